@@ -1,0 +1,85 @@
+"""MCAP recordings: round trip, metadata, and a file left by a killed process."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hil import recording
+from hil.recording import Recorder, read_metadata, read_records
+
+
+def test_round_trip_raw_and_json(tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    with Recorder(path, metadata={"scenario": "rc-loss", "seed": "3"}) as rec:
+        rec.write_raw(recording.DBUS_RX, 10, b"\x00" * 18)
+        rec.write_raw(recording.CAN_TX, 1000, recording.pack_can(0x200, bytes(8)))
+        rec.write_json(recording.TELEMETRY, 2000, {"mode": 1, "tension_n": [1.0, 2.0, 3.0]})
+    records = list(read_records(path))
+    assert [r.topic for r in records] == [recording.DBUS_RX, recording.CAN_TX, recording.TELEMETRY]
+    assert [r.time_us for r in records] == [10, 1000, 2000]
+    assert recording.unpack_can(records[1].data) == (0x200, bytes(8))
+    assert records[2].json() == {"mode": 1, "tension_n": [1.0, 2.0, 3.0]}
+    assert read_metadata(path) == {"scenario": "rc-loss", "seed": "3"}
+    only_can = list(read_records(path, topics={recording.CAN_TX}))
+    assert len(only_can) == 1
+
+
+def test_close_twice_and_write_after_close(tmp_path: Path) -> None:
+    rec = Recorder(tmp_path / "x.mcap")
+    rec.close()
+    rec.close()
+    with pytest.raises(ValueError, match="closed"):
+        rec.write_raw(recording.LINK_TX, 0, b"x")
+
+
+def test_bad_flush_interval(tmp_path: Path) -> None:
+    with pytest.raises(ValueError):
+        Recorder(tmp_path / "x.mcap", flush_every=0)
+
+
+_WRITER = """
+import sys, time
+from hil.recording import Recorder, LINK_TX
+rec = Recorder(sys.argv[1], flush_every=100)
+for i in range(1000):
+    rec.write_raw(LINK_TX, i, i.to_bytes(4, "little"))
+print("ready", flush=True)
+time.sleep(30)
+"""
+
+
+def test_file_of_a_killed_process_stays_readable(tmp_path: Path) -> None:
+    path = tmp_path / "killed.mcap"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _WRITER, str(path)],
+        stdout=subprocess.PIPE,
+        cwd=Path(__file__).resolve().parents[1],
+    )
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline().strip() == b"ready"
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+    times = [r.time_us for r in read_records(path)]
+    # Everything up to the last flush (every 100 messages) survives, in order.
+    assert times == list(range(1000))
+
+
+def test_truncated_file_reads_up_to_the_cut(tmp_path: Path) -> None:
+    path = tmp_path / "cut.mcap"
+    with Recorder(path, flush_every=50) as rec:
+        for i in range(500):
+            rec.write_raw(recording.LINK_RX, i, b"abc")
+    data = path.read_bytes()
+    cut = tmp_path / "cut2.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    times = [r.time_us for r in read_records(cut)]
+    assert 0 < len(times) < 500
+    assert times == list(range(len(times)))
