@@ -1,0 +1,245 @@
+"""The drone link against a real MAVProxy (headless, 127.0.0.1), driven through its stdin.
+
+MAVProxy listens (``--master=udpin:127.0.0.1:PORT``) and targets our component
+(``--target-system=1 --target-component=25``); the link connects with ``udpout`` and a fake board
+answers like the firmware. What MAVProxy prints is the observable: "Detected vehicle 1:25",
+"PRETENSION_N = ...", "Got COMMAND_ACK: DO_GRIPPER: IN_PROGRESS" / "ACCEPTED" (it prints an ACK only
+when its target fields are MAVProxy's own ids or 0, which ours are), and watched NAMED_VALUE_FLOATs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from fake_board import FakeBoard
+
+from host.drone_link import DroneLink, DroneLinkConfig
+from protocol import mavlink as mav
+
+pytestmark = pytest.mark.mavproxy
+
+MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
+PASSPHRASE = "spirob-drone"
+WAIT_S = 15.0
+MSG_ID_COMMAND_LONG = 76
+
+if not MAVPROXY.exists():
+    pytest.skip(
+        f"mavproxy.py not installed next to {sys.executable} (pip install mavproxy)", allow_module_level=True
+    )
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_for(cond: Callable[[], bool], what: str, timeout: float = WAIT_S) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+class MavProxy:
+    """A headless MAVProxy subprocess: commands on stdin, console lines collected from stdout."""
+
+    def __init__(self, port: int, state_dir: Path, cmds: list[str]) -> None:
+        argv = [
+            "timeout",
+            "-k",
+            "5",
+            "120",
+            sys.executable,
+            str(MAVPROXY),
+            f"--master=udpin:127.0.0.1:{port}",
+            "--target-system=1",
+            "--target-component=25",
+            "--default-modules=log,signing,param,cmdlong,misc",
+            f"--state-basedir={state_dir}",
+            "--mav20",
+        ]
+        argv += [f"--cmd={c}" for c in cmds]
+        env = dict(os.environ, PYTHONUNBUFFERED="1", HOME=str(state_dir))  # keep ~/.mavproxy out of it
+        self.proc = subprocess.Popen(
+            argv,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            cwd=state_dir,
+            env=env,
+        )
+        self._lines: list[str] = []
+        self._lock = threading.Lock()
+        self._reader = threading.Thread(target=self._read, name="mavproxy-stdout", daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for raw in self.proc.stdout:  # ends at EOF, when the process exits
+            with self._lock:
+                self._lines.append(raw.decode("utf-8", errors="replace").rstrip())
+
+    def lines(self) -> list[str]:
+        with self._lock:
+            return list(self._lines)
+
+    def send(self, line: str) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(line.encode() + b"\n")
+        self.proc.stdin.flush()
+
+    def expect(self, pattern: str, start: int = 0, timeout: float = WAIT_S) -> int:
+        """Index of the first console line at or after ``start`` matching ``pattern``."""
+        rx = re.compile(pattern)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for i, line in enumerate(self.lines()[start:], start):
+                if rx.search(line):
+                    return i
+            if self.proc.poll() is not None:
+                break
+            time.sleep(0.02)
+        tail = "\n".join(self.lines()[-30:])
+        raise AssertionError(f"MAVProxy never printed /{pattern}/; last lines:\n{tail}")
+
+    def close(self) -> None:
+        if self.proc.poll() is None and self.proc.stdin is not None:
+            with contextlib.suppress(OSError):
+                self.proc.stdin.close()  # EOF on its console makes MAVProxy exit
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.terminate()
+                try:
+                    self.proc.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    self.proc.kill()
+                    self.proc.wait(timeout=5)
+        self._reader.join(timeout=5)
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+
+
+class Setup:
+    def __init__(self, tmp_path: Path) -> None:
+        self.tmp_path = tmp_path
+        self.port = free_udp_port()
+        self.proxy: MavProxy | None = None
+        self.board: FakeBoard | None = None
+        self.link: DroneLink | None = None
+
+    def start(self, *, mavproxy_cmds: list[str], key: bytes | None) -> tuple[MavProxy, DroneLink, FakeBoard]:
+        state_dir = self.tmp_path / "mavproxy"
+        state_dir.mkdir()
+        # MAVProxy first: its udpin socket must exist before the link sends.
+        self.proxy = MavProxy(self.port, state_dir, mavproxy_cmds)
+        self.proxy.expect(r"Waiting for heartbeat|Connect udpin")
+        self.board = FakeBoard()
+        cfg = DroneLinkConfig(
+            url=f"udpout:127.0.0.1:{self.port}",
+            signing_key=key,
+            signing_timestamp_path=self.tmp_path / "signing.timestamp" if key else None,
+            tlog_path=self.tmp_path / "link.tlog",
+        )
+        self.link = DroneLink(cfg, self.board)
+        self.board.attach(self.link.on_board_message)
+        self.board.start()
+        self.link.start()
+        return self.proxy, self.link, self.board
+
+    def close(self) -> None:
+        if self.link is not None:
+            self.link.close()
+        if self.board is not None:
+            self.board.stop()
+        if self.proxy is not None:
+            self.proxy.close()
+
+
+@pytest.fixture
+def setup(tmp_path: Path) -> Iterator[Setup]:
+    s = Setup(tmp_path)
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+def grab_and_expect_acks(proxy: MavProxy, board: FakeBoard) -> None:
+    start = len(proxy.lines())
+    proxy.send("long DO_GRIPPER 25 1")
+    i = proxy.expect(r"Got COMMAND_ACK: DO_GRIPPER: IN_PROGRESS", start)
+    proxy.expect(r"Got COMMAND_ACK: DO_GRIPPER: ACCEPTED", i + 1)
+    assert [c.code.name for c in board.commands()] == ["GRASP"]
+
+
+def test_mavproxy_sees_the_arm_fetches_and_sets_a_param_grabs_and_watches(setup: Setup) -> None:
+    proxy, link, board = setup.start(mavproxy_cmds=[], key=None)
+    proxy.expect(r"Detected vehicle 1:25")
+
+    # Parameters: MAVProxy fetches the list on its own; then set one and read it back.
+    proxy.expect(r"Received 5 parameters")
+    start = len(proxy.lines())
+    proxy.send("param set PRETENSION_N 0.8")
+    wait_for(lambda: abs(board.params["pretension_n"] - 0.8) < 1e-6, "the board to take PRETENSION_N")
+    proxy.send("param fetch PRETENSION_N")
+    proxy.expect(r"PRETENSION_N = 0\.8000000", start)
+
+    grab_and_expect_acks(proxy, board)
+
+    start = len(proxy.lines())
+    proxy.send("watch NAMED_VALUE_FLOAT")
+    proxy.expect(r"NAMED_VALUE_FLOAT \{.*name : ARM_T1_N, value : 1\.5", start)
+    proxy.send("watch")
+
+    peers = {(p.sysid, p.compid): p for p in link.state().peers}
+    assert (255, 230) in peers  # MAVProxy's own ids
+    assert link.counters.malformed == 0
+
+
+def test_mavproxy_with_signing_on_both_sides(setup: Setup) -> None:
+    key = mav.signing_key_from_passphrase(PASSPHRASE)
+    proxy, link, board = setup.start(
+        mavproxy_cmds=[f"signing key {PASSPHRASE}", "set allow_unsigned 0"], key=key
+    )
+    # MAVProxy refuses unsigned packets now, so seeing us proves our signatures verify.
+    proxy.expect(r"Setup signing key")
+    proxy.expect(r"Detected vehicle 1:25")
+    grab_and_expect_acks(proxy, board)
+    state = link.state()
+    assert state.signing
+    assert {p.signed for p in state.peers if (p.sysid, p.compid) == (255, 230)} == {True}
+    assert link.signature_refusals.get(MSG_ID_COMMAND_LONG, 0) == 0
+
+
+def test_mavproxy_with_a_wrong_key_is_refused(setup: Setup) -> None:
+    key = mav.signing_key_from_passphrase(PASSPHRASE)
+    proxy, link, board = setup.start(
+        mavproxy_cmds=["signing key not-the-passphrase", "set allow_unsigned 0"], key=key
+    )
+    proxy.expect(r"Setup signing key")
+    wait_for(lambda: link.counters.signature_refused > 0, "the link to refuse MAVProxy's packets")
+    start = len(proxy.lines())
+    proxy.send("long DO_GRIPPER 25 1")
+    wait_for(
+        lambda: link.signature_refusals.get(MSG_ID_COMMAND_LONG, 0) >= 1,
+        "the link to refuse MAVProxy's wrongly signed COMMAND_LONG",
+    )
+    assert board.commands() == []
+    assert link.state().last_command is None
+    assert not any("COMMAND_ACK" in line for line in proxy.lines()[start:])
+    assert not any("Detected vehicle 1:25" in line for line in proxy.lines())  # it refuses ours too
