@@ -1,14 +1,347 @@
-"""`spirob-hil` command line (subcommands are added by their issues)."""
+"""`spirob-hil`: design math, model export (and, in later issues, boards, runs, replays, experiments).
+
+Argument parsing lives in :func:`build_parser`, apart from :func:`main`, so tests call
+``main(["design", "--json"])``. Each subcommand is one :class:`Command` in ``COMMANDS`` (a name, a
+help line, a function that adds its arguments, a function that runs it); a later issue adds its
+subcommand by appending one entry. User mistakes (bad options, impossible designs, unwritable paths) are
+one line on stderr and exit status 2, never a traceback.
+"""
 
 from __future__ import annotations
 
+import argparse
+import json
+import math
 import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import NoReturn, TextIO
+
+from hil.mjcf import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig, write_mjcf
+from hil.spiral import PRESETS, SpiralDesign
+
+__all__ = [
+    "COMMANDS",
+    "Command",
+    "UsageError",
+    "add_design_arguments",
+    "build_parser",
+    "design_from_args",
+    "main",
+]
+
+PROG = "spirob-hil"
+EXIT_OK = 0
+EXIT_USAGE = 2
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of `spirob-hil`."""
-    print("spirob-hil: not yet available", file=sys.stderr)
-    return 2
+class UsageError(Exception):
+    """A user mistake: reported as one line on stderr with exit status 2.
+
+    Attributes:
+        prog: the (sub)command it concerns, e.g. ``spirob-hil design``.
+    """
+
+    def __init__(self, message: str, prog: str = PROG) -> None:
+        super().__init__(message)
+        self.prog = prog
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are exceptions (one line, no usage dump)."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(message, self.prog)
+
+
+@dataclass(frozen=True)
+class Command:
+    """One subcommand of ``spirob-hil``.
+
+    Attributes:
+        name: the subcommand word.
+        help: one-line description for ``--help``.
+        configure: adds the subcommand's arguments to its parser.
+        run: executes it; returns the exit status. May raise :class:`UsageError` or ``ValueError``.
+    """
+
+    name: str
+    help: str
+    configure: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+# ---------------------------------------------------------------------- design options (shared)
+
+
+def add_design_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options that select a :class:`SpiralDesign` (used by ``design``, ``model export``, ...).
+
+    A design is one of: a preset (default ``prototype``); physical inputs (``--length`` and
+    ``--tip-width`` with ``--taper-deg`` or ``--base-width``); or spiral parameters (``--a``, ``--b``,
+    ``--theta0-deg`` or ``--units``). ``--dtheta-deg`` and ``--cables`` apply to the last two forms.
+    """
+    g = parser.add_argument_group("design (default: --preset prototype)")
+    g.add_argument(
+        "--preset", choices=PRESETS, help="a named design: the paper's prototype or the authors' default"
+    )
+    g.add_argument("--length", type=float, metavar="M", help="length of the straightened arm [m]")
+    g.add_argument("--tip-width", type=float, metavar="M", help="width of the tip [m]")
+    g.add_argument(
+        "--taper-deg", type=float, metavar="DEG", help="taper angle of the straightened arm [degrees]"
+    )
+    g.add_argument(
+        "--base-width", type=float, metavar="M", help="width at the base [m] (instead of the taper)"
+    )
+    g.add_argument("--a", type=float, metavar="M", help="spiral scaling factor a [m]")
+    g.add_argument("--b", type=float, metavar="B", help="spiral growth rate b [1/rad]")
+    g.add_argument("--theta0-deg", type=float, metavar="DEG", help="spiral angle of the base [degrees]")
+    g.add_argument("--units", type=int, metavar="N", help="number of units (instead of --theta0-deg)")
+    g.add_argument(
+        "--dtheta-deg", type=float, metavar="DEG", help="discretisation step [degrees] (default 30)"
+    )
+    g.add_argument("--cables", type=int, choices=(1, 2, 3), help="number of cables (default 3)")
+
+
+def design_from_args(args: argparse.Namespace) -> SpiralDesign:
+    """Build the design the options of :func:`add_design_arguments` describe.
+
+    Raises:
+        UsageError: options from different forms mixed, or a form incomplete.
+        ValueError: the values do not make a design (negative length, taper of 0 or >= 90°, ...).
+    """
+    physical = [args.length, args.tip_width, args.taper_deg, args.base_width]
+    params = [args.a, args.b, args.theta0_deg, args.units]
+    forms = sum(
+        [args.preset is not None, any(v is not None for v in physical), any(v is not None for v in params)]
+    )
+    if forms > 1:
+        raise UsageError("give a --preset, physical inputs or spiral parameters, not a mix")
+    cables = 3 if args.cables is None else args.cables
+    dtheta = math.radians(30.0 if args.dtheta_deg is None else args.dtheta_deg)
+    if any(v is not None for v in physical):
+        if args.length is None or args.tip_width is None:
+            raise UsageError("physical inputs need --length and --tip-width")
+        if (args.taper_deg is None) == (args.base_width is None):
+            raise UsageError("give exactly one of --taper-deg and --base-width")
+        taper = None if args.taper_deg is None else math.radians(args.taper_deg)
+        return SpiralDesign.from_physical(
+            length_m=args.length,
+            tip_width_m=args.tip_width,
+            taper_rad=taper,
+            base_width_m=args.base_width,
+            dtheta_rad=dtheta,
+            cables=cables,
+        )
+    if any(v is not None for v in params):
+        if args.a is None or args.b is None:
+            raise UsageError("spiral parameters need --a and --b")
+        if (args.theta0_deg is None) == (args.units is None):
+            raise UsageError("give exactly one of --theta0-deg and --units")
+        if args.units is not None:
+            if args.units < 1:
+                raise ValueError(f"--units must be >= 1, got {args.units}")
+            theta0 = args.units * dtheta
+        else:
+            theta0 = math.radians(args.theta0_deg)
+        return SpiralDesign.from_params(args.a, args.b, theta0, dtheta, cables)
+    if args.dtheta_deg is not None:
+        raise UsageError("--dtheta-deg needs physical inputs or spiral parameters (a preset fixes it)")
+    design = SpiralDesign.preset(args.preset or "prototype")
+    return design if args.cables is None else design.with_cables(cables)
+
+
+# ---------------------------------------------------------------------- design
+
+
+_ROWS: tuple[tuple[str, str, str], ...] = (
+    # (label, summary key, SI unit); angles also in degrees, lengths also in mm, for people
+    ("a", "a_m", "m"),
+    ("b", "b", "1/rad"),
+    ("dtheta", "dtheta_rad", "rad"),
+    ("theta0", "theta0_rad", "rad"),
+    ("units", "units", ""),
+    ("beta (unit ratio)", "beta", ""),
+    ("taper angle", "taper_rad", "rad"),
+    ("tip width", "tip_width_m", "m"),
+    ("base width", "base_width_m", "m"),
+    ("length", "length_m", "m"),
+    ("central spiral at the tip", "rho_c_tip_m", "m"),
+    ("central spiral at the base", "rho_c_base_m", "m"),
+    ("packed curvature at the tip", "curvature_packed_tip_per_m", "1/m"),
+    ("packed curvature at the base", "curvature_packed_base_per_m", "1/m"),
+    ("workspace envelope rho_w(theta0)", "rho_w_base_m", "m"),
+    ("smallest graspable diameter", "d_min_m", "m"),
+    ("largest graspable diameter", "d_max_m", "m"),
+    ("length to wrap half of d_min", "grasp_length_d_min_m", "m"),
+    ("discretisation efficiency eta", "eta", ""),
+    ("max load at d_min (eq. 16)", "max_load_d_min_kg", "kg"),
+)
+
+
+def _human(value: float, unit: str) -> str:
+    if unit == "rad":
+        return f"  ({math.degrees(value):.4g} deg)"
+    if unit == "m":
+        return f"  ({value * 1e3:.4g} mm)"
+    return ""
+
+
+def _configure_design(p: argparse.ArgumentParser) -> None:
+    add_design_arguments(p)
+    p.add_argument("--json", action="store_true", help="print JSON (SI units) instead of a table")
+    p.add_argument(
+        "--load-force",
+        type=float,
+        metavar="N",
+        default=54.0,
+        help="cable force for the load bound M(phi, d, F) of eq. (16) [N] (default 54 = 3 A)",
+    )
+
+
+def _run_design(args: argparse.Namespace) -> int:
+    design = design_from_args(args)
+    summary = design.summary()
+    if not (math.isfinite(args.load_force) and args.load_force > 0):
+        raise ValueError(f"--load-force must be > 0, got {args.load_force}")
+    summary["load_force_n"] = args.load_force
+    summary["max_load_d_min_kg"] = design.max_load_kg(design.d_min_m, args.load_force)
+    out: TextIO = sys.stdout
+    if args.json:
+        json.dump(summary, out, indent=2)
+        out.write("\n")
+        return EXIT_OK
+    out.write(f"SpiRob design: {design.cables} cable(s), {design.units} units (SI units)\n")
+    for label, key, unit in _ROWS:
+        value = summary[key]
+        text = str(value) if key == "units" else f"{value:.6g}"
+        out.write(f"  {label:<34} {text} {unit}{_human(value, unit)}\n")
+    out.write(f"  (load bound for a cable force of {args.load_force:g} N)\n")
+    if design.inputs:
+        given = ", ".join(f"{k}={v:g}" for k, v in design.inputs)
+        out.write(f"  inputs: {given}\n")
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------- model export
+
+
+def _parse_object(text: str) -> ObjectConfig:
+    """``NAME,X,Y,Z,RADIUS[,LENGTH]`` (metres; axis along world y) -> a fixed cylinder."""
+    parts = text.split(",")
+    if len(parts) not in (5, 6):
+        raise UsageError(f"--object wants NAME,X,Y,Z,RADIUS[,LENGTH], got {text!r}")
+    try:
+        x, y, z, radius = (float(v) for v in parts[1:5])
+        length = float(parts[5]) if len(parts) == 6 else 0.2
+    except ValueError:
+        raise UsageError(f"--object numbers must be floats, got {text!r}") from None
+    return ObjectConfig(parts[0], radius, length, (x, y, z))
+
+
+def _configure_model(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="model_command", metavar="ACTION", required=True, parser_class=_Parser)
+    e = sub.add_parser("export", help="write a self-contained MJCF model of the arm under a drone")
+    add_design_arguments(e)
+    e.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="MJCF file to write")
+    m = e.add_argument_group("model (defaults: DESIGN.md section 4)")
+    m.add_argument("--total-mass", type=float, metavar="KG", help="mass of the arm [kg] (default 0.0384)")
+    m.add_argument(
+        "--base-stiffness",
+        type=float,
+        metavar="NM_PER_RAD",
+        help="stiffness of the base joint [N m/rad] (default 0.5)",
+    )
+    m.add_argument("--damping-ratio", type=float, metavar="ZETA", help="joint damping ratio (default 0.13)")
+    m.add_argument(
+        "--mu", type=float, metavar="MU", help="capstan friction coefficient of the cables (default 0.3)"
+    )
+    m.add_argument(
+        "--torque-constant",
+        type=float,
+        metavar="NM_PER_A",
+        help="output-shaft torque constant [N m/A] (default 0.18)",
+    )
+    m.add_argument("--spool-radius", type=float, metavar="M", help="spool radius [m] (default 0.010)")
+    m.add_argument("--current-limit", type=float, metavar="A", help="current limit [A] (default 10)")
+    m.add_argument("--timestep-ms", type=float, metavar="MS", help="physics step [ms] (default 1)")
+    m.add_argument("--floor", action="store_true", help="add a ground plane at z = 0")
+    m.add_argument(
+        "--object",
+        action="append",
+        default=[],
+        metavar="NAME,X,Y,Z,R[,L]",
+        help="add a fixed cylinder along y (repeatable)",
+    )
+
+
+def _run_model(args: argparse.Namespace) -> int:
+    design = design_from_args(args)
+    arm = ArmConfig()
+    arm_changes = {
+        "total_mass_kg": args.total_mass,
+        "base_stiffness_nm_per_rad": args.base_stiffness,
+        "damping_ratio": args.damping_ratio,
+        "cable_mu": args.mu,
+    }
+    arm = replace(arm, **{k: v for k, v in arm_changes.items() if v is not None})
+    motor_changes = {
+        "torque_constant_nm_per_a": args.torque_constant,
+        "spool_radius_m": args.spool_radius,
+        "current_limit_a": args.current_limit,
+    }
+    motor = replace(MotorConfig(), **{k: v for k, v in motor_changes.items() if v is not None})
+    solver = SolverConfig() if args.timestep_ms is None else SolverConfig(timestep_s=args.timestep_ms * 1e-3)
+    cfg = ModelConfig(arm=arm, motor=motor, solver=solver)
+    if args.floor:
+        cfg = replace(cfg, drone=replace(cfg.drone, floor=True))
+    cfg = cfg.with_objects(*(_parse_object(t) for t in args.object))
+    try:
+        path = write_mjcf(args.output, design, None, cfg)
+    except OSError as exc:
+        raise UsageError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
+    print(f"wrote {path} ({design.cables} cables, {design.units} units)")
+    return EXIT_OK
+
+
+COMMANDS: list[Command] = [
+    Command(
+        "design", "print a spiral design's quantities (Table S1, Note S2)", _configure_design, _run_design
+    ),
+    Command("model", "MuJoCo model of the arm: 'model export'", _configure_model, _run_model),
+]
+"""The subcommands, in ``--help`` order. Later issues append theirs."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``spirob-hil`` with every subcommand in :data:`COMMANDS`."""
+    parser = _Parser(prog=PROG, description="SpiRob hardware-in-the-loop: design math, plant model, harness.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
+    for cmd in COMMANDS:
+        p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
+        cmd.configure(p)
+        p.set_defaults(_run=cmd.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``spirob-hil``; returns the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        status: int = args._run(args)
+        return status
+    except UsageError as exc:
+        _error_line(exc.prog, str(exc))
+    except ValueError as exc:
+        _error_line(PROG, str(exc))
+    return EXIT_USAGE
+
+
+def _error_line(prog: str, message: str) -> None:
+    first = message.strip().splitlines()[0] if message.strip() else "invalid input"
+    print(f"{prog}: error: {first}", file=sys.stderr)
 
 
 if __name__ == "__main__":

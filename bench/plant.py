@@ -1,0 +1,188 @@
+"""Benchmark of the MuJoCo plant (hil.plant) at a 1 ms control period; prints its figures.
+
+For the default 3-cable prototype and the authors' 24-unit design: control periods per second and the
+real-time factor free-swinging, fully packed (every joint limit active) and wrapping a cylinder; then a
+stability run of random cable currents up to the current limit (no divergence allowed).
+
+Targets on a 2-core machine (issue 3): free-swinging >= 10x real time, packed >= 3x. Wall-clock figures
+depend on what else the machine runs, so the CPU-time factor (this process only) is printed beside them.
+
+Usage: ``.venv/bin/python bench/plant.py [--seconds 5] [--stability-seconds 60] [--seed 0]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+# Run as a script, this file's directory comes first on sys.path, where bench/protocol.py would shadow
+# the protocol package; benchmarks import the project only.
+_HERE = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+
+import numpy as np  # noqa: E402
+
+from hil.errors import PlantDivergedError  # noqa: E402
+from hil.mjcf import ObjectConfig  # noqa: E402
+from hil.plant import Plant  # noqa: E402
+from hil.spiral import SpiralDesign  # noqa: E402
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One measured scenario."""
+
+    label: str
+    periods: int
+    wall_s: float
+    cpu_s: float
+    sim_s: float
+    mean_constraints: float
+
+    @property
+    def rtf_wall(self) -> float:
+        return self.sim_s / self.wall_s
+
+    @property
+    def rtf_cpu(self) -> float:
+        return self.sim_s / self.cpu_s
+
+
+def measure(label: str, plant: Plant, seconds: float, each: Callable[[int], None] | None = None) -> Figure:
+    """Step ``plant`` for ``seconds`` of simulated time, timing wall clock and CPU time."""
+    periods = round(seconds * 1e6 / plant.control_period_us)
+    data = plant.mj_data
+    nefc = 0
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    for k in range(periods):
+        if each is not None:
+            each(k)
+        plant.step()
+        nefc += data.nefc
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    return Figure(label, periods, wall, cpu, periods * plant.control_period_us * 1e-6, nefc / periods)
+
+
+def pole_of_packed_spiral(plant: Plant) -> tuple[float, float]:
+    """(x, z) of the centre the arm curls around when cable 0 packs it (similarity fixed point)."""
+    plant.set_packed(0)
+    pos, _ = plant.unit_poses()
+    pts = np.vstack([pos, plant.tip_pose().pos_m])
+    z = pts[:, 0] + 1j * pts[:, 2]
+    a = np.stack([z[:-1], np.ones(len(z) - 1)], axis=1)
+    s, t = np.linalg.lstsq(a, z[1:], rcond=None)[0]
+    pole = t / (1 - s)
+    plant.reset()
+    return float(pole.real), float(pole.imag)
+
+
+def scenarios(name: str, design: SpiralDesign, seconds: float) -> list[Figure]:
+    figures = []
+    # Free-swinging: no current; released from the packed pose, the arm springs open and keeps swinging
+    # under a drone that sways 10 cm at 1 Hz (pose and acceleration updated at 100 Hz, like a MAVLink feed).
+    plant = Plant(design)
+    plant.set_packed(0)
+    home = plant.drone_pose().pos_m
+    omega = 2 * math.pi * 1.0
+
+    def sway(k: int) -> None:
+        if k % 10 == 0:
+            t = k * plant.control_period_us * 1e-6
+            x = 0.1 * math.sin(omega * t)
+            plant.set_drone_pose((home[0] + x, home[1], home[2]), accel_m_s2=(-omega * omega * x, 0.0, 0.0))
+
+    figures.append(measure(f"{name}: free-swinging (swaying drone)", plant, seconds, sway))
+
+    # Fully packed: one cable at 2.5 A curls the arm until every joint sits on its limit.
+    plant = Plant(design)
+    plant.apply_currents([2500] + [0] * (design.cables - 1))
+    plant.run(1_000_000)
+    limits = int(np.sum(np.abs(plant.joint_angles_rad()) > design.dtheta_rad - math.radians(0.5)))
+    fig = measure(f"{name}: packed ({limits}/{design.joints} limits)", plant, seconds)
+    figures.append(fig)
+
+    # Wrapping a cylinder placed where the curling arm closes around it.
+    probe = Plant(design)
+    x, z = pole_of_packed_spiral(probe)
+    plant = Plant(design)
+    radius = design.d_min_m  # a cylinder twice the smallest graspable diameter
+    plant.add_object(ObjectConfig("cylinder", radius_m=radius, length_m=0.1, pos_m=(x, 0.0, z)))
+    plant.apply_currents([1500] + [0] * (design.cables - 1))
+    plant.run(500_000)
+    contacts = len(plant.contacts())
+    figures.append(measure(f"{name}: wrapping a cylinder ({contacts} contacts)", plant, seconds))
+    return figures
+
+
+def stability(design: SpiralDesign, seconds: float, seed: int) -> str:
+    """Random setpoints up to the current limit, each held 50-300 ms; reports extremes, raises nothing."""
+    plant = Plant(design, rng=np.random.default_rng(seed))
+    rng = np.random.default_rng(seed + 1)
+    limit = round(plant.config.model.motor.current_limit_a * 1000)
+    periods = round(seconds * 1e6 / plant.control_period_us)
+    next_change = 0
+    max_angle = 0.0
+    max_tension = 0.0
+    wall0 = time.perf_counter()
+    try:
+        for k in range(periods):
+            if k >= next_change:
+                plant.apply_currents([int(v) for v in rng.integers(-limit, limit + 1, size=design.cables)])
+                next_change = k + int(rng.integers(50, 300))
+            plant.step()
+            if k % 10 == 0:
+                max_angle = max(max_angle, float(np.max(np.abs(plant.joint_angles_rad()))))
+                max_tension = max(max_tension, float(np.max(plant.cable_tensions_n())))
+    except PlantDivergedError as exc:
+        return f"DIVERGED after {exc.time_us / 1e6:.3f} s: {exc}"
+    wall = time.perf_counter() - wall0
+    over = math.degrees(max_angle - design.dtheta_rad)
+    return (
+        f"{seconds:.0f} s of random currents up to +-{limit / 1000:g} A: no divergence "
+        f"({seconds / wall:.1f}x real time); largest joint angle {math.degrees(max_angle):.2f} deg "
+        f"({over:+.2f} past the limit), largest cable tension {max_tension:.0f} N"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds per scenario")
+    parser.add_argument("--stability-seconds", type=float, default=60.0, help="length of the stability run")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+
+    probe = Plant()
+    sol = probe.config.model.solver
+    m = probe.mj_model
+    print("SpiRob plant benchmark (hil.plant)")
+    print(
+        f"  solver: integrator={sol.integrator} timestep={sol.timestep_s * 1e3:g} ms "
+        f"({probe.substeps} step(s) per {probe.control_period_us} us control period), solver={sol.solver} "
+        f"iterations={sol.iterations} ls_iterations={sol.ls_iterations} tolerance={sol.tolerance:g} "
+        f"cone={sol.cone}"
+    )
+    print(f"  default model: {m.nbody} bodies, nq={m.nq}, nv={m.nv}, {m.ntendon} cables, {m.nu} motors")
+    print()
+    print(f"  {'scenario':<52} {'periods/s':>10} {'RTF wall':>9} {'RTF cpu':>8} {'rows':>6}")
+    for name, design in (
+        ("prototype", SpiralDesign.paper_prototype()),
+        ("authors", SpiralDesign.authors_default()),
+    ):
+        for fig in scenarios(name, design, args.seconds):
+            print(
+                f"  {fig.label:<52} {fig.periods / fig.wall_s:>10.0f} {fig.rtf_wall:>8.1f}x "
+                f"{fig.rtf_cpu:>7.1f}x {fig.mean_constraints:>6.0f}"
+            )
+    print()
+    for name, design in (("prototype", SpiralDesign.paper_prototype()),):
+        print(f"  stability ({name}): {stability(design, args.stability_seconds, args.seed)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,194 @@
+"""The failsafe phase machine (explicit phases driven by events, like Betaflight's ``failsafe.c``).
+
+Inputs are events with board time — a valid RC frame, a motor feedback frame, a host heartbeat, host
+commands — and :meth:`Failsafe.update`, called by the control task at the start of every tick, applies
+the timeouts. Output may flow only in phase ``OK``; every other phase means zero current on this tick.
+
+Phases (``protocol.messages.Phase``) and transitions:
+
+- ``GATE`` (start-up, after DISARM, after CLEAR_ESTOP): leaves for ``OK`` when RC is valid and fresh,
+  the right lever is DOWN (SAFE), all motors answer, the host heartbeat is fresh if required, and the
+  host has not disarmed the board (ARM clears that). Like an arming switch.
+- ``OK`` -> ``MOTOR_FAULT`` when any motor is silent longer than ``motor_timeout_us`` (DJI: 10 ms).
+  Latched: leaves only when every motor answers again *and* the right lever is seen DOWN (re-armed
+  through SAFE).
+- ``OK`` -> ``RC_LOST`` after ``rc_timeout_us`` (DJI: 30 ms) without a valid frame; back to ``OK`` when
+  valid frames return (the slew limiter restarts from the pretension floor).
+- ``OK`` -> ``HOST_LOST`` when the host is required and its heartbeat is older than
+  ``host_timeout_us``; back to ``OK`` when heartbeats return.
+- any -> ``ESTOP`` on the ESTOP command. Latched: CLEAR_ESTOP moves to ``GATE``, which needs the
+  right lever DOWN again.
+
+Priority when several hold: ESTOP > MOTOR_FAULT > RC_LOST > HOST_LOST. Invalid RC frames never reach
+this module (the control task rejects and counts them).
+"""
+
+from __future__ import annotations
+
+from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.events import EventQueue
+from protocol.dbus import Lever
+from protocol.messages import EventKind, Phase
+
+__all__ = ["Failsafe"]
+
+_PHASE_TEXT = {
+    Phase.GATE: "gate: waiting for valid RC with the right lever DOWN",
+    Phase.OK: "ok: armed",
+    Phase.RC_LOST: "RC lost: zero current",
+    Phase.MOTOR_FAULT: "motor fault: all stop, re-arm through SAFE",
+    Phase.HOST_LOST: "host heartbeat lost: zero current",
+    Phase.ESTOP: "E-stop: latched",
+}
+
+
+class Failsafe:
+    """Failsafe phase machine for three motors, one RC link and an optional host.
+
+    Attributes:
+        phase: current phase.
+        estop_latched: an E-stop is in force (until CLEAR_ESTOP).
+        host_disarmed: the host sent DISARM (until ARM).
+        host_required: the host heartbeat is required.
+        motors_online: bit i set = motor i+1 answered within ``motor_timeout_us`` (updated every tick).
+        motor_offline_events: times a motor went from online to silent.
+        rc_ok: a valid RC frame within ``rc_timeout_us`` (as of the last update).
+        host_ok: a heartbeat within ``host_timeout_us`` (as of the last update).
+    """
+
+    def __init__(self, config: FirmwareConfig, events: EventQueue) -> None:
+        """Start in ``GATE`` with nothing seen."""
+        self._events = events
+        self.phase = Phase.GATE
+        self.estop_latched = False
+        self.host_disarmed = False
+        self._motor_fault = False
+        self._armed = False
+        self.motors_online = 0
+        self.motor_offline_events = 0
+        self.rc_ok = False
+        self.host_ok = False
+        self._rc_seen = False
+        self._last_rc_us = 0
+        self._right_lever = 0
+        self._hb_seen = False
+        self._last_hb_us = 0
+        self._fb_seen = [False] * MOTOR_COUNT
+        self._last_fb_us = [0] * MOTOR_COUNT
+        self._all_motors = (1 << MOTOR_COUNT) - 1
+        self.configure(config)
+
+    def configure(self, config: FirmwareConfig) -> None:
+        """Take new timeouts and the host requirement."""
+        self._rc_timeout_us = config.rc_timeout_us
+        self._motor_timeout_us = config.motor_timeout_us
+        self._host_timeout_us = config.host_timeout_us
+        self.host_required = config.host_required
+
+    @property
+    def armed(self) -> bool:
+        """Current may flow: phase ``OK`` (gate passed, no latched fault, nothing lost)."""
+        return self.phase == Phase.OK
+
+    # --- events -----------------------------------------------------------------------------------
+
+    def on_rc_frame(self, now_us: int, right_lever: int) -> None:
+        """A *valid* RC frame arrived (invalid frames must not be passed here)."""
+        self._rc_seen = True
+        self._last_rc_us = now_us
+        self._right_lever = right_lever
+
+    def on_motor_feedback(self, now_us: int, index: int) -> None:
+        """Motor ``index`` (0-based) answered."""
+        self._fb_seen[index] = True
+        self._last_fb_us[index] = now_us
+
+    def on_heartbeat(self, now_us: int) -> None:
+        """The host's heartbeat arrived."""
+        self._hb_seen = True
+        self._last_hb_us = now_us
+
+    def estop(self, now_us: int) -> None:
+        """E-stop: zero current now, latched until :meth:`clear_estop` and a pass through SAFE."""
+        self.estop_latched = True
+        self._armed = False
+        self._set(now_us, Phase.ESTOP)
+
+    def clear_estop(self, now_us: int) -> bool:
+        """Release the E-stop latch (the gate then needs the right lever DOWN). False if none was set."""
+        if not self.estop_latched:
+            return False
+        self.estop_latched = False
+        self._armed = False
+        self._set(now_us, Phase.GATE)
+        return True
+
+    def disarm(self, now_us: int) -> None:
+        """Host DISARM: back to the gate until ARM (and the right lever DOWN)."""
+        self.host_disarmed = True
+        self._armed = False
+        if self.phase != Phase.ESTOP and not self._motor_fault:
+            self._set(now_us, Phase.GATE)
+
+    def arm(self) -> bool:
+        """Host ARM: allow the gate to pass again. False (refused) while an E-stop is latched."""
+        if self.estop_latched:
+            return False
+        self.host_disarmed = False
+        return True
+
+    # --- the tick ---------------------------------------------------------------------------------
+
+    def update(self, now_us: int) -> Phase:
+        """Apply the timeouts at ``now_us`` and return the phase for this tick."""
+        rc_ok = self._rc_seen and now_us - self._last_rc_us <= self._rc_timeout_us
+        self.rc_ok = rc_ok
+        host_ok = self._hb_seen and now_us - self._last_hb_us <= self._host_timeout_us
+        self.host_ok = host_ok
+        mask = 0
+        timeout = self._motor_timeout_us
+        for i in range(MOTOR_COUNT):
+            if self._fb_seen[i] and now_us - self._last_fb_us[i] <= timeout:
+                mask |= 1 << i
+        if mask != self.motors_online:
+            self._motors_changed(now_us, self.motors_online, mask)
+        motors_ok = mask == self._all_motors
+        lever_down = rc_ok and self._right_lever == Lever.DOWN
+
+        if self.estop_latched:
+            return self._set(now_us, Phase.ESTOP)
+        if self._motor_fault:
+            if not (motors_ok and lever_down):
+                return self._set(now_us, Phase.MOTOR_FAULT)
+            self._motor_fault = False  # re-armed through SAFE: the gate below decides
+        host_fine = host_ok or not self.host_required
+        if not self._armed:
+            if rc_ok and lever_down and motors_ok and host_fine and not self.host_disarmed:
+                self._armed = True
+                return self._set(now_us, Phase.OK)
+            return self._set(now_us, Phase.GATE)
+        if not motors_ok:
+            self._motor_fault = True
+            self._armed = False
+            return self._set(now_us, Phase.MOTOR_FAULT)
+        if not rc_ok:
+            return self._set(now_us, Phase.RC_LOST)
+        if not host_fine:
+            return self._set(now_us, Phase.HOST_LOST)
+        return self._set(now_us, Phase.OK)
+
+    def _set(self, now_us: int, phase: Phase) -> Phase:
+        if phase != self.phase:
+            self.phase = phase
+            self._events.push(now_us, EventKind.PHASE, int(phase), 0.0, _PHASE_TEXT[phase])
+        return phase
+
+    def _motors_changed(self, now_us: int, old: int, new: int) -> None:
+        self.motors_online = new
+        for i in range(MOTOR_COUNT):
+            bit = 1 << i
+            if old & bit and not new & bit:
+                self.motor_offline_events += 1
+                self._events.push(now_us, EventKind.FAULT, i + 1, 0.0, f"motor {i + 1} offline")
+            elif new & bit and not old & bit:
+                self._events.push(now_us, EventKind.INFO, i + 1, 1.0, f"motor {i + 1} online")

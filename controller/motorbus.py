@@ -1,0 +1,364 @@
+"""The motor bus: one interface, many back ends (python-can's ``BusABC`` pattern).
+
+Public methods do the bookkeeping — clamping, packing the C610 frame, decoding feedback, counting
+errors — over two tiny private hooks that a back end implements:
+
+- ``_send_frame(can_id, data)``: put one standard CAN frame on the wire (raise ``BusError`` or
+  ``OSError`` on failure; the caller counts it).
+- ``_recv_frames() -> list[(can_id, data)]``: every frame received since the last call, never blocking.
+
+Back ends by name (:func:`make_bus`, imported lazily): ``can`` (any python-can bus: ``slcan`` over a
+serial port such as /dev/ttyACM0 for USB-CAN adapters, ``socketcan``, ``virtual``) and ``fake`` (an
+in-process C610 trio, no threads). The ``sim`` back end lives in ``hil`` and registers itself with
+:func:`register_bus`.
+
+Facts: C610 command id 0x200 carries motors 1-4 as big-endian int16, -10000..10000 = -10..10 A; motor n
+answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``). CAN bus at 1 Mbit/s.
+"""
+
+from __future__ import annotations
+
+import importlib
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, ClassVar
+
+from controller.errors import BusError, PortError
+from protocol.c610 import COMMAND_ID_LOW, CURRENT_RAW_MAX, FEEDBACK_ID_BASE, MotorFeedback, current_command
+from protocol.errors import DecodeError
+
+if TYPE_CHECKING:
+    from controller.fake_c610 import FakeC610Trio
+
+__all__ = [
+    "CanMotorBus",
+    "FakeMotorBus",
+    "MotorBus",
+    "make_bus",
+    "parse_can_spec",
+    "register_bus",
+]
+
+CAN_BITRATE = 1_000_000
+"""C610s talk at 1 Mbit/s."""
+_RECV_BURST_MAX = 64
+"""Most frames drained per ``read_feedback`` call (a flooded bus cannot stall the control tick)."""
+
+
+class MotorBus(ABC):
+    """Three C610/M2006 motors behind one command frame (0x200) and three feedback ids (0x201-0x203).
+
+    Attributes:
+        motor_count: motors on this bus (3).
+        can_errors: failed sends/receives and undecodable feedback frames.
+        frames_sent: command frames sent.
+        frames_ignored: received frames that are not feedback from our motors.
+        last_send_ok: the last command frame went out.
+        simulated: True for back ends driving a simulated plant (reported in telemetry).
+    """
+
+    simulated: ClassVar[bool] = False
+
+    def __init__(self, *, current_limit_raw: int = CURRENT_RAW_MAX, motor_count: int = 3) -> None:
+        """Set the bookkeeping up.
+
+        Args:
+            current_limit_raw: |current| never sent above this (raw, 1000 per amp; at most 10000).
+            motor_count: motors 1..n on command id 0x200 (1..4).
+
+        Raises:
+            ValueError: a bad limit or motor count.
+        """
+        if not 1 <= motor_count <= 4:
+            raise ValueError(f"motor_count must be 1..4, got {motor_count}")
+        self.motor_count = motor_count
+        self.current_limit_raw = current_limit_raw
+        self.can_errors = 0
+        self.frames_sent = 0
+        self.frames_ignored = 0
+        self.last_send_ok = False
+        self._sent = [0] * motor_count
+        self._is_shutdown = False
+
+    @property
+    def current_limit_raw(self) -> int:
+        """|current| limit applied by :meth:`send_currents` (raw units)."""
+        return self._limit_raw
+
+    @current_limit_raw.setter
+    def current_limit_raw(self, value: int) -> None:
+        if not 0 <= value <= CURRENT_RAW_MAX:
+            raise ValueError(f"current_limit_raw must be 0..{CURRENT_RAW_MAX}, got {value}")
+        self._limit_raw = int(value)
+
+    @property
+    def is_shutdown(self) -> bool:
+        """:meth:`shutdown` has been called."""
+        return self._is_shutdown
+
+    def send_currents(self, currents_raw: Sequence[int]) -> tuple[int, ...]:
+        """Clamp and send one current command frame (id 0x200) for motors 1..n.
+
+        Args:
+            currents_raw: one raw setpoint per motor (1000 per amp); floats are rounded.
+
+        Returns:
+            The setpoints put in the frame after clamping to ±``current_limit_raw``. If the back end
+            failed to send, the error is counted and ``last_send_ok`` is False.
+
+        Raises:
+            ValueError: wrong number of setpoints.
+            BusError: the bus has been shut down.
+        """
+        if self._is_shutdown:
+            raise BusError("send_currents on a bus that has been shut down")
+        n = self.motor_count
+        if len(currents_raw) != n:
+            raise ValueError(f"expected {n} currents, got {len(currents_raw)}")
+        lim = self._limit_raw
+        out = self._sent
+        for i in range(n):
+            v = currents_raw[i]
+            if type(v) is not int:
+                v = round(v)
+            out[i] = lim if v > lim else -lim if v < -lim else v
+        can_id, data = current_command(out, COMMAND_ID_LOW)
+        try:
+            self._send_frame(can_id, data)
+        except (BusError, OSError):
+            self.can_errors += 1
+            self.last_send_ok = False
+        else:
+            self.frames_sent += 1
+            self.last_send_ok = True
+        return tuple(out)
+
+    def read_feedback(self) -> list[tuple[int, MotorFeedback]]:
+        """Drain the feedback received since the last call: ``(motor 1..n, MotorFeedback)`` in order.
+
+        Never raises for bad frames: undecodable ones count as ``can_errors``, foreign ids as
+        ``frames_ignored``.
+        """
+        if self._is_shutdown:
+            return []
+        try:
+            frames = self._recv_frames()
+        except (BusError, OSError):
+            self.can_errors += 1
+            return []
+        out: list[tuple[int, MotorFeedback]] = []
+        if not frames:
+            return out
+        n = self.motor_count
+        for can_id, data in frames:
+            motor = can_id - FEEDBACK_ID_BASE
+            if 1 <= motor <= n:
+                try:
+                    out.append((motor, MotorFeedback.unpack(data)))
+                except DecodeError:
+                    self.can_errors += 1
+            else:
+                self.frames_ignored += 1
+        return out
+
+    def shutdown(self) -> None:
+        """Send zero current once (if the bus still works) and release the back end. Safe twice."""
+        if self._is_shutdown:
+            return
+        try:
+            can_id, data = current_command([0] * self.motor_count, COMMAND_ID_LOW)
+            self._send_frame(can_id, data)
+        except (BusError, OSError):
+            self.can_errors += 1
+        finally:
+            self._is_shutdown = True
+            self._shutdown_backend()
+
+    def __enter__(self) -> MotorBus:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.shutdown()
+
+    @abstractmethod
+    def _send_frame(self, can_id: int, data: bytes) -> None:
+        """Back end: send one standard CAN frame (raise ``BusError`` / ``OSError`` on failure)."""
+
+    @abstractmethod
+    def _recv_frames(self) -> list[tuple[int, bytes]]:
+        """Back end: every ``(can_id, data)`` received since the last call, without blocking."""
+
+    def _shutdown_backend(self) -> None:  # noqa: B027 - optional hook
+        """Back end: release resources (called once)."""
+
+
+def parse_can_spec(spec: str) -> tuple[str, str]:
+    """Split ``interface:channel`` (``slcan:///dev/ttyACM0``, ``virtual:bus0``, ``socketcan:can0``).
+
+    A leading ``//`` after the colon is dropped, so URL-style specs work. Without a colon the spec is a
+    serial device for ``slcan``.
+
+    Raises:
+        ValueError: empty interface or channel.
+    """
+    if ":" not in spec:
+        interface, channel = "slcan", spec
+    else:
+        interface, channel = spec.split(":", 1)
+        if channel.startswith("//"):
+            channel = channel[2:]
+    if not interface or not channel:
+        raise ValueError(f"CAN spec must be interface:channel, got {spec!r}")
+    return interface, channel
+
+
+class CanMotorBus(MotorBus):
+    """The motors on any python-can bus (``slcan`` USB-CAN adapter, ``socketcan``, ``virtual``)."""
+
+    def __init__(
+        self,
+        channel: str | None = None,
+        interface: str | None = None,
+        *,
+        bus: Any = None,
+        bitrate: int = CAN_BITRATE,
+        send_timeout_s: float = 0.001,
+        current_limit_raw: int = CURRENT_RAW_MAX,
+        **kwargs: Any,
+    ) -> None:
+        """Open a python-can bus, or wrap one (``bus=``, then owned: shut down with this object).
+
+        Args:
+            channel: python-can channel (``/dev/ttyACM0`` for slcan, ``can0``, any name for virtual).
+            interface: python-can interface name (``slcan``, ``socketcan``, ``virtual``, ...).
+            bus: an open ``can.BusABC`` to use instead of opening one.
+            bitrate: CAN bitrate (slcan sets it on the adapter; virtual ignores it).
+            send_timeout_s: longest a send may wait for room in the adapter's queue.
+            current_limit_raw: see :class:`MotorBus`.
+            **kwargs: passed to ``can.Bus`` (e.g. ``sleep_after_open=0`` for slcan on a pty).
+
+        Raises:
+            PortError: the channel cannot be opened.
+        """
+        super().__init__(current_limit_raw=current_limit_raw)
+        import can
+
+        self._can = can
+        if bus is None:
+            if channel is None or interface is None:
+                raise ValueError("give channel and interface, or bus")
+            if interface == "slcan":
+                kwargs.setdefault("bitrate", bitrate)
+            try:
+                bus = can.Bus(channel=channel, interface=interface, **kwargs)
+            except (can.CanError, OSError, ValueError, ImportError) as exc:
+                raise PortError(f"cannot open CAN {interface}:{channel}: {exc}") from exc
+        self.bus = bus
+        self.send_timeout_s = send_timeout_s
+        self._rx: list[tuple[int, bytes]] = []
+
+    def _send_frame(self, can_id: int, data: bytes) -> None:
+        can = self._can
+        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
+        try:
+            self.bus.send(msg, timeout=self.send_timeout_s)
+        except can.CanError as exc:
+            raise BusError(str(exc)) from exc
+
+    def _recv_frames(self) -> list[tuple[int, bytes]]:
+        can = self._can
+        out: list[tuple[int, bytes]] = []
+        recv = self.bus.recv
+        for _ in range(_RECV_BURST_MAX):
+            try:
+                msg = recv(timeout=0)
+            except can.CanError as exc:
+                raise BusError(str(exc)) from exc
+            if msg is None:
+                break
+            if msg.is_error_frame:
+                self.can_errors += 1
+            elif msg.is_extended_id or msg.is_remote_frame:
+                self.frames_ignored += 1
+            else:
+                out.append((msg.arbitration_id, bytes(msg.data)))
+        return out
+
+    def _shutdown_backend(self) -> None:
+        try:
+            self.bus.shutdown()
+        except (self._can.CanError, OSError):
+            self.can_errors += 1
+
+
+class FakeMotorBus(MotorBus):
+    """An in-process C610 trio, stepped synchronously: each command advances it by ``dt_us``.
+
+    Feedback produced by a command is returned by the next :meth:`read_feedback` — the order of a real
+    bus, where the answers arrive after the command. Faults: ``bus.trio.silent.add(2)`` stops motor 2.
+    """
+
+    def __init__(
+        self, trio: FakeC610Trio | None = None, *, dt_us: int = 1000, current_limit_raw: int = CURRENT_RAW_MAX
+    ) -> None:
+        """Create the bus around ``trio`` (default: a fresh ``FakeC610Trio()``)."""
+        super().__init__(current_limit_raw=current_limit_raw)
+        if trio is None:
+            from controller.fake_c610 import FakeC610Trio
+
+            trio = FakeC610Trio()
+        self.trio = trio
+        self.dt_us = dt_us
+        self._pending: list[tuple[int, bytes]] = []
+
+    def _send_frame(self, can_id: int, data: bytes) -> None:
+        self.trio.handle_frame(can_id, data)
+        if can_id == COMMAND_ID_LOW:
+            self._pending.extend(self.trio.step(self.dt_us))
+
+    def _recv_frames(self) -> list[tuple[int, bytes]]:
+        if not self._pending:
+            return []
+        out = self._pending
+        self._pending = []
+        return out
+
+
+_BACKENDS: dict[str, str | type[MotorBus]] = {
+    "can": "controller.motorbus:CanMotorBus",
+    "fake": "controller.motorbus:FakeMotorBus",
+}
+
+
+def register_bus(name: str, target: str | type[MotorBus]) -> None:
+    """Register a back end by name: a class, or ``"module:Class"`` imported on first use.
+
+    ``hil`` registers ``sim`` this way (``controller`` never imports ``hil``).
+    """
+    _BACKENDS[name] = target
+
+
+def make_bus(name: str, **kwargs: Any) -> MotorBus:
+    """Create the back end registered as ``name`` with ``kwargs`` (e.g. ``make_bus("can", channel=...,
+    interface="slcan")``).
+
+    Raises:
+        ValueError: no back end of that name.
+        PortError: the back end could not open its port.
+    """
+    try:
+        target = _BACKENDS[name]
+    except KeyError:
+        raise ValueError(f"unknown motor bus {name!r}; known: {', '.join(sorted(_BACKENDS))}") from None
+    if isinstance(target, str):
+        module, _, attr = target.partition(":")
+        cls = getattr(importlib.import_module(module), attr)
+        if not (isinstance(cls, type) and issubclass(cls, MotorBus)):
+            raise ValueError(f"{target} is not a MotorBus")
+        _BACKENDS[name] = cls
+    else:
+        cls = target
+    return cls(**kwargs)

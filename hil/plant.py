@@ -1,0 +1,769 @@
+"""The MuJoCo plant: a SpiRob arm under a drone, driven by raw C610 currents, answering C610 feedback.
+
+One :meth:`Plant.step` is one control period (1 ms by default) and a whole number of physics steps.
+The firmware side only sees what a real C610 bus shows it: :meth:`Plant.apply_currents` takes the raw
+int16 setpoints of a 0x200 frame and :meth:`Plant.feedback` returns one :class:`MotorFeedback` per motor
+(rotor angle wrapping at 8192 counts per *rotor* turn, rotor speed in rpm, measured current in raw
+units). Everything else is a named accessor for tests, scenarios and the UI; no caller needs a raw
+``qpos`` index.
+
+Per control period the plant also applies what MuJoCo cannot express statically:
+
+- the motors' torque-speed line (the drive runs out of voltage towards the no-load speed);
+- capstan friction of the cables in the unit holes, as per-joint dry friction whose size follows the
+  capstan law from the current cable tensions and joint angles (``docs/plant.md``);
+- the drone's acceleration, as a change of the gravity vector (the arm is simulated in the drone's frame).
+
+Randomness (the encoders' arbitrary zero, current noise) comes only from the ``numpy.random.Generator``
+given to the constructor.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.errors import PlantDivergedError
+from hil.mjcf import ModelConfig, ObjectConfig, build_mjcf, cable_layout, unit_geometry
+from hil.spiral import SpiralDesign
+from protocol.c610 import ANGLE_COUNTS, CURRENT_RAW_MAX, RAW_PER_AMP, MotorFeedback
+
+__all__ = ["BodyPoses", "Contact", "Plant", "PlantConfig", "Pose"]
+
+FloatArray = NDArray[np.float64]
+
+_GRAVITY = np.array([0.0, 0.0, -9.80665])
+_INT16_MAX = 32767
+_BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Configuration of a :class:`Plant`.
+
+    Attributes:
+        model: everything the MJCF generator needs besides the design (arm, motors, drone, solver,
+            objects).
+        control_period_us: length of one :meth:`Plant.step`; must be a whole number of physics steps.
+        max_joint_speed_rad_s: any arm joint faster than this counts as divergence.
+        max_spool_speed_m_s: any spool (cable) faster than this counts as divergence.
+    """
+
+    model: ModelConfig = field(default_factory=ModelConfig)
+    control_period_us: int = 1000
+    max_joint_speed_rad_s: float = 5.0e3
+    max_spool_speed_m_s: float = 50.0
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        self.model.validate()
+        if isinstance(self.control_period_us, bool) or not isinstance(self.control_period_us, int):
+            raise ValueError(f"control_period_us must be an int, got {self.control_period_us!r}")
+        if self.control_period_us <= 0:
+            raise ValueError(f"control_period_us must be > 0, got {self.control_period_us}")
+        for name in ("max_joint_speed_rad_s", "max_spool_speed_m_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A position and orientation in world coordinates.
+
+    Attributes:
+        pos_m: position, shape (3,).
+        quat_wxyz: unit quaternion w, x, y, z (MuJoCo's and viser's convention), shape (4,).
+    """
+
+    pos_m: FloatArray
+    quat_wxyz: FloatArray
+
+
+@dataclass(frozen=True)
+class BodyPoses:
+    """Poses of the drone and every unit, for drawing (drone first, then ``unit_00`` ... tip).
+
+    A unit's frame has its origin on the joint at its base-side face and its axis along −z towards the
+    tip; its size is given by :meth:`Plant.unit_dimensions_m`.
+
+    Attributes:
+        names: body names, ``("drone", "unit_00", ...)``.
+        positions_m: shape (n, 3).
+        quats_wxyz: shape (n, 4).
+    """
+
+    names: tuple[str, ...]
+    positions_m: FloatArray
+    quats_wxyz: FloatArray
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact between a unit and something else.
+
+    Attributes:
+        unit: the unit's body name (``unit_07``).
+        other: the other body's name (an object's name, or ``world`` for the floor).
+        pos_m: contact point, world frame.
+        normal_force_n: force along the contact normal (>= 0).
+    """
+
+    unit: str
+    other: str
+    pos_m: tuple[float, float, float]
+    normal_force_n: float
+
+
+class Plant:
+    """The simulated arm, its three (or one or two) motors and the drone it hangs from.
+
+    Args:
+        design: the spiral design; ``None`` = the paper's 3-cable prototype. ``design.cables`` sets the
+            number of cables and motors.
+        config: plant configuration (defaults: DESIGN.md section 4).
+        rng: the only source of randomness (encoder zero offsets, current noise). ``None`` = no
+            randomness: encoders start at 0 and ``current_noise_raw`` must be 0.
+
+    Raises:
+        ValueError: a configuration value is out of range, or the control period is not a whole number of
+            physics steps.
+    """
+
+    def __init__(
+        self,
+        design: SpiralDesign | None = None,
+        config: PlantConfig | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        self._design = design if design is not None else SpiralDesign.paper_prototype()
+        self._config = config if config is not None else PlantConfig()
+        self._config.validate()
+        if rng is not None and not isinstance(rng, np.random.Generator):
+            raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        if rng is None and self._config.model.motor.current_noise_raw > 0:
+            raise ValueError("current noise needs an rng (numpy.random.Generator)")
+        self._rng = rng
+        period_s = self._config.control_period_us * 1e-6
+        ratio = period_s / self._config.model.solver.timestep_s
+        substeps = round(ratio)
+        if substeps < 1 or abs(ratio - substeps) > 1e-9 * max(1.0, ratio):
+            raise ValueError(
+                f"control period {self._config.control_period_us} us is not a whole number of physics steps "
+                f"of {self._config.model.solver.timestep_s * 1e6:g} us"
+            )
+        self._substeps = substeps
+        self._build()
+        self.reset()
+
+    # ------------------------------------------------------------------ construction
+
+    def _build(self) -> None:
+        cfg = self._config.model
+        xml = build_mjcf(self._design, None, cfg)
+        m = mujoco.MjModel.from_xml_string(xml)
+        # Divergence is reported (PlantDivergedError), never silently reset.
+        m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+        self._xml = xml
+        self._m = m
+        self._d = mujoco.MjData(m)
+        n_cables = self._design.cables
+        n_units = self._design.units
+        self._n_cables = n_cables
+        self._geo = unit_geometry(self._design, cfg.arm)
+        self._layout = cable_layout(self._design, n_cables, cfg)
+        motor = cfg.motor
+        self._r_spool = motor.spool_radius_m
+        self._gear = motor.gear_ratio
+        self._limit_raw = round(motor.current_limit_a * RAW_PER_AMP)
+
+        def jid(name: str) -> int:
+            return int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name))
+
+        def bid(name: str) -> int:
+            return int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name))
+
+        spool_j = [jid(f"spool_{k}") for k in range(n_cables)]
+        self._spool_qadr = np.array([m.jnt_qposadr[j] for j in spool_j], dtype=np.intp)
+        self._spool_dadr = np.array([m.jnt_dofadr[j] for j in spool_j], dtype=np.intp)
+        self._tendon_ids = np.array(
+            [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, f"cable_{k}") for k in range(n_cables)],
+            dtype=np.intp,
+        )
+        self._tension_adr = np.array(
+            [
+                m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, f"tension_{k}")]
+                for k in range(n_cables)
+            ],
+            dtype=np.intp,
+        )
+        self._unit_bodies = np.array([bid(f"unit_{i:02d}") for i in range(n_units)], dtype=np.intp)
+        self._unit_names = tuple(f"unit_{i:02d}" for i in range(n_units))
+        self._body_name_of = {
+            int(b): name for b, name in zip(self._unit_bodies, self._unit_names, strict=True)
+        }
+        self._drone_body = bid("drone")
+        self._drone_mocap = int(m.body_mocapid[self._drone_body])
+        self._tip_site = int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "tip"))
+        arm_j = [jid(f"joint_{i:02d}") for i in range(1, n_units)]
+        self._ball = n_cables == 3
+        self._arm_qadr = np.array([m.jnt_qposadr[j] for j in arm_j], dtype=np.intp)
+        self._arm_dadr = np.array([m.jnt_dofadr[j] for j in arm_j], dtype=np.intp)
+        self._arm_dofs = np.concatenate([self._arm_dadr + k for k in range(3 if self._ball else 1)])
+        # Bending dofs (ball: local x and y; the z dof is twist, which does not rub the cable).
+        self._bend_dofs = (
+            np.stack([self._arm_dadr, self._arm_dadr + 1], axis=1) if self._ball else self._arm_dadr[:, None]
+        )
+        self._friction_scale = np.array(self._geo.cable_radius_base_side_m[1:], dtype=np.float64)
+        self._bend_dofs_flat = self._bend_dofs.ravel()
+        self._alpha_buf = np.empty(n_units - 1)
+        self._wrap_buf = np.empty(n_units - 1)
+        self._friction_on = False
+        self._mu = cfg.arm.cable_mu
+        self._tension_adr_list = [int(a) for a in self._tension_adr]
+        self._spool_dadr_list = [int(a) for a in self._spool_dadr]
+        self._spool_qadr_list = [int(a) for a in self._spool_qadr]
+        self._inv_r_spool = 1.0 / motor.spool_radius_m
+        self._inv_no_load = 1.0 / motor.no_load_speed_rad_s
+        self._stall_a = motor.stall_current_a
+        self._arm_slice = slice(int(self._arm_dofs.min()), int(self._arm_dofs.max()) + 1)
+        self._spool_slice = slice(int(self._spool_dadr.min()), int(self._spool_dadr.max()) + 1)
+        self._object_names = tuple(o.name for o in cfg.objects)
+        self._object_bodies = {o.name: bid(o.name) for o in cfg.objects}
+        self._current_raw = np.zeros(n_cables, dtype=np.int64)
+        self._current_raw_list = [0] * n_cables
+        self._applied_a = np.zeros(n_cables)
+        self._drone_accel = np.zeros(3)
+
+    # ------------------------------------------------------------------ properties
+
+    @property
+    def design(self) -> SpiralDesign:
+        """The spiral design this plant simulates."""
+        return self._design
+
+    @property
+    def config(self) -> PlantConfig:
+        """The plant configuration (objects added with :meth:`add_object` included)."""
+        return self._config
+
+    @property
+    def cables(self) -> int:
+        """Number of cables = number of motors."""
+        return self._n_cables
+
+    @property
+    def time_us(self) -> int:
+        """Simulated time since :meth:`reset`, in whole microseconds."""
+        return self._time_us
+
+    @property
+    def control_period_us(self) -> int:
+        """Length of one :meth:`step`."""
+        return self._config.control_period_us
+
+    @property
+    def substeps(self) -> int:
+        """Physics steps per control period."""
+        return self._substeps
+
+    @property
+    def mjcf(self) -> str:
+        """The MJCF text of the current model."""
+        return self._xml
+
+    @property
+    def mj_model(self) -> Any:
+        """The underlying ``mujoco.MjModel`` (escape hatch; prefer the named accessors)."""
+        return self._m
+
+    @property
+    def mj_data(self) -> Any:
+        """The underlying ``mujoco.MjData`` (escape hatch; prefer the named accessors)."""
+        return self._d
+
+    @property
+    def unit_names(self) -> tuple[str, ...]:
+        """Body names of the units, base first."""
+        return self._unit_names
+
+    @property
+    def object_names(self) -> tuple[str, ...]:
+        """Names of the objects in the model."""
+        return self._object_names
+
+    # ------------------------------------------------------------------ life cycle
+
+    def reset(self) -> None:
+        """Back to t = 0: arm straight and at rest, cables just taut, no current, drone at its start pose."""
+        m, d = self._m, self._d
+        mujoco.mj_resetData(m, d)
+        drone = self._config.model.drone
+        d.mocap_pos[self._drone_mocap] = drone.pos_m
+        d.mocap_quat[self._drone_mocap] = _unit_quat(drone.quat_wxyz)
+        m.opt.gravity[:] = _GRAVITY
+        self._drone_accel[:] = 0.0
+        self._current_raw[:] = 0
+        self._current_raw_list = [0] * self._n_cables
+        self._applied_a[:] = 0.0
+        self._time_us = 0
+        if self._rng is not None:
+            self._angle_offset_list = [
+                int(v) for v in self._rng.integers(0, ANGLE_COUNTS, size=self._n_cables)
+            ]
+        else:
+            self._angle_offset_list = [0] * self._n_cables
+        m.dof_frictionloss[self._bend_dofs_flat] = 0.0
+        self._friction_on = False
+        self._bad_qacc = 0
+        mujoco.mj_forward(m, d)
+
+    def step(self) -> None:
+        """Advance one control period with the currents last given to :meth:`apply_currents`.
+
+        Raises:
+            PlantDivergedError: the physics diverged (NaN/Inf, MuJoCo's bad-acceleration warning, or a joint
+                or spool speed beyond the configured bounds). :meth:`reset` before stepping again.
+        """
+        m, d = self._m, self._d
+        qvel = d.qvel
+        ctrl = d.ctrl
+        # Torque-speed line: in the direction of motion the drive can push at most I_stall·(1 − ω/ω_nl).
+        # Plain floats: three motors are cheaper in Python than in numpy.
+        for k in range(self._n_cables):
+            cmd = self._current_raw_list[k] / RAW_PER_AMP
+            if cmd == 0.0:
+                applied = 0.0
+            else:
+                omega = qvel[self._spool_dadr_list[k]] * self._inv_r_spool
+                sign = 1.0 if cmd > 0 else -1.0
+                avail = self._stall_a * (1.0 - sign * omega * self._inv_no_load)
+                applied = sign * min(abs(cmd), avail) if avail > 0.0 else 0.0
+            self._applied_a[k] = applied
+            ctrl[k] = applied
+        if self._mu > 0:
+            self._update_cable_friction()
+        for _ in range(self._substeps):
+            mujoco.mj_step(m, d)
+        self._time_us += self._config.control_period_us
+        # One cheap test per period; the detailed diagnosis only when it fails.
+        arm_speed = np.abs(qvel[self._arm_slice]).max()
+        spool_speed = np.abs(qvel[self._spool_slice]).max()
+        if (
+            not (arm_speed <= self._config.max_joint_speed_rad_s)
+            or not (spool_speed <= self._config.max_spool_speed_m_s)
+            or d.warning[_BADQACC].number != self._bad_qacc
+        ):
+            self._check_divergence()
+
+    def run(self, duration_us: int) -> None:
+        """Step for ``duration_us`` (a whole number of control periods) with the current commands.
+
+        Raises:
+            ValueError: ``duration_us`` is negative or not a multiple of the control period.
+            PlantDivergedError: see :meth:`step`.
+        """
+        period = self._config.control_period_us
+        if duration_us < 0 or duration_us % period:
+            raise ValueError(f"duration {duration_us} us is not a whole number of {period} us periods")
+        for _ in range(duration_us // period):
+            self.step()
+
+    def _check_divergence(self) -> None:
+        d = self._d
+        warn = int(d.warning[_BADQACC].number)
+        bad = warn > self._bad_qacc
+        self._bad_qacc = warn
+        reason = ""
+        if bad:
+            reason = f"MuJoCo reported a bad acceleration at dof {int(d.warning[_BADQACC].lastinfo)}"
+        elif not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
+            reason = "NaN or Inf in the state"
+        else:
+            joint_speed = float(np.abs(d.qvel[self._arm_dofs]).max(initial=0.0))
+            spool_speed = float(np.abs(d.qvel[self._spool_dadr]).max(initial=0.0))
+            if joint_speed > self._config.max_joint_speed_rad_s:
+                reason = f"arm joint speed {joint_speed:.3g} rad/s"
+            elif spool_speed > self._config.max_spool_speed_m_s:
+                reason = f"spool speed {spool_speed:.3g} m/s"
+        if reason:
+            raise PlantDivergedError(f"plant diverged at t = {self._time_us} us: {reason}", self._time_us)
+
+    def _update_cable_friction(self) -> None:
+        """Capstan friction in the holes as per-joint dry friction (see docs/plant.md).
+
+        A cable of tension T bent by α at a joint loses ``T(1 − e^{−μα})`` there, and arrives at joint i
+        with ``T·e^{−μ Σ_{j<i} α_j}``. Each joint gets the friction torque of all cables at its hole
+        radius; MuJoCo's frictionloss makes it a stick-slip constraint, not an explicit force.
+        """
+        sens = self._d.sensordata
+        total = 0.0
+        for adr in self._tension_adr_list:
+            t = sens[adr]
+            if t > 0.0:
+                total += t
+        if total == 0.0:
+            if self._friction_on:
+                self._m.dof_frictionloss[self._bend_dofs_flat] = 0.0
+                self._friction_on = False
+            return
+        alpha = self._alpha_buf
+        wrap = self._wrap_buf
+        self._joint_angles_into(alpha)
+        np.abs(alpha, out=alpha)
+        np.cumsum(alpha, out=wrap)
+        wrap -= alpha
+        wrap *= -self._mu
+        np.exp(wrap, out=wrap)  # share of the tension arriving at each joint
+        alpha *= -self._mu
+        np.expm1(alpha, out=alpha)  # −(share lost in that joint's holes)
+        wrap *= alpha
+        wrap *= self._friction_scale * -total  # cable radius at each joint
+        self._m.dof_frictionloss[self._bend_dofs] = wrap[:, None]
+        self._friction_on = True
+
+    # ------------------------------------------------------------------ the motor bus side
+
+    def apply_currents(self, currents_raw: Sequence[int]) -> tuple[int, ...]:
+        """Set the motors' current setpoints in raw C610 units (1000 per amp), one per cable.
+
+        Values beyond the configured current limit are clamped, like the ESC does. A C610 command frame
+        has four slots: values beyond the plant's motors (e.g. slot 3 for a 2-cable arm) are accepted and
+        ignored, like a slot with no ESC on it.
+
+        Args:
+            currents_raw: one int per cable (up to four); positive winds the cable in (pulls).
+
+        Returns:
+            The setpoints actually applied to the plant's motors (after clamping), one per cable.
+
+        Raises:
+            ValueError: fewer values than cables or more than four, or a value that is not an integer.
+        """
+        if not self._n_cables <= len(currents_raw) <= 4:
+            raise ValueError(f"expected {self._n_cables} currents (at most 4), got {len(currents_raw)}")
+        out = []
+        for i, value in enumerate(currents_raw):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer):
+                raise ValueError(f"current[{i}] must be an int, got {type(value).__name__}")
+            out.append(max(-self._limit_raw, min(self._limit_raw, int(value))))
+        del out[self._n_cables :]
+        self._current_raw[:] = out
+        self._current_raw_list = out
+        return tuple(out)
+
+    def feedback(self) -> tuple[MotorFeedback, ...]:
+        """One C610 feedback frame per motor, as the motor would report it now.
+
+        Angle: rotor position, 0..8191 per *rotor* turn (the output turns 36x slower), with an arbitrary
+        zero drawn from the rng at :meth:`reset`. Speed: rotor rpm. Current: the current the drive actually
+        delivers (the torque-speed line can make it smaller than the setpoint), raw units, with the
+        configured noise.
+        """
+        d = self._d
+        motor = self._config.model.motor
+        qpos, qvel = d.qpos, d.qvel
+        counts_per_m = self._gear * ANGLE_COUNTS / (2.0 * math.pi * self._r_spool)
+        rpm_per_m_s = self._gear * 60.0 / (2.0 * math.pi * self._r_spool)
+        noise = (
+            self._rng.normal(0.0, motor.current_noise_raw, self._n_cables)
+            if motor.current_noise_raw > 0 and self._rng is not None
+            else None
+        )
+        frames = []
+        # Plain floats: this runs every millisecond for three motors.
+        for k in range(self._n_cables):
+            counts = round(float(qpos[self._spool_qadr_list[k]]) * counts_per_m) + self._angle_offset_list[k]
+            rpm = round(float(qvel[self._spool_dadr_list[k]]) * rpm_per_m_s)
+            current = float(self._applied_a[k]) * RAW_PER_AMP
+            if noise is not None:
+                current += float(noise[k])
+            frames.append(
+                MotorFeedback(
+                    counts % ANGLE_COUNTS,
+                    max(-_INT16_MAX, min(_INT16_MAX, rpm)),
+                    max(-CURRENT_RAW_MAX, min(CURRENT_RAW_MAX, round(current))),
+                    motor.temperature_c,
+                )
+            )
+        return tuple(frames)
+
+    # ------------------------------------------------------------------ named accessors
+
+    def commanded_currents_raw(self) -> tuple[int, ...]:
+        """The setpoints last applied (after clamping), raw units."""
+        return tuple(int(c) for c in self._current_raw)
+
+    def applied_currents_a(self) -> FloatArray:
+        """Current each drive delivered in the last period (after the torque-speed line) [A]."""
+        return self._applied_a.copy()
+
+    def spool_angles_rad(self) -> FloatArray:
+        """Output-shaft angle of each spool since reset, multi-turn; positive = cable wound in [rad]."""
+        return np.asarray(self._d.qpos[self._spool_qadr] / self._r_spool, dtype=np.float64)
+
+    def spool_speeds_rad_s(self) -> FloatArray:
+        """Output-shaft speed of each spool [rad/s]."""
+        return np.asarray(self._d.qvel[self._spool_dadr] / self._r_spool, dtype=np.float64)
+
+    def cable_tensions_n(self) -> FloatArray:
+        """Tension of each cable at the spool (0 when slack) [N]."""
+        return np.maximum(np.asarray(self._d.sensordata[self._tension_adr], dtype=np.float64), 0.0)
+
+    def cable_lengths_m(self) -> FloatArray:
+        """Path length of each cable inside the arm, from its guide at the base to the knot at the tip [m].
+
+        When the cable is taut this shortens by exactly ``r_spool · Δangle`` as the spool winds in.
+        """
+        d = self._d
+        total = d.ten_length[self._tendon_ids]
+        spool_segment = self._layout.spool_lead_m + d.qpos[self._spool_qadr]
+        return np.asarray(total - spool_segment, dtype=np.float64)
+
+    def cable_slack_m(self) -> FloatArray:
+        """How much longer each cable is than its path (0 when taut) [m]."""
+        d = self._d
+        slack = self._layout.taut_length_m - d.ten_length[self._tendon_ids]
+        return np.maximum(np.asarray(slack, dtype=np.float64), 0.0)
+
+    def joint_angles_rad(self) -> FloatArray:
+        """Bending angle of each joint, base first (``joint_01`` ... ), shape (units − 1,) [rad].
+
+        Hinges (1-2 cables): signed, positive bends towards −x (away from cable 0). Ball joints (3 cables):
+        the rotation angle, ≥ 0.
+        """
+        out = np.empty(len(self._arm_qadr))
+        self._joint_angles_into(out)
+        return out
+
+    def _joint_angles_into(self, out: FloatArray) -> None:
+        q = self._d.qpos
+        if self._ball:
+            np.take(q, self._arm_qadr, out=out)
+            np.abs(out, out=out)
+            np.minimum(out, 1.0, out=out)
+            np.arccos(out, out=out)
+            out *= 2.0
+        else:
+            np.take(q, self._arm_qadr, out=out)
+
+    def tip_pose(self) -> Pose:
+        """Pose of the tip (the knot end of the last unit)."""
+        d = self._d
+        return Pose(d.site_xpos[self._tip_site].copy(), d.xquat[self._unit_bodies[-1]].copy())
+
+    def unit_poses(self) -> tuple[FloatArray, FloatArray]:
+        """Frames of all units, base first: positions (n, 3) and quaternions w, x, y, z (n, 4).
+
+        A unit's origin is the joint at its base-side face; its axis points along its local −z.
+        """
+        d = self._d
+        return d.xpos[self._unit_bodies].copy(), d.xquat[self._unit_bodies].copy()
+
+    def body_poses(self) -> BodyPoses:
+        """Drone and unit frames in one batch (for the UI's batched meshes)."""
+        d = self._d
+        ids = np.concatenate([[self._drone_body], self._unit_bodies])
+        return BodyPoses(("drone", *self._unit_names), d.xpos[ids].copy(), d.xquat[ids].copy())
+
+    def unit_dimensions_m(self) -> tuple[tuple[float, float, float], ...]:
+        """``(length, base-side width, tip-side width)`` of each unit, base first [m]."""
+        g = self._geo
+        return tuple((g.chord_m[i], g.width_base_side_m[i], g.width_tip_side_m[i]) for i in range(g.units))
+
+    def contacts(self) -> list[Contact]:
+        """Current contacts between units and anything else (objects, floor), with normal forces."""
+        m, d = self._m, self._d
+        out: list[Contact] = []
+        force = np.zeros(6)
+        for i in range(d.ncon):
+            con = d.contact[i]
+            b1 = int(m.geom_bodyid[con.geom1])
+            b2 = int(m.geom_bodyid[con.geom2])
+            unit, other = (b1, b2) if b1 in self._body_name_of else (b2, b1)
+            if unit not in self._body_name_of:
+                continue
+            mujoco.mj_contactForce(m, d, i, force)
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, other) or "world"
+            pos = (float(con.pos[0]), float(con.pos[1]), float(con.pos[2]))
+            out.append(Contact(self._body_name_of[unit], name, pos, max(float(force[0]), 0.0)))
+        return out
+
+    # ------------------------------------------------------------------ drone and objects
+
+    def drone_pose(self) -> Pose:
+        """Current drone pose."""
+        d = self._d
+        return Pose(d.mocap_pos[self._drone_mocap].copy(), d.mocap_quat[self._drone_mocap].copy())
+
+    def set_drone_pose(
+        self,
+        pos_m: Sequence[float],
+        quat_wxyz: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+        accel_m_s2: Sequence[float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        """Move the drone (kinematically; the arm follows rigidly at its base).
+
+        Args:
+            pos_m: drone origin, world frame.
+            quat_wxyz: orientation (normalised here).
+            accel_m_s2: the drone's linear acceleration, world frame. The arm is simulated in the drone's
+                frame, so this enters as the fictitious force ``−m·a`` (gravity becomes ``g − a``).
+
+        Raises:
+            ValueError: wrong shape, a non-finite value, or a zero quaternion.
+        """
+        pos = _finite_vector("pos_m", pos_m, 3)
+        acc = _finite_vector("accel_m_s2", accel_m_s2, 3)
+        quat = _unit_quat(quat_wxyz)
+        d = self._d
+        d.mocap_pos[self._drone_mocap] = pos
+        d.mocap_quat[self._drone_mocap] = quat
+        self._drone_accel[:] = acc
+        self._m.opt.gravity[:] = _GRAVITY - acc
+        mujoco.mj_kinematics(self._m, d)
+
+    def set_object_pose(
+        self, name: str, pos_m: Sequence[float], quat_wxyz: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
+    ) -> None:
+        """Place an object (fixed: moves its body; free: sets its position and stops it).
+
+        Raises:
+            KeyError: no object of that name.
+            ValueError: bad vector.
+        """
+        if name not in self._object_bodies:
+            raise KeyError(f"no object named {name!r}; objects: {', '.join(self._object_names) or 'none'}")
+        pos = _finite_vector("pos_m", pos_m, 3)
+        quat = _unit_quat(quat_wxyz)
+        m, d = self._m, self._d
+        body = self._object_bodies[name]
+        jnt = int(m.body_jntadr[body])
+        if jnt < 0:
+            m.body_pos[body] = pos
+            m.body_quat[body] = quat
+        else:
+            qa, da = int(m.jnt_qposadr[jnt]), int(m.jnt_dofadr[jnt])
+            d.qpos[qa : qa + 3] = pos
+            d.qpos[qa + 3 : qa + 7] = quat
+            d.qvel[da : da + 6] = 0.0
+        mujoco.mj_forward(m, d)
+
+    def object_pose(self, name: str) -> Pose:
+        """Current pose of an object.
+
+        Raises:
+            KeyError: no object of that name.
+        """
+        if name not in self._object_bodies:
+            raise KeyError(f"no object named {name!r}")
+        b = self._object_bodies[name]
+        return Pose(self._d.xpos[b].copy(), self._d.xquat[b].copy())
+
+    def add_object(self, obj: ObjectConfig) -> None:
+        """Add an object to grasp. The model is rebuilt; the arm's state, time and commands are kept.
+
+        Raises:
+            ValueError: invalid object or a duplicate name.
+        """
+        old_m, old_d = self._m, self._d
+        state = (old_d.qpos.copy(), old_d.qvel.copy(), old_d.mocap_pos.copy(), old_d.mocap_quat.copy())
+        keep = (
+            self._time_us,
+            self._current_raw.copy(),
+            self._applied_a.copy(),
+            list(self._angle_offset_list),
+            self._drone_accel.copy(),
+            old_d.time,
+        )
+        model = self._config.model.with_objects(obj)
+        new_config = replace(self._config, model=model)
+        new_config.validate()
+        self._config = new_config
+        self._build()
+        m, d = self._m, self._d
+        # Objects come after the drone's subtree, so the arm's coordinates keep their addresses.
+        nq, nv = old_m.nq, old_m.nv
+        d.qpos[:nq], d.qvel[:nv] = state[0], state[1]
+        d.mocap_pos[: len(state[2])], d.mocap_quat[: len(state[3])] = state[2], state[3]
+        for o in model.objects:
+            body = self._object_bodies[o.name]
+            jnt = int(m.body_jntadr[body])
+            if jnt >= 0 and int(m.jnt_qposadr[jnt]) >= nq:
+                qa = int(m.jnt_qposadr[jnt])
+                d.qpos[qa : qa + 3] = o.pos_m
+                d.qpos[qa + 3 : qa + 7] = (1.0, 0.0, 0.0, 0.0)
+        self._time_us, cur, app, off, acc, d.time = keep
+        self._current_raw[:] = cur
+        self._applied_a[:] = app
+        self._angle_offset_list = off
+        self._drone_accel[:] = acc
+        self._current_raw_list = [int(c) for c in cur]
+        m.opt.gravity[:] = _GRAVITY - acc
+        self._bad_qacc = 0
+        mujoco.mj_forward(m, d)
+
+    # ------------------------------------------------------------------ poses for tests and scenarios
+
+    def set_packed(self, cable: int = 0) -> None:
+        """Put the arm kinematically into its packed spiral, curled towards ``cable``, at rest.
+
+        Every joint is set to its limit Δθ bending towards that cable (for 1-2 cables the hinge limit on
+        that side), and every spool is set so its cable is exactly taut. Currents are unchanged.
+
+        Raises:
+            IndexError: no such cable.
+        """
+        if not 0 <= cable < self._n_cables:
+            raise IndexError(f"cable {cable} outside 0..{self._n_cables - 1}")
+        d = self._d
+        dtheta = self._design.dtheta_rad
+        psi = self._layout.angles_rad[cable]
+        if self._ball:
+            # Bending towards the cable at azimuth ψ: rotate about the axis (−sin ψ, cos ψ, 0)·(−1).
+            axis = np.array([math.sin(psi), -math.cos(psi), 0.0])
+            quat = np.concatenate([[math.cos(dtheta / 2)], math.sin(dtheta / 2) * axis])
+            for adr in self._arm_qadr:
+                d.qpos[adr : adr + 4] = quat
+        else:
+            sign = -1.0 if math.cos(psi) > 0 else 1.0  # hinge about y: negative bends towards +x
+            d.qpos[self._arm_qadr] = sign * dtheta
+        d.qvel[:] = 0.0
+        self._make_cables_taut()
+
+    def set_straight(self) -> None:
+        """Put the arm straight and at rest with every cable exactly taut (time and currents unchanged)."""
+        m, d = self._m, self._d
+        d.qpos[:] = m.qpos0
+        d.qvel[:] = 0.0
+        self._make_cables_taut()
+
+    def _make_cables_taut(self) -> None:
+        m, d = self._m, self._d
+        d.qpos[self._spool_qadr] = 0.0
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_tendon(m, d)
+        excess = d.ten_length[self._tendon_ids] - self._layout.taut_length_m
+        d.qpos[self._spool_qadr] = -excess
+        mujoco.mj_forward(m, d)
+
+
+def _finite_vector(name: str, value: Sequence[float], n: int) -> FloatArray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (n,) or not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be {n} finite numbers, got {value!r}")
+    return arr
+
+
+def _unit_quat(value: Sequence[float]) -> FloatArray:
+    q = _finite_vector("quat_wxyz", value, 4)
+    norm = float(np.linalg.norm(q))
+    if norm == 0.0:
+        raise ValueError("quat_wxyz must be non-zero")
+    return q / norm

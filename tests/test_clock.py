@@ -1,0 +1,61 @@
+"""Clocks: lockstep semantics; the real-time clock's absolute sleeps and set-up (no wall-clock bounds)."""
+
+from __future__ import annotations
+
+import gc
+
+import pytest
+
+from controller.clock import LockstepClock, RealTimeClock
+from controller.errors import ClockError
+
+
+def test_lockstep_advances_only_when_told() -> None:
+    c = LockstepClock(1000)
+    assert c.now_us() == 1000
+    c.advance(500)
+    c.advance_to(2000)
+    assert c.now_us() == 2000
+    with pytest.raises(ClockError):
+        c.advance_to(1999)
+    with pytest.raises(ClockError):
+        c.advance(-1)
+    with pytest.raises(ValueError):
+        LockstepClock(-1)
+
+
+def test_lockstep_sleep_advances_to_the_deadline_never_back() -> None:
+    c = LockstepClock()
+    c.sleep_until_us(5000)
+    assert c.now_us() == 5000
+    c.sleep_until_us(100)  # in the past: returns at once
+    assert c.now_us() == 5000
+
+
+def test_realtime_sleep_returns_at_or_after_the_deadline() -> None:
+    c = RealTimeClock(fifo=False)
+    for _ in range(5):
+        deadline = c.now_us() + 300
+        c.sleep_until_us(deadline)
+        assert c.now_us() >= deadline
+    before = c.now_us()
+    c.sleep_until_us(before - 1_000_000)  # past deadline: no sleep (nothing to assert on time)
+    assert c.now_us() >= before
+
+
+def test_realtime_running_restores_gc_and_scheduler() -> None:
+    c = RealTimeClock(fifo=True, spin_us=0)
+    assert gc.isenabled()
+    with c.running():
+        assert not gc.isenabled()
+    assert gc.isenabled()
+    assert not c.fifo_active
+
+
+def test_realtime_clock_validates_arguments() -> None:
+    with pytest.raises(ValueError):
+        RealTimeClock(fifo_priority=0)
+    with pytest.raises(ValueError):
+        RealTimeClock(timer_slack_ns=0)
+    with pytest.raises(ValueError):
+        RealTimeClock(spin_us=-1)

@@ -1,0 +1,278 @@
+"""Failsafe phase machine, given/when/then in simulated time (1 ms ticks, fake C610 trio, scripted RC).
+
+Every "lost" must give zero current on the first tick after the timeout expires, not later.
+"""
+
+from __future__ import annotations
+
+from controller_harness import Rig, frame
+
+from controller.config import FirmwareConfig
+from controller.events import EventQueue
+from controller.failsafe import Failsafe
+from protocol.dbus import Lever, RcFrame
+from protocol.messages import Command, CommandCode, EventKind, Heartbeat, Phase
+
+ZERO = (0, 0, 0)
+MANUAL_CURL = frame(right=Lever.MIDDLE, ch3=400)
+
+
+def armed_manual_rig(**cfg: object) -> Rig:
+    rig = Rig(FirmwareConfig.from_dict(cfg), link=bool(cfg.get("host_required")))
+    if cfg.get("host_required"):
+        rig.send(Heartbeat(0, 0))
+    rig.arm()
+    rig.set_rc(MANUAL_CURL)
+    rig.until(lambda: all(c > 0 for c in rig.currents), 50)
+    return rig
+
+
+# --- start-up gate --------------------------------------------------------------------------------
+
+
+def test_gate_no_current_before_any_rc() -> None:
+    # given a board with the radio silent
+    rig = Rig(start=None)
+    rig.radio.set_frame(None)
+    # when it runs for a second
+    for _ in range(1000):
+        rig.tick()
+        # then no current ever flows and the phase stays GATE
+        assert rig.currents == ZERO
+    assert rig.fw.phase == Phase.GATE
+
+
+def test_gate_holds_while_right_lever_is_not_down_at_boot() -> None:
+    # given the radio powered up with the right lever already in MANUAL and the left stick up
+    rig = Rig(start=frame(right=Lever.MIDDLE, ch3=600))
+    # when the board boots
+    for _ in range(200):
+        rig.tick()
+        # then it refuses to drive the motors
+        assert rig.currents == ZERO
+    assert rig.fw.phase == Phase.GATE
+    # when the lever is put DOWN, the gate opens (SAFE: still zero current)
+    rig.set_rc(frame())
+    rig.until(lambda: rig.fw.phase == Phase.OK, 30)
+    assert rig.currents == ZERO
+    # and MIDDLE now gives current
+    rig.set_rc(frame(right=Lever.MIDDLE, ch3=600))
+    rig.until(lambda: all(c > 0 for c in rig.currents), 30)
+
+
+def test_gate_needs_all_motors() -> None:
+    # given motor 3 never answers
+    rig = Rig()
+    rig.bus.trio.silent.add(3)
+    # when the lever is DOWN for a while
+    rig.tick(100)
+    # then the gate stays closed
+    assert rig.fw.phase == Phase.GATE
+    # when motor 3 comes up, the gate opens
+    rig.bus.trio.silent.clear()
+    rig.until(lambda: rig.fw.phase == Phase.OK, 20)
+
+
+# --- RC lost --------------------------------------------------------------------------------------
+
+
+def test_rc_lost_zero_current_on_the_tick_after_30_ms() -> None:
+    # given an armed board in MANUAL with current flowing
+    rig = armed_manual_rig()
+    # when the radio goes silent right after delivering a frame
+    rig.until(lambda: rig.radio.frames_sent > 0 and rig.fw.rc_frame is not None and _fresh(rig), 20)
+    last_frame_us = rig.last_us
+    rig.set_rc(None)
+    # then current flows through last + 30 ms ...
+    while rig.now_us <= last_frame_us + 30_000:
+        rig.tick()
+        assert all(c > 0 for c in rig.currents), rig.last_us - last_frame_us
+    assert rig.fw.phase == Phase.OK
+    # ... and is zero on the very next tick, in phase RC_LOST
+    rig.tick()
+    assert rig.last_us == last_frame_us + 31_000
+    assert rig.currents == ZERO
+    assert rig.fw.phase == Phase.RC_LOST
+
+
+def _fresh(rig: Rig) -> bool:
+    return rig.fw.failsafe._last_rc_us == rig.last_us
+
+
+def test_rc_regained_resumes_from_the_pretension_floor() -> None:
+    # given RC lost
+    rig = armed_manual_rig()
+    rig.set_rc(None)
+    rig.until(lambda: rig.fw.phase == Phase.RC_LOST, 40)
+    # when frames return
+    rig.set_rc(MANUAL_CURL)
+    rig.until(lambda: rig.fw.phase == Phase.OK, 20)
+    # then the tensions restart at the floor and ramp (slew-limited), not jump to the stick value
+    pretension = rig.config.pretension_n
+    first = rig.fw.tensions_n
+    assert all(abs(t - pretension) <= rig.config.slew_n_per_s * 1e-3 + 1e-9 for t in first)
+
+
+def test_invalid_frames_are_counted_and_never_acted_on() -> None:
+    # given an armed board in SAFE
+    rig = Rig()
+    rig.arm()
+    # when only out-of-range frames with the lever in MIDDLE arrive
+    bad = RcFrame((700, 0, 0, 660), Lever.MIDDLE, Lever.DOWN)
+    lever0 = RcFrame((0, 0, 0, 600), 0, Lever.DOWN)
+    rig.set_rc(bad)
+    rig.radio.inject(lever0)
+    for _ in range(25):
+        rig.tick()
+        # then they never move the motors
+        assert rig.currents == ZERO
+    assert rig.fw.rc_rejected >= 2
+    assert rig.fw.rc_frame is not None and rig.fw.rc_frame.right_lever == Lever.DOWN
+    # and RC counts as lost once the last valid frame is 30 ms old
+    rig.until(lambda: rig.fw.phase == Phase.RC_LOST, 40)
+
+
+# --- motor lost -----------------------------------------------------------------------------------
+
+
+def test_motor_silent_over_10_ms_zero_on_next_tick_and_latched() -> None:
+    # given an armed board in MANUAL
+    rig = armed_manual_rig()
+    # when motor 2 stops answering
+    rig.bus.trio.silent.add(2)
+    rig.tick()
+    last_fb_us = rig.fw.motors.last_feedback_us[1]
+    while rig.now_us <= last_fb_us + 10_000:
+        rig.tick()
+        assert all(c > 0 for c in rig.currents)
+    # then all three currents are zero on the next tick
+    rig.tick()
+    assert rig.last_us == last_fb_us + 11_000
+    assert rig.currents == ZERO
+    assert rig.fw.phase == Phase.MOTOR_FAULT
+    assert rig.fw.failsafe.motor_offline_events == 1
+    # when the motor comes back with the lever still in MIDDLE
+    rig.bus.trio.silent.clear()
+    for _ in range(100):
+        rig.tick()
+        # then the fault stays latched
+        assert rig.currents == ZERO
+    assert rig.fw.phase == Phase.MOTOR_FAULT
+    # when the operator re-arms through SAFE
+    rig.set_rc(frame())
+    rig.until(lambda: rig.fw.phase == Phase.OK, 30)
+    rig.set_rc(MANUAL_CURL)
+    rig.until(lambda: all(c > 0 for c in rig.currents), 30)
+
+
+def test_motor_fault_needs_the_motor_back_before_rearming() -> None:
+    rig = armed_manual_rig()
+    rig.bus.trio.silent.add(1)
+    rig.until(lambda: rig.fw.phase == Phase.MOTOR_FAULT, 20)
+    # lever DOWN while the motor is still silent: stays latched
+    rig.set_rc(frame())
+    rig.tick(50)
+    assert rig.fw.phase == Phase.MOTOR_FAULT
+    rig.bus.trio.silent.clear()
+    rig.until(lambda: rig.fw.phase == Phase.OK, 20)
+
+
+# --- host lost ------------------------------------------------------------------------------------
+
+
+def test_host_lost_zero_current_when_host_required() -> None:
+    # given a board that requires the host, armed, host heartbeat sent once
+    rig = armed_manual_rig(host_required=True, host_timeout_us=100_000)
+    hb_us = rig.fw.failsafe._last_hb_us
+    # when the host goes silent
+    while rig.now_us <= hb_us + 100_000:
+        rig.tick()
+        assert all(c > 0 for c in rig.currents)
+    # then current is zero on the next tick
+    rig.tick()
+    assert rig.currents == ZERO
+    assert rig.fw.phase == Phase.HOST_LOST
+    # when heartbeats return, current flows again
+    rig.send(Heartbeat(1, 1))
+    rig.until(lambda: rig.fw.phase == Phase.OK, 5)
+    rig.until(lambda: all(c > 0 for c in rig.currents), 5)
+
+
+def test_host_not_required_ignores_missing_heartbeat() -> None:
+    rig = armed_manual_rig()
+    rig.tick(1000)
+    assert rig.fw.phase == Phase.OK and all(c > 0 for c in rig.currents)
+
+
+def test_gate_waits_for_host_when_required() -> None:
+    rig = Rig(FirmwareConfig(host_required=True), link=True)
+    rig.tick(100)
+    assert rig.fw.phase == Phase.GATE
+    rig.send(Heartbeat(0, 0))
+    rig.until(lambda: rig.fw.phase == Phase.OK, 5)
+
+
+# --- E-stop, arm, disarm --------------------------------------------------------------------------
+
+
+def test_estop_latched_until_cleared_and_rearmed_through_safe() -> None:
+    # given an armed board in MANUAL with a host link
+    rig = Rig(link=True)
+    rig.arm()
+    rig.set_rc(MANUAL_CURL)
+    rig.until(lambda: all(c > 0 for c in rig.currents), 50)
+    # when the host sends E-stop
+    rig.send(Command(CommandCode.ESTOP))
+    rig.tick()
+    # then current is zero on that very tick (link_rx runs before control)
+    assert rig.currents == ZERO
+    assert rig.fw.phase == Phase.ESTOP
+    # and stays zero whatever the sticks do
+    rig.tick(100)
+    assert rig.currents == ZERO
+    # when cleared with the lever still MIDDLE: the gate, still zero
+    rig.send(Command(CommandCode.CLEAR_ESTOP))
+    rig.tick(50)
+    assert rig.fw.phase == Phase.GATE and rig.currents == ZERO
+    # when re-armed through SAFE, MANUAL works again
+    rig.set_rc(frame())
+    rig.until(lambda: rig.fw.phase == Phase.OK, 30)
+    rig.set_rc(MANUAL_CURL)
+    rig.until(lambda: all(c > 0 for c in rig.currents), 30)
+
+
+def test_disarm_needs_arm_command() -> None:
+    rig = Rig(link=True)
+    rig.arm()
+    rig.send(Command(CommandCode.DISARM))
+    rig.tick(50)
+    assert rig.fw.phase == Phase.GATE  # lever DOWN is not enough after a DISARM
+    rig.send(Command(CommandCode.ARM))
+    rig.until(lambda: rig.fw.phase == Phase.OK, 5)
+
+
+def test_arm_refused_during_estop() -> None:
+    rig = Rig(link=True)
+    rig.arm()
+    rig.send(Command(CommandCode.ESTOP))
+    rig.tick()
+    rig.send(Command(CommandCode.ARM))
+    rig.tick()
+    assert rig.fw.phase == Phase.ESTOP
+
+
+# --- the machine alone ----------------------------------------------------------------------------
+
+
+def test_phase_events_carry_board_time() -> None:
+    events = EventQueue(16)
+    fs = Failsafe(FirmwareConfig(), events)
+    for i in range(3):
+        fs.on_motor_feedback(5_000, i)
+    fs.on_rc_frame(5_000, Lever.DOWN)
+    assert fs.update(5_000) == Phase.OK
+    assert fs.update(40_000) == Phase.MOTOR_FAULT  # motors silent first (priority over RC)
+    got = [(e.time_us, e.kind, e.code) for e in events.pop_all()]
+    assert (5_000, EventKind.PHASE, Phase.OK) in got
+    assert (40_000, EventKind.PHASE, Phase.MOTOR_FAULT) in got
+    assert sum(1 for _, k, _ in got if k == EventKind.FAULT) == 3

@@ -1,0 +1,164 @@
+"""Grasp state machine (seed Note S4): pack, reach, contact, wrap, hold, release; the "off" variant."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from controller_harness import Rig, frame
+
+from controller.config import FirmwareConfig
+from controller.events import EventQueue
+from controller.grasp import GraspMachine
+from protocol.dbus import Lever
+from protocol.messages import AckResult, Command, CommandAck, CommandCode, GraspState, Mode
+
+MOVING = [-0.05, -0.05, -0.05]  # cable paying out while the arm unrolls
+STALLED = [0.0, 0.0, 0.0]
+TAUT = [2.0, 2.0, 2.0]
+
+
+def machine(**cfg: object) -> tuple[GraspMachine, FirmwareConfig]:
+    config = FirmwareConfig.from_dict(cfg)
+    return GraspMachine(config, EventQueue(64)), config
+
+
+def run(g: GraspMachine, t: int, ms: int, speed: list[float] = MOVING, tension: list[float] = TAUT) -> int:
+    for _ in range(ms):
+        g.step(t, 1000, speed, tension)
+        t += 1000
+    return t
+
+
+def test_idle_packs_then_reach_ramps_down_then_contact_wraps_and_holds() -> None:
+    g, c = machine()
+    t = run(g, 0, 2000)
+    assert g.state == GraspState.IDLE and g.curl_n == c.grasp_pack_n
+    assert g.request_grasp(t, 0.0) == AckResult.ACCEPTED
+    t = run(g, t, 1)
+    assert g.state == GraspState.REACH
+    t = run(g, t, 300)  # unrolling: tension falls at the reach rate
+    assert g.curl_n == pytest.approx(c.grasp_pack_n - c.grasp_reach_rate_n_per_s * 0.300, abs=1e-6)
+    assert g.state == GraspState.REACH
+    # contact: the object-side cable stalls while taut for the dwell time
+    t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=STALLED)
+    assert g.state == GraspState.WRAP
+    t = run(g, t, 3000, speed=STALLED)
+    assert g.state == GraspState.HOLD and g.curl_n == c.grasp_wrap_n
+    assert g.request_release(t) == AckResult.ACCEPTED
+    assert g.state == GraspState.RELEASE
+    t = run(g, t, 3000, speed=STALLED)
+    assert g.state == GraspState.IDLE
+
+
+def test_no_contact_during_the_grace_period_or_when_slack() -> None:
+    g, c = machine()
+    t = run(g, 0, 2000)
+    g.request_grasp(t)
+    t = run(g, t, 1)
+    t = run(g, t, c.grasp_contact_grace_us // 1000 - 1, speed=STALLED)  # not moving yet: ignored
+    assert g.state == GraspState.REACH
+    t = run(g, t, 200, speed=STALLED, tension=[0.0, 0.0, 0.0])  # stalled but slack: no contact
+    assert g.state == GraspState.REACH
+
+
+def test_reach_without_contact_fails_at_timeout() -> None:
+    g, c = machine(grasp_reach_timeout_us=2_000_000)
+    t = run(g, 0, 2000)
+    g.request_grasp(t)
+    t = run(g, t, 1)
+    start = t - 1000
+    while g.state == GraspState.REACH:
+        t = run(g, t, 1, speed=MOVING)
+        assert t - start <= 2_000_000 + 2000
+    assert g.state == GraspState.FAILED
+    assert g.curl_n == c.grasp_reach_n
+    # a stall after the ramp has ended is not contact (the arm is simply unrolled)
+    g2, _ = machine()
+    t = run(g2, 0, 2000)
+    g2.request_grasp(t)
+    t = run(g2, t, 2000, speed=MOVING)  # ramp done (6 N -> 0.5 N at 4 N/s)
+    t = run(g2, t, 500, speed=STALLED)
+    assert g2.state == GraspState.REACH
+
+
+def test_strategy_off_is_a_plain_ramp_from_straight() -> None:
+    g, c = machine(grasp_strategy_on=False)
+    t = run(g, 0, 100)
+    assert g.curl_n == 0.0  # straight
+    g.request_grasp(t)
+    t = run(g, t, 1)
+    assert g.state == GraspState.WRAP
+    t = run(g, t, 3000)
+    assert g.state == GraspState.HOLD and g.curl_n == c.grasp_wrap_n
+
+
+def test_requests_in_wrong_states() -> None:
+    g, _ = machine()
+    assert g.request_hold(0) == AckResult.REJECTED  # nothing to hold in IDLE
+    t = run(g, 0, 2000)
+    g.request_grasp(t)
+    t = run(g, t, 10)
+    assert g.request_grasp(t) == AckResult.REJECTED  # busy
+    assert g.request_hold(t) == AckResult.ACCEPTED
+    assert g.state == GraspState.HOLD
+    assert g.request_grasp(t, math.nan) == AckResult.REJECTED
+
+
+def test_grasp_after_failure_repacks_first() -> None:
+    g, _ = machine(grasp_reach_timeout_us=500_000)
+    t = run(g, 0, 2000)
+    g.request_grasp(t)
+    t = run(g, t, 700)
+    assert g.state == GraspState.FAILED
+    assert g.request_grasp(t) == AckResult.ACCEPTED
+    assert g.state == GraspState.IDLE and g.pending
+    t = run(g, t, 3000)
+    assert g.state in (GraspState.REACH, GraspState.FAILED)
+
+
+# --- through the firmware -------------------------------------------------------------------------
+
+
+def test_left_lever_edges_trigger_grasp_and_release_in_grasp_mode() -> None:
+    rig = Rig()
+    rig.arm()
+    rig.set_rc(frame(right=Lever.UP, left=Lever.UP))  # already UP on entry: no edge, no grasp
+    rig.until(lambda: rig.fw.mode == Mode.GRASP, 30)
+    rig.tick(2000)
+    assert rig.fw.grasp_state == GraspState.IDLE
+    assert all(c > 0 for c in rig.currents)  # packed: the curl side pulls
+    rig.set_rc(frame(right=Lever.UP, left=Lever.DOWN))
+    rig.tick(30)
+    rig.set_rc(frame(right=Lever.UP, left=Lever.UP))  # the edge
+    rig.until(lambda: rig.fw.grasp_state == GraspState.REACH, 100)
+    rig.set_rc(frame(right=Lever.UP, left=Lever.DOWN))
+    rig.until(lambda: rig.fw.grasp_state == GraspState.RELEASE, 100)
+    # leaving GRASP mode resets the machine
+    rig.set_rc(frame(right=Lever.MIDDLE))
+    rig.until(lambda: rig.fw.mode == Mode.MANUAL, 30)
+    assert rig.fw.grasp_state == GraspState.IDLE
+
+
+def test_host_grasp_command_acks_in_progress_then_result() -> None:
+    rig = Rig(FirmwareConfig(grasp_reach_timeout_us=1_000_000), link=True)
+    rig.arm()
+    seq = rig.send(Command(CommandCode.GRASP, (math.nan, 0.0, 0.0)))
+    rig.tick(5)
+    acks = [m for m in rig.drain() if isinstance(m, CommandAck)]
+    assert acks[-1].result == AckResult.REJECTED  # lever not UP
+    rig.set_rc(frame(right=Lever.UP))
+    rig.until(lambda: rig.fw.mode == Mode.GRASP, 30)
+    seq = rig.send(Command(CommandCode.GRASP, (math.nan, 0.0, 0.0)))
+    rig.tick(5)
+    acks = [m for m in rig.drain() if isinstance(m, CommandAck)]
+    assert (acks[-1].command, acks[-1].result, acks[-1].request_seq) == (
+        CommandCode.GRASP,
+        AckResult.IN_PROGRESS,
+        seq,
+    )
+    # the fake trio's spring never stalls the cable like an object: the reach times out -> FAILED ack
+    rig.until(lambda: rig.fw.grasp_state == GraspState.FAILED, 5000)
+    rig.tick(5)
+    final = [m for m in rig.drain() if isinstance(m, CommandAck) and m.request_seq == seq]
+    assert final[-1].result == AckResult.FAILED

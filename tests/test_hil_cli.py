@@ -1,0 +1,220 @@
+"""`spirob-hil` command line (hil.cli): design and model export, one-line errors with status 2."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import mujoco
+import pytest
+
+from hil.cli import COMMANDS, build_parser, main
+from hil.spiral import AUTHORS_DEFAULT, PAPER_PROTOTYPE
+
+REQUIRED_KEYS = {
+    "a_m",
+    "b",
+    "dtheta_rad",
+    "theta0_rad",
+    "units",
+    "beta",
+    "taper_rad",
+    "tip_width_m",
+    "base_width_m",
+    "length_m",
+    "d_min_m",
+    "d_max_m",
+    "eta",
+    "inputs",
+}
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    status = main(argv)
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def assert_one_line_error(status: int, err: str) -> None:
+    assert status == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("spirob-hil")
+    assert "error:" in lines[0]
+    assert "Traceback" not in err
+
+
+def test_design_json_defaults_to_the_prototype(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, _ = run(["design", "--json"], capsys)
+    assert status == 0
+    data = json.loads(out)
+    assert data.keys() >= REQUIRED_KEYS
+    assert data["units"] == PAPER_PROTOTYPE.units
+    assert data["b"] == pytest.approx(PAPER_PROTOTYPE.b)
+    assert data["inputs"]["length_m"] == 0.23
+
+
+def test_design_table_for_people(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, _ = run(["design", "--preset", "authors"], capsys)
+    assert status == 0
+    assert "24 units" in out
+    assert "taper angle" in out and "largest graspable diameter" in out
+
+
+def test_design_from_physical_inputs(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = [
+        "design",
+        "--json",
+        "--length",
+        "0.3",
+        "--tip-width",
+        "0.008",
+        "--taper-deg",
+        "7",
+        "--dtheta-deg",
+        "20",
+    ]
+    status, out, _ = run([*argv, "--cables", "2"], capsys)
+    assert status == 0
+    data = json.loads(out)
+    assert data["cables"] == 2
+    assert data["tip_width_m"] == pytest.approx(0.008)
+    assert data["taper_rad"] == pytest.approx(math.radians(7))
+    assert data["dtheta_rad"] == pytest.approx(math.radians(20))
+    assert data["inputs"] == {
+        "length_m": 0.3,
+        "tip_width_m": 0.008,
+        "dtheta_rad": pytest.approx(math.radians(20)),
+        "taper_rad": pytest.approx(math.radians(7)),
+    }
+
+
+def test_design_from_base_width(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, _ = run(
+        ["design", "--json", "--length", "0.2", "--tip-width", "0.007", "--base-width", "0.03"], capsys
+    )
+    assert status == 0
+    data = json.loads(out)
+    assert data["base_width_m"] == pytest.approx(0.03, rel=0.06)
+
+
+def test_design_from_spiral_parameters(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, _ = run(
+        ["design", "--json", "--a", "0.00495", "--b", "0.1764", "--theta0-deg", "720", "--dtheta-deg", "30"],
+        capsys,
+    )
+    assert status == 0
+    assert json.loads(out)["units"] == AUTHORS_DEFAULT.units
+    status, out, _ = run(["design", "--json", "--a", "0.00495", "--b", "0.1764", "--units", "24"], capsys)
+    assert status == 0
+    assert json.loads(out)["theta0_rad"] == pytest.approx(4 * math.pi)
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["design", "--length", "-0.2", "--tip-width", "0.007", "--taper-deg", "6"],
+        ["design", "--length", "0.2", "--tip-width", "0.007", "--taper-deg", "0"],
+        ["design", "--length", "0.2", "--tip-width", "0.007", "--taper-deg", "90"],
+        ["design", "--length", "0.2", "--tip-width", "0.007", "--taper-deg", "120"],
+        ["design", "--a", "0.005", "--b", "0.15", "--theta0-deg", "20", "--dtheta-deg", "30"],
+        ["design", "--a", "0.005", "--b", "0.15", "--units", "0"],
+        ["design", "--length", "0.2", "--tip-width", "0.007"],
+        ["design", "--length", "0.2", "--taper-deg", "6"],
+        ["design", "--preset", "authors", "--length", "0.2"],
+        ["design", "--preset", "prototype", "--dtheta-deg", "20"],
+        ["design", "--preset", "nope"],
+        ["design", "--cables", "4"],
+        ["design", "--length", "abc"],
+        ["design", "--json", "--load-force", "-1"],
+        ["model", "export"],
+        ["model"],
+        ["frobnicate"],
+        [],
+    ],
+)
+def test_user_mistakes_are_one_line_and_status_2(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, err = run(argv, capsys)
+    assert_one_line_error(status, err)
+    assert out == ""
+
+
+@pytest.mark.parametrize("cables", ["1", "2", "3"])
+def test_model_export_writes_a_loadable_model(
+    tmp_path: Path, cables: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    target = tmp_path / "arm.xml"
+    status, out, _ = run(["model", "export", "--cables", cables, "-o", str(target)], capsys)
+    assert status == 0
+    assert str(target) in out
+    m = mujoco.MjModel.from_xml_path(str(target))
+    assert m.ntendon == int(cables)
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "unit_00") >= 0
+
+
+def test_model_export_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "authors.xml"
+    argv = [
+        "model",
+        "export",
+        "--preset",
+        "authors",
+        "-o",
+        str(target),
+        "--mu",
+        "0.35",
+        "--torque-constant",
+        "0.33",
+    ]
+    argv += [
+        "--total-mass",
+        "0.1",
+        "--timestep-ms",
+        "0.5",
+        "--floor",
+        "--object",
+        "branch,0.05,0,0.7,0.02,0.3",
+    ]
+    status, _, err = run(argv, capsys)
+    assert status == 0, err
+    m = mujoco.MjModel.from_xml_path(str(target))
+    assert m.opt.timestep == pytest.approx(0.0005)
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "branch") >= 0
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor") >= 0
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "unit_23") >= 0
+    assert m.actuator_gear[0][0] == pytest.approx(33.0)
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--object", "branch,1,2"],
+        ["--object", "unit_x,0,0,0,0.01"],
+        ["--mu", "-1"],
+        ["--current-limit", "20"],
+    ],
+)
+def test_model_export_mistakes(tmp_path: Path, extra: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    status, _, err = run(["model", "export", "-o", str(tmp_path / "x.xml"), *extra], capsys)
+    assert_one_line_error(status, err)
+    assert not (tmp_path / "x.xml").exists()
+
+
+def test_unwritable_output_is_a_user_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    status, _, err = run(["model", "export", "-o", str(tmp_path / "missing" / "arm.xml")], capsys)
+    assert_one_line_error(status, err)
+    assert "cannot write" in err
+
+
+def test_parser_is_separate_and_lists_every_command(capsys: pytest.CaptureFixture[str]) -> None:
+    parser = build_parser()
+    args = parser.parse_args(["design", "--preset", "authors"])
+    assert args.command == "design" and args.preset == "authors"
+    names = [c.name for c in COMMANDS]
+    assert names[:2] == ["design", "model"]
+    with pytest.raises(SystemExit) as info:
+        main(["--help"])
+    assert info.value.code == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in names)

@@ -1,0 +1,236 @@
+"""MJCF generator (hil.mjcf): self-contained models, stable names, scaling laws, cable routing."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+import pytest
+
+from hil.mjcf import (
+    ArmConfig,
+    DroneConfig,
+    ModelConfig,
+    MotorConfig,
+    ObjectConfig,
+    SolverConfig,
+    build_mjcf,
+    cable_angles_rad,
+    cable_layout,
+    unit_geometry,
+    write_mjcf,
+)
+from hil.spiral import AUTHORS_DEFAULT, PAPER_PROTOTYPE, SpiralDesign
+
+
+def load(
+    design: SpiralDesign = PAPER_PROTOTYPE, cables: int | None = None, config: ModelConfig | None = None
+) -> Any:
+    return mujoco.MjModel.from_xml_string(build_mjcf(design, cables, config))
+
+
+def name_id(m: object, kind: object, name: str) -> int:
+    return int(mujoco.mj_name2id(m, kind, name))
+
+
+@pytest.mark.parametrize("cables", [1, 2, 3])
+def test_written_file_loads_with_plain_mujoco(tmp_path: Path, cables: int) -> None:
+    path = write_mjcf(tmp_path / "arm.xml", PAPER_PROTOTYPE, cables)
+    text = path.read_text(encoding="utf-8")
+    assert "file=" not in text and "<include" not in text  # nothing else to ship
+    m = mujoco.MjModel.from_xml_path(str(path))
+    d = mujoco.MjData(m)
+    mujoco.mj_step(m, d)
+    n = PAPER_PROTOTYPE.units
+    assert m.ntendon == cables and m.nu == cables
+    assert all(name_id(m, mujoco.mjtObj.mjOBJ_BODY, f"unit_{i:02d}") >= 0 for i in range(n))
+    assert name_id(m, mujoco.mjtObj.mjOBJ_JOINT, "joint_00") == -1  # the base unit is fixed to the drone
+    for i in range(1, n):
+        j = name_id(m, mujoco.mjtObj.mjOBJ_JOINT, f"joint_{i:02d}")
+        assert m.jnt_bodyid[j] == name_id(m, mujoco.mjtObj.mjOBJ_BODY, f"unit_{i:02d}")
+    for k in range(cables):
+        assert name_id(m, mujoco.mjtObj.mjOBJ_TENDON, f"cable_{k}") >= 0
+        assert name_id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"motor_{k}") >= 0
+        assert name_id(m, mujoco.mjtObj.mjOBJ_JOINT, f"spool_{k}") >= 0
+        assert name_id(m, mujoco.mjtObj.mjOBJ_SENSOR, f"tension_{k}") >= 0
+        for site in (
+            f"cable_{k}_spool",
+            f"cable_{k}_guide",
+            f"cable_{k}_unit_00_prox",
+            f"cable_{k}_unit_{n - 1:02d}_dist",
+        ):
+            assert name_id(m, mujoco.mjtObj.mjOBJ_SITE, site) >= 0
+    assert name_id(m, mujoco.mjtObj.mjOBJ_SITE, "tip") >= 0
+    assert m.body_mocapid[name_id(m, mujoco.mjtObj.mjOBJ_BODY, "drone")] == 0
+
+
+@pytest.mark.parametrize(
+    ("cables", "kind"),
+    [(1, mujoco.mjtJoint.mjJNT_HINGE), (2, mujoco.mjtJoint.mjJNT_HINGE), (3, mujoco.mjtJoint.mjJNT_BALL)],
+)
+def test_joint_types_and_limits(cables: int, kind: object) -> None:
+    m = load(cables=cables)
+    dtheta = PAPER_PROTOTYPE.dtheta_rad
+    for i in range(1, PAPER_PROTOTYPE.units):
+        j = name_id(m, mujoco.mjtObj.mjOBJ_JOINT, f"joint_{i:02d}")
+        assert m.jnt_type[j] == kind
+        assert m.jnt_limited[j]
+        expected = (0.0, dtheta) if cables == 3 else (-dtheta, dtheta)
+        assert tuple(m.jnt_range[j]) == pytest.approx(expected, rel=1e-8)
+
+
+@pytest.mark.parametrize("design", [PAPER_PROTOTYPE, AUTHORS_DEFAULT], ids=["prototype", "authors"])
+def test_units_scale_by_beta_and_mass_by_beta_cubed(design: SpiralDesign) -> None:
+    m = load(design)
+    n = design.units
+    bodies = [name_id(m, mujoco.mjtObj.mjOBJ_BODY, f"unit_{i:02d}") for i in range(n)]
+    # The distance from one unit's joint to the next is that unit's length.
+    lengths = [float(np.linalg.norm(m.body_pos[bodies[i + 1]])) for i in range(n - 1)]
+    masses = [float(m.body_mass[b]) for b in bodies]
+    for i in range(n - 2):
+        assert lengths[i] / lengths[i + 1] == pytest.approx(design.beta, rel=0.01)
+    for i in range(n - 1):
+        assert masses[i] / masses[i + 1] == pytest.approx(design.beta**3, rel=0.01)
+    assert sum(masses) == pytest.approx(ArmConfig().total_mass_kg, rel=1e-6)
+
+
+def test_stiffness_scales_with_size_cubed_and_damping_is_set() -> None:
+    arm = ArmConfig(base_stiffness_nm_per_rad=0.6, damping_ratio=0.2)
+    m = load(config=ModelConfig(arm=arm))
+    n = PAPER_PROTOTYPE.units
+    joints = [name_id(m, mujoco.mjtObj.mjOBJ_JOINT, f"joint_{i:02d}") for i in range(1, n)]
+    k = [float(m.jnt_stiffness[j]) for j in joints]
+    assert k[0] == pytest.approx(0.6)
+    for a, b in itertools.pairwise(k):
+        assert a / b == pytest.approx(PAPER_PROTOTYPE.beta**3, rel=1e-6)
+    damping = [float(m.dof_damping[m.jnt_dofadr[j]]) for j in joints]
+    assert all(c > 0 for c in damping)
+    assert damping == sorted(damping, reverse=True)
+    geo = unit_geometry(PAPER_PROTOTYPE, arm)
+    assert geo.stiffness_nm_per_rad[0] == 0.0 and geo.damping_nms_per_rad[0] == 0.0
+
+
+def test_cables_are_just_taut_when_straight_and_pull_only() -> None:
+    m = load()
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    for k in range(3):
+        t = name_id(m, mujoco.mjtObj.mjOBJ_TENDON, f"cable_{k}")
+        assert m.tendon_limited[t]
+        assert m.tendon_range[t][0] == 0.0
+        assert d.ten_length[t] == pytest.approx(m.tendon_range[t][1], abs=1e-7)
+
+
+def test_cable_holes_are_at_120_degrees() -> None:
+    m = load()
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    azimuths = []
+    for k in range(3):
+        pos = m.site_pos[name_id(m, mujoco.mjtObj.mjOBJ_SITE, f"cable_{k}_unit_05_prox")]
+        azimuths.append(math.degrees(math.atan2(pos[1], pos[0])) % 360)
+    assert azimuths == pytest.approx([0.0, 120.0, 240.0], abs=1e-6)
+    assert cable_angles_rad(2) == pytest.approx((0.0, math.pi))
+    with pytest.raises(ValueError):
+        cable_angles_rad(0)
+
+
+def test_motor_gear_and_spool_mass_follow_the_motor_config() -> None:
+    motor = MotorConfig(torque_constant_nm_per_a=0.3, spool_radius_m=0.015, rotor_inertia_kg_m2=2e-7)
+    m = load(config=ModelConfig(motor=motor))
+    a = name_id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, "motor_1")
+    assert m.actuator_gear[a][0] == pytest.approx(0.3 / 0.015)
+    assert tuple(m.actuator_ctrlrange[a]) == pytest.approx((-10.0, 10.0))
+    spool = name_id(m, mujoco.mjtObj.mjOBJ_BODY, "spool_1")
+    assert m.body_mass[spool] == pytest.approx(2e-7 * 36**2 / 0.015**2)
+    assert motor.reflected_mass_kg == pytest.approx(m.body_mass[spool])
+
+
+def test_solver_options_are_written() -> None:
+    sol = SolverConfig(timestep_s=0.0005, integrator="implicitfast", iterations=7, solver="CG")
+    m = load(config=ModelConfig(solver=sol))
+    assert m.opt.timestep == pytest.approx(0.0005)
+    assert m.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    assert m.opt.iterations == 7
+    assert m.opt.solver == mujoco.mjtSolver.mjSOL_CG
+    default = load()
+    assert default.opt.integrator == mujoco.mjtIntegrator.mjINT_DISCRETE
+
+
+def test_custom_numerics_carry_the_design() -> None:
+    m = load(AUTHORS_DEFAULT)
+    values = {
+        mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_NUMERIC, i): float(m.numeric_data[m.numeric_adr[i]])
+        for i in range(m.nnumeric)
+    }
+    assert values["spirob_b"] == pytest.approx(0.1764)
+    assert values["spirob_units"] == 24
+    assert values["spirob_cable_mu"] == pytest.approx(ArmConfig().cable_mu)
+    assert values["spirob_torque_constant_nm_per_a"] == pytest.approx(0.18)
+
+
+def test_objects_fixed_and_free() -> None:
+    cfg = ModelConfig().with_objects(
+        ObjectConfig("branch", 0.02, 0.3, (0.05, 0.0, 0.85)),
+        ObjectConfig("can", 0.03, 0.1, (0.0, 0.1, 0.5), axis=(0, 0, 1), mass_kg=0.2, shape="capsule"),
+    )
+    m = load(config=cfg)
+    branch = name_id(m, mujoco.mjtObj.mjOBJ_BODY, "branch")
+    can = name_id(m, mujoco.mjtObj.mjOBJ_BODY, "can")
+    assert m.body_jntnum[branch] == 0
+    assert m.body_jntnum[can] == 1
+    assert m.body_mass[can] == pytest.approx(0.2)
+    g = name_id(m, mujoco.mjtObj.mjOBJ_GEOM, "can_geom")
+    assert m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
+
+
+def test_arm_does_not_collide_with_itself_by_default() -> None:
+    m = load()
+    g = [name_id(m, mujoco.mjtObj.mjOBJ_GEOM, f"unit_{i:02d}_geom") for i in (3, 9)]
+    a, b = g
+    assert not (m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a])
+    m2 = load(config=ModelConfig(arm=ArmConfig(self_collision=True)))
+    assert m2.geom_contype[a] & m2.geom_conaffinity[b]
+
+
+def test_floor_option() -> None:
+    m = load(config=ModelConfig(drone=DroneConfig(floor=True)))
+    assert name_id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor") >= 0
+
+
+@pytest.mark.parametrize(
+    ("config", "match"),
+    [
+        (ModelConfig(arm=ArmConfig(total_mass_kg=0.0)), "total_mass_kg"),
+        (ModelConfig(arm=ArmConfig(cable_offset_ratio=1.2)), "cable_offset_ratio"),
+        (ModelConfig(arm=ArmConfig(cable_mu=-0.1)), "cable_mu"),
+        (ModelConfig(motor=MotorConfig(current_limit_a=12.0)), "current_limit_a"),
+        (ModelConfig(motor=MotorConfig(spool_radius_m=0.0)), "spool_radius_m"),
+        (ModelConfig(solver=SolverConfig(integrator="leapfrog")), "integrator"),
+        (ModelConfig(solver=SolverConfig(timestep_s=-1.0)), "timestep_s"),
+        (ModelConfig(drone=DroneConfig(quat_wxyz=(0, 0, 0, 0))), "quat"),
+        (ModelConfig(objects=(ObjectConfig("unit_x", 0.01, 0.1, (0, 0, 0)),)), "object name"),
+        (ModelConfig(objects=(ObjectConfig("a", 0.01, 0.1, (0, 0, 0)),) * 2), "unique"),
+        (ModelConfig(objects=(ObjectConfig("a", -0.01, 0.1, (0, 0, 0)),)), "radius_m"),
+        (ModelConfig(objects=(ObjectConfig("a", 0.01, 0.1, (0, 0, 0), axis=(0, 0, 0)),)), "axis"),
+    ],
+)
+def test_bad_configuration_is_refused(config: ModelConfig, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        build_mjcf(PAPER_PROTOTYPE, None, config)
+
+
+def test_designs_the_cables_cannot_fit_are_refused() -> None:
+    fat = SpiralDesign.from_params(0.01, 1.2, 2 * math.radians(80), math.radians(80))
+    with pytest.raises(ValueError, match="overlap"):
+        cable_layout(fat, 3)
+
+
+def test_single_unit_is_refused() -> None:
+    one = SpiralDesign.from_params(0.005, 0.15, math.radians(30), math.radians(30))
+    with pytest.raises(ValueError, match="at least 2 units"):
+        build_mjcf(one)

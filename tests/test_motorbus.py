@@ -1,0 +1,164 @@
+"""MotorBus: clamping, packing, feedback decoding, shutdown, registry; loopback over python-can's virtual
+bus and over a real pty pair (slcan adapter emulator with a fake C610 trio behind it)."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+
+import can
+import pytest
+
+from controller.errors import BusError, PortError
+from controller.fake_c610 import C610TrioServer, FakeC610Trio, SlcanAdapterEmulator
+from controller.motorbus import CanMotorBus, FakeMotorBus, MotorBus, make_bus, parse_can_spec, register_bus
+from protocol.c610 import MotorFeedback
+
+
+class RecordingBus(MotorBus):
+    """A back end that records frames and serves scripted ones."""
+
+    def __init__(self, **kwargs: int) -> None:
+        super().__init__(**kwargs)
+        self.sent: list[tuple[int, bytes]] = []
+        self.inbox: list[tuple[int, bytes]] = []
+        self.fail_send = False
+        self.closed = 0
+
+    def _send_frame(self, can_id: int, data: bytes) -> None:
+        if self.fail_send:
+            raise BusError("bus off")
+        self.sent.append((can_id, data))
+
+    def _recv_frames(self) -> list[tuple[int, bytes]]:
+        out, self.inbox = self.inbox, []
+        return out
+
+    def _shutdown_backend(self) -> None:
+        self.closed += 1
+
+
+def test_send_clamps_packs_and_returns_what_was_sent() -> None:
+    bus = RecordingBus(current_limit_raw=3000)
+    sent = bus.send_currents([5000, -20000, 1234.4])  # type: ignore[list-item]
+    assert sent == (3000, -3000, 1234)
+    assert bus.sent == [(0x200, bytes.fromhex("0bb8f448 04d2 0000".replace(" ", "")))]
+    with pytest.raises(ValueError):
+        bus.send_currents([1, 2])
+
+
+def test_send_failure_is_counted_not_raised() -> None:
+    bus = RecordingBus()
+    bus.fail_send = True
+    assert bus.send_currents([1, 2, 3]) == (1, 2, 3)
+    assert bus.can_errors == 1 and not bus.last_send_ok
+
+
+def test_read_feedback_decodes_ours_and_counts_the_rest() -> None:
+    bus = RecordingBus()
+    bus.inbox = [
+        (0x202, MotorFeedback(8191, -120, 300, 40).pack()),
+        (0x201, bytes(7)),  # truncated
+        (0x205, bytes(8)),  # motor 5: not ours
+        (0x203, MotorFeedback(1, 2, 3).pack()),
+    ]
+    got = bus.read_feedback()
+    assert got == [(2, MotorFeedback(8191, -120, 300, 40)), (3, MotorFeedback(1, 2, 3, 0))]
+    assert bus.can_errors == 1 and bus.frames_ignored == 1
+    assert bus.read_feedback() == []
+
+
+def test_shutdown_sends_zero_once_and_is_safe_twice() -> None:
+    with RecordingBus() as bus:
+        bus.send_currents([100, 100, 100])
+    bus.shutdown()
+    assert bus.sent[-1] == (0x200, bytes(8))
+    assert len(bus.sent) == 2 and bus.closed == 1
+    with pytest.raises(BusError):
+        bus.send_currents([0, 0, 0])
+    assert bus.read_feedback() == []
+
+
+def test_registry_and_spec_parsing() -> None:
+    assert isinstance(make_bus("fake"), FakeMotorBus)
+    register_bus("recording", RecordingBus)
+    assert isinstance(make_bus("recording"), RecordingBus)
+    with pytest.raises(ValueError, match="unknown motor bus"):
+        make_bus("nope")
+    assert parse_can_spec("slcan:///dev/ttyACM0") == ("slcan", "/dev/ttyACM0")
+    assert parse_can_spec("virtual:bus0") == ("virtual", "bus0")
+    assert parse_can_spec("/dev/ttyACM1") == ("slcan", "/dev/ttyACM1")
+    with pytest.raises(ValueError):
+        parse_can_spec("virtual:")
+
+
+def test_fake_bus_feedback_follows_commands() -> None:
+    bus = FakeMotorBus()
+    bus.trio.silent.add(3)
+    bus.send_currents([500, 0, 0])
+    fb = dict(bus.read_feedback())
+    assert set(fb) == {1, 2}
+    for _ in range(50):
+        bus.send_currents([500, 0, 0])
+    assert dict(bus.read_feedback())[1].speed_rpm > 0  # motor 1 winds in
+
+
+def _drain(bus: MotorBus, want: int, timeout_s: float = 5.0) -> dict[int, MotorFeedback]:
+    got: dict[int, MotorFeedback] = {}
+    deadline = time.monotonic() + timeout_s
+    while len(got) < want and time.monotonic() < deadline:
+        got.update(bus.read_feedback())
+        time.sleep(0.001)
+    return got
+
+
+def test_loopback_over_python_can_virtual_bus() -> None:
+    channel = f"test-motorbus-{os.getpid()}"
+    trio = FakeC610Trio(start_angles_counts=(8000, 100, 4000))
+    with C610TrioServer(can.Bus(interface="virtual", channel=channel), trio) as server:
+        with CanMotorBus(channel, "virtual") as bus:
+            bus.send_currents([300, -300, 0])
+            got = _drain(bus, 3)
+            assert set(got) == {1, 2, 3}
+            assert server.trio.motors[0].current_raw == 300 and server.trio.motors[1].current_raw == -300
+            assert got[1].current == 300 and got[2].current == -300
+        assert server.error is None
+    assert trio.motors[0].current_raw == 0  # shutdown sent zero current
+
+
+@pytest.fixture
+def pty_adapter() -> Iterator[tuple[str, SlcanAdapterEmulator]]:
+    master, slave = os.openpty()
+    name = os.ttyname(slave)
+    emulator = SlcanAdapterEmulator(master)
+    with emulator:
+        yield name, emulator
+    os.close(slave)
+
+
+def test_loopback_over_a_pty_with_an_slcan_adapter(pty_adapter: tuple[str, SlcanAdapterEmulator]) -> None:
+    name, adapter = pty_adapter
+    with CanMotorBus(name, "slcan", sleep_after_open=0) as bus:
+        assert adapter_open(adapter)
+        assert "S8" in adapter.lines  # 1 Mbit/s
+        for _ in range(3):
+            bus.send_currents([1000, 0, -1000])
+            got = _drain(bus, 3)
+            assert set(got) == {1, 2, 3}
+        assert got[1].current == 1000 and got[3].current == -1000
+        assert bus.can_errors == 0
+    assert adapter.trio.motors[0].current_raw == 0
+    assert adapter.error is None
+
+
+def adapter_open(adapter: SlcanAdapterEmulator) -> bool:
+    deadline = time.monotonic() + 5.0
+    while not adapter.is_open and time.monotonic() < deadline:
+        time.sleep(0.001)
+    return adapter.is_open
+
+
+def test_missing_can_port_is_a_port_error() -> None:
+    with pytest.raises(PortError, match="ttyDOESNOTEXIST"):
+        CanMotorBus("/dev/ttyDOESNOTEXIST", "slcan", sleep_after_open=0)

@@ -1,0 +1,90 @@
+"""RC sources: DBUS over a real pty (idle-gap framing with simulated arrival times), link and script."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from controller.errors import PortError
+from controller.rc import DbusSerialSource, LinkRcSource, ScriptedRcSource
+from protocol.dbus import Lever, RcFrame
+
+GOOD = RcFrame((100, -200, 300, -400), Lever.MIDDLE, Lever.UP)
+
+
+@pytest.fixture
+def dbus_pty() -> Iterator[tuple[int, DbusSerialSource]]:
+    master, slave = os.openpty()
+    source = DbusSerialSource(os.ttyname(slave))
+    try:
+        yield master, source
+    finally:
+        source.close()
+        source.close()  # safe twice
+        os.close(slave)
+        os.close(master)
+
+
+def _write_then_poll(master: int, source: DbusSerialSource, data: bytes, now_us: int) -> list[RcFrame]:
+    """Write ``data`` on the radio side, wait (bounded) until the pty holds it, then poll at ``now_us``."""
+    os.write(master, data)
+    deadline = time.monotonic() + 5.0
+    while source._serial.in_waiting < len(data) and time.monotonic() < deadline:
+        time.sleep(0.0005)
+    return source.poll(now_us)
+
+
+def test_dbus_frames_over_a_pty_split_on_idle_gaps(dbus_pty: tuple[int, DbusSerialSource]) -> None:
+    master, source = dbus_pty
+    assert source._serial.baudrate == 100_000 and source._serial.parity == "E"
+    # a frame, then silence past the idle gap: delivered
+    assert _write_then_poll(master, source, GOOD.pack(), 0) == []
+    assert source.poll(1_000) == []
+    assert source.poll(2_600) == [GOOD]
+    # half a frame, a gap, garbage, a gap, then a good frame: only the good one survives
+    assert _write_then_poll(master, source, GOOD.pack()[:9], 10_000) == []
+    assert source.poll(13_000) == []
+    assert _write_then_poll(master, source, b"\x55" * 30, 20_000) == []
+    assert _write_then_poll(master, source, GOOD.pack(), 30_000) == []
+    assert source.poll(33_000) == [GOOD]
+    assert source.bytes_dropped == 9 + 30
+    assert source.framer.frames_ok == 2
+
+
+def test_missing_rc_port_is_a_port_error() -> None:
+    with pytest.raises(PortError, match="ttyNOPE"):
+        DbusSerialSource("/dev/ttyNOPE")
+
+
+def test_busy_rc_port_is_a_port_error(dbus_pty: tuple[int, DbusSerialSource]) -> None:
+    _, source = dbus_pty
+    with pytest.raises(PortError):
+        DbusSerialSource(source._serial.port)
+
+
+def test_scripted_source_repeats_at_the_dr16_cadence() -> None:
+    src = ScriptedRcSource(GOOD)
+    times = [t for t in range(0, 50_000, 1000) if src.poll(t)]
+    assert times == [0, 14_000, 28_000, 42_000]
+    src.set_frame(None)
+    assert not any(src.poll(t) for t in range(50_000, 100_000, 1000))
+    src.schedule(120_000, GOOD)
+    assert src.poll(110_000) == [] and src.poll(120_000) == [GOOD]
+    bad = RcFrame((0, 0, 0, 0), 0, 0)
+    src.inject(bad)
+    assert src.poll(121_000) == [bad]
+
+
+def test_link_source_takes_pushed_bytes() -> None:
+    src = LinkRcSource(capacity=2)
+    src.push(GOOD.pack(), 0)
+    src.push(b"short", 0)
+    assert src.poll(1000) == [GOOD]
+    assert src.poll(2000) == []
+    for _ in range(3):
+        src.push(GOOD.pack(), 3000)
+    assert len(src.poll(4000)) == 2
+    assert src.frames_dropped == 2
