@@ -12,10 +12,11 @@ Phases (``protocol.messages.Phase``) and transitions:
 - ``OK`` -> ``MOTOR_FAULT`` when any motor is silent longer than ``motor_timeout_us`` (DJI: 10 ms).
   Latched: leaves only when every motor answers again *and* the right lever is seen DOWN (re-armed
   through SAFE).
-- ``OK`` -> ``RC_LOST`` after ``rc_timeout_us`` (DJI: 30 ms) without a valid frame; back to ``OK`` when
-  valid frames return (the slew limiter restarts from the pretension floor).
+- ``OK`` -> ``RC_LOST`` after ``rc_timeout_us`` (DJI: 30 ms) without a valid frame. Latched: leaves
+  only when valid frames return *and* show the right lever DOWN (re-armed through SAFE), so an arm never
+  jumps back to the stick positions of a radio that comes back into range.
 - ``OK`` -> ``HOST_LOST`` when the host is required and its heartbeat is older than
-  ``host_timeout_us``; back to ``OK`` when heartbeats return.
+  ``host_timeout_us``. Latched the same way: heartbeats back *and* the right lever seen DOWN.
 - any -> ``ESTOP`` on the ESTOP command. Latched: CLEAR_ESTOP moves to ``GATE``, which needs the
   right lever DOWN again.
 
@@ -63,6 +64,7 @@ class Failsafe:
         self.estop_latched = False
         self.host_disarmed = False
         self._motor_fault = False
+        self._lost: Phase | None = None  # RC_LOST or HOST_LOST, latched until re-armed through SAFE
         self._armed = False
         self.motors_online = 0
         self.motor_offline_events = 0
@@ -162,6 +164,12 @@ class Failsafe:
                 return self._set(now_us, Phase.MOTOR_FAULT)
             self._motor_fault = False  # re-armed through SAFE: the gate below decides
         host_fine = host_ok or not self.host_required
+        lost = self._lost
+        if lost is not None:
+            back = rc_ok if lost == Phase.RC_LOST else host_fine
+            if not (back and lever_down):
+                return self._set(now_us, lost)
+            self._lost = None  # re-armed through SAFE: the gate below decides
         if not self._armed:
             if rc_ok and lever_down and motors_ok and host_fine and not self.host_disarmed:
                 self._armed = True
@@ -171,10 +179,10 @@ class Failsafe:
             self._motor_fault = True
             self._armed = False
             return self._set(now_us, Phase.MOTOR_FAULT)
-        if not rc_ok:
-            return self._set(now_us, Phase.RC_LOST)
-        if not host_fine:
-            return self._set(now_us, Phase.HOST_LOST)
+        if not rc_ok or not host_fine:
+            self._lost = Phase.RC_LOST if not rc_ok else Phase.HOST_LOST
+            self._armed = False
+            return self._set(now_us, self._lost)
         return self._set(now_us, Phase.OK)
 
     def _set(self, now_us: int, phase: Phase) -> Phase:

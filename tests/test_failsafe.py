@@ -99,14 +99,23 @@ def _fresh(rig: Rig) -> bool:
     return rig.fw.failsafe._last_rc_us == rig.last_us
 
 
-def test_rc_regained_resumes_from_the_pretension_floor() -> None:
+def test_rc_regained_stays_latched_until_rearmed_then_resumes_from_the_floor() -> None:
     # given RC lost
     rig = armed_manual_rig()
     rig.set_rc(None)
     rig.until(lambda: rig.fw.phase == Phase.RC_LOST, 40)
-    # when frames return
+    # when frames return with the lever still in MANUAL
     rig.set_rc(MANUAL_CURL)
+    for _ in range(100):
+        rig.tick()
+        # then nothing moves: the radio came back, the pilot has not re-armed
+        assert rig.currents == ZERO and rig.fw.phase == Phase.RC_LOST
+    # when the pilot re-arms through SAFE
+    rig.set_rc(frame(right=Lever.DOWN))
     rig.until(lambda: rig.fw.phase == Phase.OK, 20)
+    assert rig.currents == ZERO  # SAFE mode
+    rig.set_rc(MANUAL_CURL)
+    rig.until(lambda: any(c > 0 for c in rig.currents), 20)
     # then the tensions restart at the floor and ramp (slew-limited), not jump to the stick value
     pretension = rig.config.pretension_n
     first = rig.fw.tensions_n
@@ -192,10 +201,17 @@ def test_host_lost_zero_current_when_host_required() -> None:
     rig.tick()
     assert rig.currents == ZERO
     assert rig.fw.phase == Phase.HOST_LOST
-    # when heartbeats return, current flows again
+    # when heartbeats return, the loss stays latched until the pilot re-arms through SAFE
     rig.send(Heartbeat(1, 1))
-    rig.until(lambda: rig.fw.phase == Phase.OK, 5)
-    rig.until(lambda: all(c > 0 for c in rig.currents), 5)
+    for _ in range(50):
+        rig.tick()
+        assert rig.currents == ZERO and rig.fw.phase == Phase.HOST_LOST
+    rig.send(Heartbeat(2, 2))
+    rig.set_rc(frame(right=Lever.DOWN))
+    rig.until(lambda: rig.fw.phase == Phase.OK, 20)
+    rig.send(Heartbeat(3, 3))
+    rig.set_rc(MANUAL_CURL)
+    rig.until(lambda: all(c > 0 for c in rig.currents), 20)
 
 
 def test_host_not_required_ignores_missing_heartbeat() -> None:
