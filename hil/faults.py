@@ -29,7 +29,7 @@ from enum import StrEnum
 import numpy as np
 
 from protocol.c610 import MotorFeedback
-from protocol.dbus import CH_OFFSET, RcFrame
+from protocol.dbus import CH_OFFSET, FRAME_LEN, RcFrame
 
 
 class FaultKind(StrEnum):
@@ -216,7 +216,10 @@ class FaultSet:
             return None
         if self._active(FaultKind.RC_GARBAGE, t_us):
             self._count("rc_garbage_bursts")
-            n = int(self.rng.integers(1, 40))
+            # Framing noise: bursts of any length but 18. DBUS has no checksum, so an 18-byte burst of
+            # plausible values *is* a frame to any receiver; that case is rc-out-of-range's, not ours.
+            n = int(self.rng.integers(1, 39))
+            n += n >= FRAME_LEN
             return self.rng.integers(0, 256, n, dtype=np.uint8).tobytes()
         if self._active(FaultKind.RC_FROZEN, t_us):
             if self._frozen_frame is None:

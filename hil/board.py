@@ -1,0 +1,502 @@
+"""The virtual board: the firmware emulator driving the MuJoCo plant, with a virtual radio and a host link.
+
+One :class:`VirtualBoard` is the C-board, its three C610/M2006 motors, the arm and (optionally) the
+DT7/DR16 radio, all in one process. Two ways to drive it:
+
+- **lockstep** (:meth:`VirtualBoard.tick`, scenarios and experiments): every control period, in this
+  order, on simulated time and without reading any clock:
+
+  1. physics: the plant advances one control period (a whole number of MuJoCo steps);
+  2. delivery: the radio's DBUS bytes reach the board's UART, the motors' feedback frames reach its CAN
+     receive queue, the host's bytes reach its link (each through the fault set, each recorded);
+  3. the firmware runs every task due at the new time (:meth:`controller.firmware.Firmware.run_due`);
+  4. the command frame it sent reaches the ESCs, and its link bytes reach the host.
+
+  Same inputs and seed, same bytes out: a run is a pure function of (design, scenario, faults, seed).
+
+- **real time** (:func:`run_realtime`, ``spirob-hil board``): the same tick paced by
+  :class:`controller.clock.RealTimeClock` (absolute deadlines, SCHED_FIFO when permitted), with the
+  link on a pty or a TCP socket that speaks exactly what the real board speaks on /dev/ttyACM0.
+  :class:`VirtualBoardProcess` runs it in a child process, so nothing in the host can stall its loop.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import logging
+import multiprocessing as mp
+import multiprocessing.connection
+import signal
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from types import TracebackType
+from typing import Any, Literal
+
+import numpy as np
+
+from controller.clock import Clock, RealTimeClock, monotonic_ns
+from controller.config import FirmwareConfig
+from controller.firmware import Firmware
+from controller.rc import DbusSerialSource, LinkRcSource, RcSource
+from controller.transport import Transport
+from protocol.messages import ClockKind
+
+from . import recording
+from .errors import HilError
+from .faults import Fault, FaultSet
+from .plant import Plant, PlantConfig
+from .radio import RadioScript, VirtualRadio
+from .recording import Recorder
+from .simbus import SimMotorBus
+from .spiral import SpiralDesign
+
+_log = logging.getLogger(__name__)
+
+RcInput = Literal["radio", "link"]
+
+
+# --- lockstep byte pipes --------------------------------------------------------------------------
+
+
+class WireEnd(Transport):
+    """One end of a lockstep board link: writes collect in :attr:`outbox`, reads drain :attr:`inbox`."""
+
+    def __init__(self, tx_capacity: int = 1 << 20) -> None:
+        super().__init__(tx_capacity)
+        self.inbox = bytearray()
+        self.outbox = bytearray()
+
+    def _read(self) -> bytes:
+        if not self.inbox:
+            return b""
+        data = bytes(self.inbox)
+        self.inbox.clear()
+        return data
+
+    def _write(self, data: bytearray) -> int:
+        self.outbox += data
+        return len(data)
+
+
+class LinkWire:
+    """The USB cable between a scripted host and the board in lockstep, with faults on it.
+
+    :meth:`carry` moves what each end wrote to the other end. What the board receives is recorded on
+    ``/board/link_rx`` after the faults; what the board sent on ``/board/link_tx`` before them, so a
+    replay compares the board's own output.
+    """
+
+    def __init__(self, faults: FaultSet | None = None, recorder: Recorder | None = None) -> None:
+        self.host = WireEnd()
+        self.board = WireEnd()
+        self.faults = faults
+        self.recorder = recorder
+
+    def carry(self, t_us: int) -> None:
+        """Deliver everything written so far (subject to faults)."""
+        self.to_board(t_us)
+        self.to_host(t_us)
+
+    def to_board(self, t_us: int) -> None:
+        """Host -> board."""
+        data = bytes(self.host.outbox)
+        self.host.outbox.clear()
+        if self.faults is not None:
+            data = self.faults.link_bytes(t_us, data, "rx")
+        if data:
+            self.board.inbox += data
+            if self.recorder is not None:
+                self.recorder.write_raw(recording.LINK_RX, t_us, data)
+
+    def to_host(self, t_us: int) -> None:
+        """Board -> host."""
+        data = bytes(self.board.outbox)
+        self.board.outbox.clear()
+        if data and self.recorder is not None:
+            self.recorder.write_raw(recording.LINK_TX, t_us, data)
+        if self.faults is not None:
+            data = self.faults.link_bytes(t_us, data, "tx")
+        if data:
+            self.host.inbox += data
+
+
+class MemoryUart:
+    """The board's DBUS UART in lockstep: the pyserial subset :class:`DbusSerialSource` uses."""
+
+    def __init__(self) -> None:
+        self.timeout: float | None = 0
+        self._buf = bytearray()
+
+    def feed(self, data: bytes) -> None:
+        """Bytes that arrived on the wire."""
+        self._buf += data
+
+    @property
+    def in_waiting(self) -> int:
+        """Bytes ready to read."""
+        return len(self._buf)
+
+    def read(self, n: int) -> bytes:
+        """Take up to ``n`` bytes."""
+        data = bytes(self._buf[:n])
+        del self._buf[:n]
+        return data
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+# --- the board ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BoardConfig:
+    """Everything that makes up one virtual board (picklable; units in names).
+
+    Attributes:
+        design: the arm's spiral design (default: the paper's 3-cable prototype).
+        plant: plant configuration (model, solver, control period).
+        firmware: firmware configuration.
+        rc: ``"radio"``: a virtual DT7/DR16 on the DBUS UART (scenarios); ``"link"``: the host's virtual
+            RC frames over the board link are the radio (the browser panel).
+        seed: seed of every random choice (encoder offsets, faults).
+        start_packed: start with the arm coiled on its first cable (the grasp strategy's start pose).
+    """
+
+    design: SpiralDesign = field(default_factory=SpiralDesign.paper_prototype)
+    plant: PlantConfig = field(default_factory=PlantConfig)
+    firmware: FirmwareConfig = field(default_factory=FirmwareConfig)
+    rc: RcInput = "radio"
+    seed: int = 0
+    start_packed: bool = False
+
+    def describe(self) -> dict[str, str]:
+        """String pairs for a recording's metadata (enough to rebuild the board for replay)."""
+        return {
+            "design": json.dumps(dataclasses.asdict(self.design)),
+            "firmware": json.dumps(self.firmware.to_dict()),
+            "rc": self.rc,
+            "seed": str(self.seed),
+            "start_packed": str(self.start_packed),
+        }
+
+
+class VirtualBoard:
+    """Firmware + plant + radio + link, advanced one control period at a time.
+
+    Args:
+        config: what to build.
+        faults: faults to inject (windows in board time).
+        radio_script: the pilot's stick and lever states over time (``rc="radio"``).
+        link: the board's end of the host link; default a :class:`LinkWire` end for a scripted host.
+        recorder: record every byte in and out (and decoded telemetry) to MCAP.
+        exec_timer_ns: the scheduler's execution-time timer. Lockstep runs keep the default constant
+            (execution times read 0) so that two runs produce byte-identical telemetry; real-time runs
+            pass :func:`controller.clock.monotonic_ns`.
+    """
+
+    def __init__(
+        self,
+        config: BoardConfig | None = None,
+        *,
+        faults: list[Fault] | tuple[Fault, ...] = (),
+        radio_script: RadioScript | None = None,
+        link: Transport | None = None,
+        recorder: Recorder | None = None,
+        exec_timer_ns: Callable[[], int] = lambda: 0,
+    ) -> None:
+        self.config = cfg = config if config is not None else BoardConfig()
+        rng = np.random.default_rng(cfg.seed)
+        plant_rng, fault_rng = rng.spawn(2)
+        self.faults = FaultSet(faults, fault_rng)
+        self.recorder = recorder
+        self.plant = Plant(cfg.design, cfg.plant, plant_rng)
+        if cfg.start_packed:
+            self.plant.set_packed(0)
+        self.period_us = cfg.plant.control_period_us
+        if cfg.firmware.control_period_us != self.period_us:
+            raise ValueError(
+                f"firmware control period {cfg.firmware.control_period_us} us differs from the plant's "
+                f"{self.period_us} us"
+            )
+        self.now_us = 0
+        self.bus = SimMotorBus(
+            self.plant,
+            lambda: self.now_us,
+            faults=self.faults,
+            recorder=recorder,
+            current_limit_raw=cfg.firmware.current_limit_raw,
+        )
+        self.radio: VirtualRadio | None = None
+        self.uart: MemoryUart | None = None
+        rc: RcSource
+        if cfg.rc == "radio":
+            self.radio = VirtualRadio(radio_script, self.faults)
+            self.uart = MemoryUart()
+            rc = DbusSerialSource(self.uart)
+        elif cfg.rc == "link":
+            rc = LinkRcSource()
+        else:
+            raise ValueError(f"rc must be 'radio' or 'link', got {cfg.rc!r}")
+        self.rc = rc
+        self.wire: LinkWire | None = None
+        if link is None:
+            self.wire = LinkWire(self.faults, recorder)
+            link = self.wire.board
+        self.link = link
+        self.firmware = Firmware(
+            cfg.firmware,
+            self.bus,
+            rc,
+            link,
+            poses=self._poses,
+            exec_timer_ns=exec_timer_ns,
+        )
+        self.firmware.clock_kind = ClockKind.LOCKSTEP
+        self.ticks = 0
+        if recorder is not None:
+            recorder.write_json("/board/config", 0, cfg.describe())
+
+    def _poses(self) -> tuple[Any, Any]:
+        poses = self.plant.body_poses()
+        return poses.positions_m, poses.quats_wxyz
+
+    def tick(self, now_us: int | None = None) -> None:
+        """One control period in lockstep order: physics, delivery, firmware, command delivery.
+
+        Args:
+            now_us: the firmware's time for this tick (real-time drivers pass their clock); default the
+                plant's time. Loop-delay faults shift the firmware's time, never the physics.
+        """
+        self.plant.step()
+        t = self.plant.time_us if now_us is None else now_us
+        delay = self.faults.tick_delay_us(t)
+        t += delay
+        self.now_us = t
+        rec = self.recorder
+        if self.radio is not None and self.uart is not None:
+            data = self.radio.read(t)
+            if data:
+                self.uart.feed(data)
+                if rec is not None:
+                    rec.write_raw(recording.DBUS_RX, t, data)
+        self.bus.deliver_feedback()
+        if self.wire is not None:
+            self.wire.to_board(t)
+        if rec is not None:
+            rec.write_raw(TICK, t, b"")
+        self.firmware.run_due(t)
+        self.bus.deliver_command()
+        if self.wire is not None:
+            self.wire.to_host(t)
+        self.ticks += 1
+
+    def run(self, duration_us: int, on_tick: Callable[[VirtualBoard], None] | None = None) -> None:
+        """Lockstep for ``duration_us`` of simulated time, calling ``on_tick`` after every tick."""
+        for _ in range(max(0, duration_us // self.period_us)):
+            self.tick()
+            if on_tick is not None:
+                on_tick(self)
+
+    def close(self) -> None:
+        """Zero current to the plant and release the link (safe twice)."""
+        if not self.bus.is_shutdown:
+            self.bus.shutdown()
+        self.link.close()
+
+    def __enter__(self) -> VirtualBoard:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+TICK = "/board/tick"
+"""Raw channel with one empty record per firmware tick, at the time the firmware saw."""
+
+
+# --- real time ------------------------------------------------------------------------------------
+
+
+def run_realtime(
+    board: VirtualBoard,
+    clock: Clock,
+    duration_us: int | None = None,
+    stop: threading.Event | None = None,
+) -> None:
+    """Drive ``board`` in real time: one tick per control period on absolute deadlines.
+
+    A late tick is skipped, never caught up in a burst (the plant then lags the wall clock by that
+    period, as a real arm would not, but the firmware sees true time). Zero current on the way out.
+    """
+    period = board.period_us
+    with clock.running():
+        if isinstance(clock, RealTimeClock):
+            board.firmware.clock_kind = (
+                ClockKind.REALTIME_FIFO if clock.fifo_active else ClockKind.REALTIME_NORMAL
+            )
+        start = clock.now_us()
+        offset = start - board.plant.time_us
+        end = None if duration_us is None else start + duration_us
+        deadline = start + period
+        try:
+            while stop is None or not stop.is_set():
+                clock.sleep_until_us(deadline)
+                now = clock.now_us()
+                if end is not None and now >= end:
+                    break
+                board.tick(now - offset)
+                deadline += period
+                if now - deadline >= period:  # more than a whole period late: skip, do not burst
+                    deadline += ((now - deadline) // period) * period
+        finally:
+            board.bus.send_currents((0, 0, 0))
+            board.bus.deliver_command()
+
+
+# --- a board in its own process -------------------------------------------------------------------
+
+
+def _child_main(
+    conn: multiprocessing.connection.Connection,
+    config: BoardConfig,
+    listen: str | None,
+    fifo: bool,
+) -> None:
+    """Entry of the board process: open the endpoint, report its URL, run until told to stop."""
+    from .transports import PtyTransport, TcpServerTransport
+
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        transport: PtyTransport | TcpServerTransport
+        if listen is None:
+            transport = PtyTransport()
+        else:
+            host, port = parse_listen(listen)
+            transport = TcpServerTransport(host, port)
+        board = VirtualBoard(config, link=transport, exec_timer_ns=monotonic_ns)
+    except Exception as exc:  # reported to the parent as one line
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        conn.close()
+        return
+    conn.send(("ok", transport.url))
+
+    def watch_parent() -> None:
+        with contextlib.suppress(EOFError, OSError):
+            conn.recv()  # anything, or EOF when the parent dies
+        stop.set()
+
+    threading.Thread(target=watch_parent, name="parent-watch", daemon=True).start()
+    try:
+        run_realtime(board, RealTimeClock(fifo=fifo), stop=stop)
+    finally:
+        board.close()
+
+
+def parse_listen(listen: str) -> tuple[str, int]:
+    """``socket://HOST:PORT`` -> (host, port).
+
+    Raises:
+        ValueError: not that form.
+    """
+    if not listen.startswith("socket://"):
+        raise ValueError(f"--listen takes socket://HOST:PORT, got {listen!r}")
+    host, sep, port = listen[len("socket://") :].rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ValueError(f"--listen takes socket://HOST:PORT, got {listen!r}")
+    return host, int(port)
+
+
+class VirtualBoardProcess:
+    """A real-time virtual board in a child process; :meth:`start` returns the URL to connect to.
+
+    Args:
+        config: the board to build (default: the prototype arm, RC from the host link).
+        listen: ``socket://127.0.0.1:PORT`` (port 0 picks a free one), or None for a pty.
+        pty: serve on a pty (the default when ``listen`` is None).
+        fifo: ask for SCHED_FIFO in the child (it says so in its log when refused).
+    """
+
+    def __init__(
+        self,
+        config: BoardConfig | None = None,
+        *,
+        listen: str | None = "socket://127.0.0.1:0",
+        pty: bool = False,
+        fifo: bool = True,
+    ) -> None:
+        self.config = config if config is not None else BoardConfig(rc="link")
+        self.listen = None if pty else listen
+        if self.listen is not None:
+            parse_listen(self.listen)
+        self.fifo = fifo
+        self.url: str | None = None
+        self._proc: mp.process.BaseProcess | None = None
+        self._conn: multiprocessing.connection.Connection | None = None
+
+    def start(self, timeout_s: float = 30.0) -> str:
+        """Start the board; returns its pyserial URL or pty path.
+
+        Raises:
+            HilError: the board did not come up (the reason in one line).
+        """
+        if self._proc is not None:
+            raise HilError("virtual board already started")
+        ctx = mp.get_context("spawn")
+        parent, child = ctx.Pipe()
+        proc = ctx.Process(
+            target=_child_main, args=(child, self.config, self.listen, self.fifo), name="virtual-board"
+        )
+        proc.start()
+        child.close()
+        self._proc, self._conn = proc, parent
+        if not parent.poll(timeout_s):
+            self.stop()
+            raise HilError(f"virtual board did not start within {timeout_s:g} s")
+        try:
+            status, value = parent.recv()
+        except EOFError:
+            self.stop()
+            raise HilError("virtual board exited during start-up") from None
+        if status != "ok":
+            self.stop()
+            raise HilError(f"virtual board failed to start: {value}")
+        self.url = str(value)
+        return self.url
+
+    @property
+    def alive(self) -> bool:
+        """The board process is running."""
+        return self._proc is not None and self._proc.is_alive()
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Stop the board (zero current first); safe twice."""
+        proc, conn = self._proc, self._conn
+        self._proc = self._conn = None
+        if conn is not None:
+            with contextlib.suppress(OSError, ValueError):
+                conn.send("stop")
+            conn.close()
+        if proc is not None:
+            proc.join(timeout_s)
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(timeout_s)
+            if proc.is_alive():
+                proc.kill()
+                proc.join(timeout_s)
+
+    def __enter__(self) -> VirtualBoardProcess:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()

@@ -1,0 +1,112 @@
+"""The ``sim`` back end of :class:`controller.motorbus.MotorBus`: three C610s wired to the MuJoCo plant.
+
+The firmware sees exactly what it sees on a real CAN bus: it sends one 0x200 frame per control tick and
+receives 0x201-0x203 feedback frames. The driver of the simulation decides when frames cross:
+
+1. :meth:`SimMotorBus.deliver_feedback` after each plant step puts the motors' feedback frames (through
+   the fault set) in the bus's receive queue;
+2. the firmware's control task drains them with ``read_feedback()`` and sends its command;
+3. :meth:`SimMotorBus.deliver_command` hands the last command frame to the plant's ESCs.
+
+Every frame that crosses is recorded (raw CAN channels) when a recorder is attached.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import ClassVar, Protocol
+
+from controller.errors import BusError
+from controller.motorbus import MotorBus
+from protocol.c610 import COMMAND_ID_LOW, CURRENT_RAW_MAX, FEEDBACK_ID_BASE, MotorFeedback
+
+from . import recording
+from .faults import FaultSet
+from .recording import Recorder
+
+
+class Motors(Protocol):
+    """What the bus needs of the plant: C610-shaped commands in, C610-shaped feedback out."""
+
+    def apply_currents(self, raw: Sequence[int]) -> object:
+        """Set the three ESC current setpoints (raw, 1000 per amp)."""
+
+    def feedback(self) -> Sequence[MotorFeedback]:
+        """The three motors' feedback now."""
+
+
+class SimMotorBus(MotorBus):
+    """Motor bus whose far end is a simulated C610 trio.
+
+    Args:
+        motors: the plant (anything with ``apply_currents`` and ``feedback``).
+        now_us: the simulation clock, for fault windows and recording timestamps.
+        faults: faults on the bus (silence, stuck, wrong feedback, bus off).
+        recorder: optional recording of every frame that crosses.
+        current_limit_raw: the firmware's clamp (the ESC clamps again at 10 A).
+    """
+
+    simulated: ClassVar[bool] = True
+
+    def __init__(
+        self,
+        motors: Motors,
+        now_us: Callable[[], int],
+        *,
+        faults: FaultSet | None = None,
+        recorder: Recorder | None = None,
+        current_limit_raw: int = CURRENT_RAW_MAX,
+    ) -> None:
+        super().__init__(current_limit_raw=current_limit_raw, motor_count=3)
+        self.motors = motors
+        self._now_us = now_us
+        self.faults = faults
+        self.recorder = recorder
+        self._inbox: list[tuple[int, bytes]] = []
+        self._command: bytes | None = None
+        self.commands_applied = 0
+
+    def deliver_feedback(self) -> None:
+        """Queue the motors' current feedback frames for the firmware (after a plant step)."""
+        t = self._now_us()
+        faults = self.faults
+        for motor, fb in enumerate(self.motors.feedback(), start=1):
+            frame: MotorFeedback | None = fb if faults is None else faults.feedback(t, motor, fb)
+            if frame is None:
+                continue
+            can_id = FEEDBACK_ID_BASE + motor
+            data = frame.pack()
+            self._inbox.append((can_id, data))
+            if self.recorder is not None:
+                self.recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))
+
+    def deliver_command(self) -> None:
+        """Hand the last command frame, if a new one was sent, to the ESCs."""
+        data = self._command
+        if data is None:
+            return
+        self._command = None
+        self.motors.apply_currents(_unpack_command(data))
+        self.commands_applied += 1
+
+    def _send_frame(self, can_id: int, data: bytes) -> None:
+        t = self._now_us()
+        if self.faults is not None and self.faults.bus_off(t):
+            raise BusError("CAN bus off")
+        if can_id == COMMAND_ID_LOW:
+            self._command = data
+        if self.recorder is not None:
+            self.recorder.write_raw(recording.CAN_TX, t, recording.pack_can(can_id, data))
+
+    def _recv_frames(self) -> list[tuple[int, bytes]]:
+        frames, self._inbox = self._inbox, []
+        return frames
+
+    def _shutdown_backend(self) -> None:
+        self.deliver_command()
+
+
+def _unpack_command(data: bytes) -> tuple[int, int, int]:
+    """The three setpoints of a 0x200 frame (big-endian int16)."""
+    values = [int.from_bytes(data[i : i + 2], "big", signed=True) for i in (0, 2, 4)]
+    return values[0], values[1], values[2]
