@@ -262,6 +262,10 @@ class VirtualBoard:
 
     def _poses(self) -> tuple[Any, Any]:
         poses = self.plant.body_poses()
+        if self.recorder is not None:  # an input of the firmware like any other: replay needs it
+            self.recorder.write_raw(
+                recording.POSES, self.now_us, recording.pack_poses(poses.positions_m, poses.quats_wxyz)
+            )
         return poses.positions_m, poses.quats_wxyz
 
     def tick(self, now_us: int | None = None) -> None:
@@ -287,7 +291,7 @@ class VirtualBoard:
         if self.wire is not None:
             self.wire.to_board(t)
         if rec is not None:
-            rec.write_raw(TICK, t, b"")
+            rec.write_raw(recording.TICK, t, b"")
         self.firmware.run_due(t)
         self.bus.deliver_command()
         if self.wire is not None:
@@ -314,10 +318,6 @@ class VirtualBoard:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
-
-
-TICK = "/board/tick"
-"""Raw channel with one empty record per firmware tick, at the time the firmware saw."""
 
 
 # --- real time ------------------------------------------------------------------------------------

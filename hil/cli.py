@@ -12,11 +12,16 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import NoReturn, TextIO
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
 from hil.mjcf import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig, write_mjcf
 from hil.spiral import PRESETS, SpiralDesign
@@ -305,11 +310,255 @@ def _run_model(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# ---------------------------------------------------------------------- the virtual board and the harness
+
+
+def _progress_console() -> Console:
+    return Console(stderr=True)
+
+
+def _configure_board(p: argparse.ArgumentParser) -> None:
+    add_design_arguments(p)
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--pty", action="store_true", help="serve the board link on a pseudo-terminal (default)"
+    )
+    where.add_argument(
+        "--listen",
+        metavar="socket://HOST:PORT",
+        help="serve the board link on TCP (e.g. socket://127.0.0.1:5760)",
+    )
+    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
+    p.add_argument(
+        "--rc",
+        choices=("link", "radio"),
+        default="link",
+        help="RC source: the host's virtual RC over the link (default), or a virtual radio holding SAFE",
+    )
+    p.add_argument("--no-fifo", action="store_true", help="do not ask for SCHED_FIFO real-time priority")
+    p.add_argument("--seed", type=int, default=0, help="seed of the plant's random choices (default 0)")
+
+
+def _run_board(args: argparse.Namespace) -> int:
+    from controller.clock import RealTimeClock, monotonic_ns
+    from hil.board import BoardConfig, VirtualBoard, parse_listen, run_realtime
+    from hil.radio import RadioScript
+    from hil.transports import PtyTransport, TcpServerTransport
+    from protocol.dbus import RcFrame
+
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise ValueError(f"--duration must be > 0, got {args.duration}")
+    design = design_from_args(args)
+    config = BoardConfig(design=design, rc=args.rc, seed=args.seed)
+    transport: PtyTransport | TcpServerTransport
+    if args.listen:
+        host, port = parse_listen(args.listen)
+        try:
+            transport = TcpServerTransport(host, port)
+        except OSError as exc:
+            raise UsageError(
+                f"cannot listen on {args.listen}: {exc.strerror or exc}", f"{PROG} board"
+            ) from exc
+    else:
+        transport = PtyTransport()
+    script = RadioScript([(0, RcFrame.neutral())]) if args.rc == "radio" else None
+    board = VirtualBoard(config, link=transport, radio_script=script, exec_timer_ns=monotonic_ns)
+    print(
+        f"virtual board: {design.cables}-cable arm, {design.units} units; board link on {transport.url}",
+        flush=True,
+    )
+    print("connect with: spirob-host --port " + transport.url, flush=True)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        run_realtime(
+            board,
+            RealTimeClock(fifo=not args.no_fifo),
+            None if args.duration is None else round(args.duration * 1e6),
+            stop,
+        )
+    except KeyboardInterrupt:
+        pass
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        board.close()
+    print("virtual board stopped (zero current sent)", flush=True)
+    return EXIT_OK
+
+
+def _configure_list(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="print JSON")
+
+
+def _run_list(args: argparse.Namespace) -> int:
+    from hil.scenarios import SCENARIOS
+
+    if args.json:
+        json.dump(
+            [
+                {"name": s.name, "summary": s.summary, "duration_s": s.duration_us / 1e6}
+                for s in SCENARIOS.values()
+            ],
+            sys.stdout,
+            indent=2,
+        )
+        sys.stdout.write("\n")
+        return EXIT_OK
+    width = max(len(n) for n in SCENARIOS)
+    for s in SCENARIOS.values():
+        print(f"{s.name:<{width}}  {s.summary}")
+    return EXIT_OK
+
+
+def _configure_run(p: argparse.ArgumentParser) -> None:
+    p.add_argument("names", nargs="*", metavar="NAME", help="scenarios to run (see 'spirob-hil list')")
+    p.add_argument("--all", action="store_true", help="run every scenario")
+    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.add_argument("--json", action="store_true", help="print one JSON object per scenario")
+    p.add_argument(
+        "--record",
+        metavar="PATH",
+        help="MCAP recording of every byte in and out of the board (a directory when several scenarios run)",
+    )
+    p.add_argument("--report", metavar="DIR", help="write PNG plots of each run there")
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="extra fault KIND@START[-END][:key=value,...] (seconds), e.g. link-byte-loss@1-3:rate=0.01",
+    )
+    p.add_argument(
+        "--port",
+        metavar="PORT",
+        help="run against a board-link endpoint in real time (a real board, or spirob-hil board) instead",
+    )
+    add_design_arguments(p)
+
+
+def _run_run(args: argparse.Namespace) -> int:
+    from hil.faults import Fault
+    from hil.report import print_results
+    from hil.scenarios import SCENARIOS, ScenarioResult, run_scenario
+
+    names: list[str] = list(SCENARIOS) if args.all else list(args.names)
+    if not names:
+        raise UsageError("name at least one scenario, or --all (see 'spirob-hil list')", f"{PROG} run")
+    unknown = [n for n in names if n not in SCENARIOS]
+    if unknown:
+        raise UsageError(f"unknown scenario {unknown[0]!r} (known: {', '.join(SCENARIOS)})", f"{PROG} run")
+    faults = [Fault.parse(spec) for spec in args.fault]
+    design = design_from_args(args)
+    record_paths = _record_paths(args.record, names)
+    console = _progress_console()
+    results: list[ScenarioResult] = []
+    if args.port:
+        from hil.realtime import run_scenario_on_port
+
+        for name in names:
+            console.print(f"running {name} on {args.port} in real time ...")
+            results.append(run_scenario_on_port(name, args.port, seed=args.seed, faults=faults))
+    else:
+        with Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed:.0f}/{task.total:.0f} ms simulated"),
+            TimeElapsedColumn(),
+            console=console,
+            transient=True,
+            disable=not console.is_terminal,
+        ) as progress:
+            for name in names:
+                task = progress.add_task(name, total=SCENARIOS[name].duration_us / 1000)
+
+                def advance(done: int, total: int, task: TaskID = task) -> None:
+                    progress.update(task, completed=done)  # one tick is one simulated millisecond
+
+                result = run_scenario(
+                    name,
+                    seed=args.seed,
+                    design=design,
+                    faults=faults,
+                    record=record_paths.get(name),
+                    report_dir=args.report,
+                    progress=advance,
+                )
+                progress.remove_task(task)
+                if not console.is_terminal:
+                    verdict = "passed" if result.passed else "FAILED"
+                    console.print(f"{name}: {verdict}")
+                results.append(result)
+    if args.json:
+        for r in results:
+            print(json.dumps(r.as_dict()))
+    else:
+        print_results(results, Console())
+        for name, path in record_paths.items():
+            print(f"recorded {name} to {path}")
+        if args.report:
+            print(f"plots in {args.report}")
+    return 0 if all(r.passed for r in results) else 1
+
+
+def _record_paths(record: str | None, names: list[str]) -> dict[str, Path]:
+    if record is None:
+        return {}
+    path = Path(record)
+    if len(names) == 1 and not path.is_dir():
+        targets = {names[0]: path}
+    else:
+        path.mkdir(parents=True, exist_ok=True)
+        targets = {n: path / f"{n}.mcap" for n in names}
+    for target in targets.values():
+        if not target.parent.is_dir():
+            raise UsageError(f"cannot record to {target}: no such directory", f"{PROG} run")
+    return targets
+
+
+def _configure_replay(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE", help="an MCAP recording made by 'spirob-hil run --record'")
+    p.add_argument("--json", action="store_true", help="print JSON")
+
+
+def _run_replay(args: argparse.Namespace) -> int:
+    from hil.errors import HilError
+    from hil.replay import replay
+
+    path = Path(args.file)
+    if not path.is_file():
+        raise UsageError(f"no such recording: {path}", f"{PROG} replay")
+    try:
+        result = replay(path)
+    except HilError as exc:
+        raise UsageError(f"{path}: {exc}", f"{PROG} replay") from exc
+    if args.json:
+        print(json.dumps(result.as_dict()))
+    elif result.matched:
+        print(
+            f"{path}: every output byte matched ({result.outputs_compared} outputs over {result.ticks} ticks)"
+        )
+    else:
+        differ = f"{result.mismatches} of {result.outputs_compared} outputs differ"
+        print(f"{path}: {differ}; first: {result.first_mismatch}")
+    return 0 if result.matched else 1
+
+
 COMMANDS: list[Command] = [
     Command(
         "design", "print a spiral design's quantities (Table S1, Note S2)", _configure_design, _run_design
     ),
     Command("model", "MuJoCo model of the arm: 'model export'", _configure_model, _run_model),
+    Command(
+        "board", "run the virtual board in real time on a pty or a TCP port", _configure_board, _run_board
+    ),
+    Command("list", "list the scenarios, one line each", _configure_list, _run_list),
+    Command("run", "run scenarios in lockstep (or on a board link with --port)", _configure_run, _run_run),
+    Command(
+        "replay",
+        "replay a recording through the firmware and compare every output byte",
+        _configure_replay,
+        _run_replay,
+    ),
 ]
 """The subcommands, in ``--help`` order. Later issues append theirs."""
 

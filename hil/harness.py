@@ -117,6 +117,7 @@ class Probe:
         phase, mode, grasp: the firmware's state after the tick.
         tension_n: the plant's true cable tensions, shape (n, 3).
         tip_m: the plant's tip position, shape (n, 3).
+        cable_m: the plant's cable lengths from spool to tip, shape (n, 3).
         rc_rejected: the firmware's count of rejected RC frames.
     """
 
@@ -130,6 +131,7 @@ class Probe:
     grasp: npt.NDArray[np.int8] = field(init=False)
     tension_n: npt.NDArray[np.float64] = field(init=False)
     tip_m: npt.NDArray[np.float64] = field(init=False)
+    cable_m: npt.NDArray[np.float64] = field(init=False)
     rc_rejected: npt.NDArray[np.int64] = field(init=False)
 
     def __post_init__(self) -> None:
@@ -142,6 +144,7 @@ class Probe:
         self.grasp = np.zeros(n, np.int8)
         self.tension_n = np.zeros((n, 3))
         self.tip_m = np.zeros((n, 3))
+        self.cable_m = np.zeros((n, 3))
         self.rc_rejected = np.zeros(n, np.int64)
 
     def sample(self, board: VirtualBoard) -> None:
@@ -159,6 +162,7 @@ class Probe:
         self.grasp[i] = fw.grasp_state
         self.tension_n[i] = plant.cable_tensions_n()
         self.tip_m[i] = plant.tip_pose().pos_m
+        self.cable_m[i] = plant.cable_lengths_m()
         self.rc_rejected[i] = fw.rc_rejected
         self.n = i + 1
 

@@ -22,6 +22,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import IO, Any, Final
 
+import numpy as np
+import numpy.typing as npt
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message
@@ -42,7 +44,11 @@ LINK_RX: Final = "/board/link_rx"
 """Board-link bytes from the host into the board."""
 LINK_TX: Final = "/board/link_tx"
 """Board-link bytes from the board to the host."""
-RAW_TOPICS: Final = (DBUS_RX, CAN_RX, CAN_TX, LINK_RX, LINK_TX)
+TICK: Final = "/board/tick"
+"""One empty record per firmware tick, at the time the firmware saw (lockstep recordings)."""
+POSES: Final = "/board/poses"
+"""The plant's body poses as handed to the firmware's pose provider: n rows of x y z qw qx qy qz (f64)."""
+RAW_TOPICS: Final = (DBUS_RX, CAN_RX, CAN_TX, LINK_RX, LINK_TX, TICK, POSES)
 
 # Decoded channels (JSON) for people and plotting tools.
 TELEMETRY: Final = "/telemetry"
@@ -63,6 +69,17 @@ def unpack_can(record: bytes) -> tuple[int, bytes]:
     """Inverse of :func:`pack_can`."""
     (can_id,) = _CAN_HEADER.unpack_from(record)
     return can_id, record[_CAN_HEADER.size :]
+
+
+def pack_poses(positions_m: npt.ArrayLike, quats_wxyz: npt.ArrayLike) -> bytes:
+    """Body poses as stored on :data:`POSES`: n rows of x, y, z, qw, qx, qy, qz (float64 LE)."""
+    return np.ascontiguousarray(np.hstack([positions_m, quats_wxyz]), dtype="<f8").tobytes()
+
+
+def unpack_poses(data: bytes) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Inverse of :func:`pack_poses`."""
+    rows = np.frombuffer(data, dtype="<f8").reshape(-1, 7)
+    return rows[:, :3], rows[:, 3:]
 
 
 @dataclass(frozen=True, slots=True)

@@ -575,6 +575,7 @@ def run_scenario(
     faults: Sequence[Fault] = (),
     record: str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
+    report_dir: str | Path | None = None,
 ) -> ScenarioResult:
     """Run one scenario in lockstep and measure its checks.
 
@@ -585,6 +586,7 @@ def run_scenario(
         faults: faults added to the scenario's own.
         record: write an MCAP recording of every byte in and out of the board.
         progress: called as ``progress(ticks_done, ticks_total)`` every 100 ticks.
+        report_dir: write a PNG of the run's signals there (``NAME.png``).
 
     Raises:
         KeyError: unknown scenario name.
@@ -636,6 +638,10 @@ def run_scenario(
             if progress is not None and (i + 1) % 100 == 0:
                 progress(i + 1, ticks)
         checks = scenario.check(run)
+        if report_dir is not None:
+            from .report import plot_run  # matplotlib only when a report is asked for
+
+            plot_run(probe, report_dir, name)
         counters = dict(board.firmware.counters)
         counters.update({f"injected_{k}": v for k, v in board.faults.injected.items()})
         board.close()

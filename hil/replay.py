@@ -1,0 +1,180 @@
+"""Replay a lockstep recording through the firmware and check that every output byte matches.
+
+A recording holds every input of the firmware with the board time it arrived (DBUS bytes, CAN feedback
+frames, board-link bytes from the host, the plant poses handed to the pose provider) and every output
+(CAN command frames, board-link bytes to the host), plus one tick record per firmware tick. Replay
+rebuilds the firmware from the recording's metadata, feeds it the same inputs at the same ticks, with no
+plant at all, and compares what it emits with what was recorded, record by record.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+from controller.config import FirmwareConfig
+from controller.firmware import Firmware
+from controller.motorbus import MotorBus
+from controller.rc import DbusSerialSource, LinkRcSource, RcSource
+from protocol.c610 import CURRENT_RAW_MAX
+
+from . import recording
+from .board import MemoryUart, WireEnd
+from .errors import HilError
+from .recording import Record, read_metadata, read_records
+
+_INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
+_OUTPUTS = frozenset({recording.CAN_TX, recording.LINK_TX})
+
+
+class ReplayBus(MotorBus):
+    """A motor bus whose feedback comes from a recording and whose commands are collected.
+
+    It reports itself as simulated, as the recorded board's bus was (telemetry carries that flag).
+    """
+
+    simulated: ClassVar[bool] = True
+
+    def __init__(self, current_limit_raw: int = CURRENT_RAW_MAX) -> None:
+        super().__init__(current_limit_raw=current_limit_raw, motor_count=3)
+        self.inbox: list[tuple[int, bytes]] = []
+        self.sent: list[bytes] = []
+
+    def _send_frame(self, can_id: int, data: bytes) -> None:
+        self.sent.append(recording.pack_can(can_id, data))
+
+    def _recv_frames(self) -> list[tuple[int, bytes]]:
+        frames, self.inbox = self.inbox, []
+        return frames
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """Outcome of a replay.
+
+    Attributes:
+        path: the recording.
+        ticks: firmware ticks replayed.
+        outputs_compared: output records compared.
+        mismatches: how many differed (or were missing / extra).
+        first_mismatch: description of the first difference, if any.
+    """
+
+    path: str
+    ticks: int
+    outputs_compared: int
+    mismatches: int
+    first_mismatch: str | None
+
+    @property
+    def matched(self) -> bool:
+        """Every output byte matched."""
+        return self.mismatches == 0 and self.ticks > 0
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "path": self.path,
+            "matched": self.matched,
+            "ticks": self.ticks,
+            "outputs_compared": self.outputs_compared,
+            "mismatches": self.mismatches,
+            "first_mismatch": self.first_mismatch,
+        }
+
+
+def _firmware_from(meta: dict[str, str]) -> tuple[FirmwareConfig, str]:
+    try:
+        config = FirmwareConfig.from_dict(json.loads(meta["firmware"]))
+        rc = meta["rc"]
+    except (KeyError, ValueError) as exc:
+        raise HilError(f"not a lockstep board recording (metadata: {exc})") from exc
+    return config, rc
+
+
+def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> ReplayResult:
+    """Replay ``path`` through a fresh firmware and compare its outputs.
+
+    Raises:
+        HilError: the file is not a lockstep recording of a virtual board.
+    """
+    meta = read_metadata(path)
+    config, rc_kind = _firmware_from(meta)
+    bus = ReplayBus(config.current_limit_raw)
+    link = WireEnd()
+    uart: MemoryUart | None = None
+    rc: RcSource
+    if rc_kind == "radio":
+        uart = MemoryUart()
+        rc = DbusSerialSource(uart)
+    else:
+        rc = LinkRcSource()
+    poses: list[Any] = []
+    fw = Firmware(
+        config,
+        bus,
+        rc,
+        link,
+        poses=lambda: poses.pop(0) if poses else None,
+        exec_timer_ns=lambda: 0,
+    )
+
+    produced: list[tuple[int, str, bytes]] = []
+    expected: list[tuple[int, str, bytes]] = []
+    ticks = 0
+    records: list[Record] = list(read_records(path, topics=_INPUTS | _OUTPUTS | {recording.TICK}))
+    for i, rec in enumerate(records):
+        topic = rec.topic
+        if topic in _OUTPUTS:
+            expected.append((rec.time_us, topic, rec.data))
+        elif topic == recording.DBUS_RX:
+            if uart is None:
+                raise HilError("recording has DBUS bytes but its board took RC from the link")
+            uart.feed(rec.data)
+        elif topic == recording.CAN_RX:
+            bus.inbox.append(recording.unpack_can(rec.data))
+        elif topic == recording.LINK_RX:
+            link.inbox += rec.data
+        elif topic == recording.TICK:
+            t = rec.time_us
+            # Poses are pulled by the firmware during this tick, so they were recorded after its mark.
+            poses.clear()
+            for later in records[i + 1 :]:
+                if later.topic == recording.TICK:
+                    break
+                if later.topic == recording.POSES:
+                    poses.append(recording.unpack_poses(later.data))
+            fw.run_due(t)
+            produced.extend((t, recording.CAN_TX, frame) for frame in bus.sent)
+            bus.sent.clear()
+            if link.outbox:
+                produced.append((t, recording.LINK_TX, bytes(link.outbox)))
+                link.outbox.clear()
+            ticks += 1
+            if progress is not None and ticks % 500 == 0:
+                progress(ticks)
+    # The board's shutdown sends zero current once after the last tick.
+    bus.shutdown()
+    if bus.sent:
+        last_t = produced[-1][0] if produced else 0
+        produced.extend((last_t, recording.CAN_TX, frame) for frame in bus.sent)
+    mismatches = 0
+    first: str | None = None
+    for i in range(max(len(produced), len(expected))):
+        got = produced[i] if i < len(produced) else None
+        want = expected[i] if i < len(expected) else None
+        if got != want:
+            mismatches += 1
+            if first is None:
+                first = f"output #{i}: recorded {_describe(want)}, replay produced {_describe(got)}"
+    return ReplayResult(str(path), ticks, len(expected), mismatches, first)
+
+
+def _describe(item: tuple[int, str, bytes] | None) -> str:
+    if item is None:
+        return "nothing"
+    t, topic, data = item
+    return f"{topic} at {t} us ({len(data)} bytes: {data[:16].hex()}...)"

@@ -1,0 +1,110 @@
+"""Run reports: a table in the terminal and PNG plots of a run's signals over time."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from protocol.messages import Mode, Phase
+
+from .harness import Probe
+from .scenarios import ScenarioResult
+
+
+def results_table(results: Sequence[ScenarioResult]) -> Table:
+    """One row per check: scenario, check, measured value, bound, verdict."""
+    table = Table(title="scenario checks (simulated time)", show_lines=False)
+    for col, justify in (
+        ("scenario", "left"),
+        ("check", "left"),
+        ("measured", "right"),
+        ("bound", "right"),
+        ("", "center"),
+    ):
+        table.add_column(col, justify=justify)  # type: ignore[arg-type]
+    for r in results:
+        for i, c in enumerate(r.checks):
+            verdict = "[green]pass[/green]" if c.passed else "[bold red]FAIL[/bold red]"
+            table.add_row(
+                r.name if i == 0 else "",
+                c.name,
+                f"{c.value:.6g} {c.unit}".strip(),
+                f"{c.op} {c.bound:.6g} {c.unit}".strip(),
+                verdict,
+            )
+    return table
+
+
+def print_results(results: Sequence[ScenarioResult], console: Console) -> None:
+    """The table, then one summary line."""
+    console.print(results_table(results))
+    failed = [r.name for r in results if not r.passed]
+    if failed:
+        console.print(
+            f"[bold red]{len(failed)} of {len(results)} scenarios failed:[/bold red] {', '.join(failed)}"
+        )
+    else:
+        console.print(f"[green]all {len(results)} scenarios passed[/green]")
+
+
+def plot_run(probe: Probe, out_dir: str | Path, name: str) -> Path:
+    """Tensions, currents, cable lengths, failsafe phase and tip trajectory of one run, as one PNG.
+
+    Returns:
+        The PNG's path (``out_dir/name.png``).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    n = probe.n
+    t = probe.t_us[:n] / 1e6
+    fig, axes = plt.subplots(5, 1, figsize=(9, 13), sharex=False)
+    colors = ("tab:red", "tab:green", "tab:blue")
+    ax = axes[0]
+    for k in range(3):
+        ax.plot(t, probe.tension_n[:n, k], color=colors[k], label=f"cable {k + 1} (plant)")
+        ax.plot(t, probe.target_n[:n, k], color=colors[k], ls="--", lw=0.8, label=f"cable {k + 1} target")
+    ax.set_ylabel("tension [N]")
+    ax.legend(ncol=3, fontsize=7)
+    ax = axes[1]
+    for k in range(3):
+        ax.plot(t, probe.current_raw[:n, k] / 1000.0, color=colors[k], label=f"motor {k + 1}")
+    ax.set_ylabel("current to ESC [A]")
+    ax.legend(ncol=3, fontsize=7)
+    ax = axes[2]
+    for k in range(3):
+        ax.plot(
+            t, (probe.cable_m[:n, k] - probe.cable_m[0, k]) * 1000, color=colors[k], label=f"cable {k + 1}"
+        )
+    ax.set_ylabel("cable length change [mm]")
+    ax.legend(ncol=3, fontsize=7)
+    ax = axes[3]
+    ax.step(t, probe.phase[:n], where="post", color="tab:blue")
+    ax.set_yticks([int(p) for p in Phase], [p.name for p in Phase], fontsize=7)
+    ax.set_ylabel("failsafe phase", color="tab:blue")
+    mode_ax = ax.twinx()
+    mode_ax.step(t, probe.mode[:n], where="post", color="tab:orange", alpha=0.8)
+    mode_ax.set_yticks([int(m) for m in Mode], [m.name for m in Mode], fontsize=7)
+    mode_ax.set_ylabel("mode", color="tab:orange")
+    ax.set_xlabel("time [s]")
+    ax = axes[4]
+    tip = probe.tip_m[:n]
+    sc = ax.scatter(tip[:, 0] * 1000, tip[:, 2] * 1000, c=t, s=2, cmap="viridis")
+    ax.set_xlabel("tip x [mm]")
+    ax.set_ylabel("tip z [mm]")
+    ax.set_aspect("equal", adjustable="datalim")
+    fig.colorbar(sc, ax=ax, label="time [s]")
+    fig.suptitle(name)
+    fig.tight_layout()
+    path = out / f"{name}.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
