@@ -1,0 +1,135 @@
+"""Benchmark of the lockstep closed loop (firmware + plant + board link) against the bare plant.
+
+1. Closed loop: the virtual board in lockstep (plant step, DBUS and CAN delivery, the firmware's task
+   table, the command to the ESCs) with a scripted host on the board link that sends heartbeats and
+   decodes every telemetry frame — while the radio script bends the arm around. The currents the ESCs
+   received are kept.
+2. Bare plant, same run: a fresh plant with the same seed stepped with exactly those currents, so both
+   simulate the same motion and the same contacts.
+3. The whole scenario suite, timed.
+
+Prints the real-time factors, their ratio (target: closed loop >= 80 % of the bare plant's speed) and
+the suite's wall time (target <= 2 minutes on the 2-core machine).
+
+Usage: ``.venv/bin/python bench/hil.py [--seconds 10] [--no-suite]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+# Run as a script, this file's directory comes first on sys.path, where bench/protocol.py would shadow
+# the protocol package; benchmarks import the project only.
+_HERE = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+
+import numpy as np  # noqa: E402
+
+from hil.board import BoardConfig, VirtualBoard  # noqa: E402
+from hil.harness import ScriptedHost  # noqa: E402
+from hil.plant import Plant  # noqa: E402
+from hil.radio import RadioScript  # noqa: E402
+from hil.scenarios import SCENARIOS, rc, run_scenario  # noqa: E402
+from protocol.dbus import Lever, RcFrame  # noqa: E402
+
+
+def stick_script(seconds: float) -> RadioScript:
+    """Arm, then sweep the bending direction around while curling and uncurling."""
+    steps: list[tuple[int, RcFrame]] = [(0, rc()), (200_000, rc(Lever.MIDDLE))]
+    t = 500_000
+    k = 0
+    while t < seconds * 1e6:
+        angle = k * 0.7
+        steps.append(
+            (
+                t,
+                rc(
+                    Lever.MIDDLE,
+                    ch0=int(500 * np.cos(angle)),
+                    ch1=int(500 * np.sin(angle)),
+                    ch3=(k % 3) * 200,
+                ),
+            )
+        )
+        t += 400_000
+        k += 1
+    return RadioScript(steps)
+
+
+def closed_loop(seconds: float, seed: int) -> tuple[float, np.ndarray]:
+    """Wall time of the closed loop and the currents the ESCs received per tick."""
+    board = VirtualBoard(BoardConfig(seed=seed), radio_script=stick_script(seconds))
+    assert board.wire is not None
+    host = ScriptedHost(board.wire.host, board.faults)
+    ticks = round(seconds * 1e6 / board.period_us)
+    applied = np.zeros((ticks, 3), np.int64)
+    t0 = time.perf_counter()
+    for i in range(ticks):
+        host.before_tick(board.now_us)
+        board.tick()
+        host.after_tick(board.now_us)
+        applied[i] = board.plant.commanded_currents_raw()
+    wall = time.perf_counter() - t0
+    if len(host.telemetry) < ticks // 10 * 0.9:
+        raise SystemExit(f"closed loop broken: only {len(host.telemetry)} telemetry frames in {ticks} ticks")
+    board.close()
+    return wall, applied
+
+
+def bare_plant(seed: int, applied: np.ndarray) -> float:
+    """Wall time of a plant with the same seed stepped with the recorded currents."""
+    rng = np.random.default_rng(seed)
+    plant_rng, _ = rng.spawn(2)
+    plant = Plant(None, None, plant_rng)
+    previous = None
+    t0 = time.perf_counter()
+    for row in applied:
+        plant.step()
+        currents = (int(row[0]), int(row[1]), int(row[2]))
+        if currents != previous:
+            plant.apply_currents(currents)
+            previous = currents
+    return time.perf_counter() - t0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per run (default 10)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--no-suite", action="store_true", help="skip timing the scenario suite")
+    args = parser.parse_args()
+
+    loop_wall, applied = closed_loop(args.seconds, args.seed)
+    bare_wall = bare_plant(args.seed, applied)
+    loop_rtf = args.seconds / loop_wall
+    bare_rtf = args.seconds / bare_wall
+    overhead_us = (loop_wall - bare_wall) / len(applied) * 1e6
+    print(f"simulated per run: {args.seconds:g} s")
+    print(f"lockstep closed loop (firmware + plant + link): {loop_rtf:6.2f}x real time")
+    print(f"bare plant, same currents, same run:            {bare_rtf:6.2f}x real time")
+    print(f"closed loop / bare plant speed:                 {loop_rtf / bare_rtf:6.1%} (target >= 80%)")
+    print(f"closed-loop overhead per 1 ms tick:             {overhead_us:6.1f} us")
+
+    if not args.no_suite:
+        t0 = time.perf_counter()
+        simulated = 0
+        failed = []
+        for name, scenario in SCENARIOS.items():
+            result = run_scenario(name)
+            simulated += scenario.duration_us
+            if not result.passed:
+                failed.append(name)
+        wall = time.perf_counter() - t0
+        print(
+            f"scenario suite: {len(SCENARIOS)} scenarios, {simulated / 1e6:.1f} s simulated in "
+            f"{wall:.1f} s wall ({simulated / 1e6 / wall:.2f}x real time; target <= 120 s)"
+        )
+        if failed:
+            print(f"FAILED scenarios: {', '.join(failed)}")
+
+
+if __name__ == "__main__":
+    main()

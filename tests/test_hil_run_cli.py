@@ -1,0 +1,99 @@
+"""`spirob-hil list | run | replay | board` from the command line (argv in, exit status and output out)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hil.cli import main
+from hil.scenarios import SCENARIOS
+
+
+def test_list_names_every_scenario(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["list"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in lines] == list(SCENARIOS)
+    assert main(["list", "--json"]) == 0
+    listed = json.loads(capsys.readouterr().out)
+    assert [item["name"] for item in listed] == list(SCENARIOS)
+
+
+def test_run_json_record_report_and_replay(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    rec = tmp_path / "runs"
+    plots = tmp_path / "plots"
+    status = main(
+        [
+            "run",
+            "startup-gate",
+            "overcurrent",
+            "--json",
+            "--seed",
+            "2",
+            "--record",
+            str(rec),
+            "--report",
+            str(plots),
+        ]
+    )
+    out = capsys.readouterr().out.splitlines()
+    assert status == 0
+    objs = [json.loads(line) for line in out]
+    assert [o["name"] for o in objs] == ["startup-gate", "overcurrent"]
+    assert all(o["passed"] and o["checks"] for o in objs)
+    check = objs[0]["checks"][0]
+    assert {"name", "value", "bound", "passed"} <= set(check)
+    assert (plots / "startup-gate.png").stat().st_size > 10_000
+    assert main(["replay", str(rec / "overcurrent.mcap"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["matched"] is True
+
+
+def test_run_fails_with_nonzero_status_when_a_check_fails(capsys: pytest.CaptureFixture[str]) -> None:
+    # The radio dies at 0 s for good: the gate never opens, so "current once armed" fails.
+    assert main(["run", "startup-gate", "--fault", "rc-silence@0"]) == 1
+    assert "FAIL" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["run"], "name at least one scenario"),
+        (["run", "no-such"], "unknown scenario 'no-such'"),
+        (["run", "rc-loss", "--fault", "rc-silence@x"], "expected KIND@START"),
+        (["replay", "/no/such/file.mcap"], "no such recording"),
+        (["board", "--listen", "tcp://1.2.3.4:5"], "socket://HOST:PORT"),
+        (["run", "rc-loss", "--record", "/no/such/dir/x.mcap"], "cannot record"),
+    ],
+)
+def test_user_mistakes_are_one_line_and_status_2(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+
+
+def test_board_command_serves_and_stops(tmp_path: Path) -> None:
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "hil.cli",
+            "board",
+            "--listen",
+            "socket://127.0.0.1:0",
+            "--duration",
+            "1",
+            "--no-fifo",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=Path(__file__).resolve().parents[1],
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "board link on socket://127.0.0.1:" in proc.stdout
+    assert "zero current sent" in proc.stdout
