@@ -1,0 +1,291 @@
+"""Benchmark of the teleop panel with a real browser (headless Chromium) against the virtual board.
+
+Prints:
+
+1. scene updates per second sent while a browser is connected: live (the plant's poses over the board
+   link) and at full speed with a synthetic 40-body arm, plus the websocket frames per second the browser
+   actually received;
+2. end-to-end latency from a stick move in the page (Playwright fills the slider's number box) to the
+   first telemetry whose commanded current changed: median and p99;
+3. the firmware control loop's timing without and with a browser attached (late ticks, lateness max,
+   and the p99 execution time the board reports) and their ratio.
+
+Targets (issue 6): >= 30 updates/s, latency p99 <= 100 ms, loop lateness ratio <= 1.2.
+
+Usage: ``.venv/bin/python bench/ui.py [--moves N] [--fake]`` (``--fake``: the scripted fake board of
+tests/link_peer.py, for when ``hil.board`` is not available; then the loop figures are not the firmware's).
+Playwright runs in this process, so its own work is counted in the latency (a conservative figure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+def percentile(values: list[float], q: float) -> float:
+    """Nearest-rank percentile (q in 0..100)."""
+    s = sorted(values)
+    k = max(0, min(len(s) - 1, round(q / 100 * (len(s) - 1))))
+    return s[k]
+
+
+class TelemetryLog:
+    """Listener: (host time, commanded currents, loop counters) of every telemetry frame."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.rows: list[tuple[float, tuple[int, int, int], int, int, int, float]] = []
+
+    def __call__(self, msg: Any) -> None:
+        from protocol.messages import Telemetry
+
+        if isinstance(msg, Telemetry):
+            with self.lock:
+                self.rows.append(
+                    (
+                        time.monotonic(),
+                        msg.commanded_current,
+                        msg.control_late,
+                        msg.control_lateness_max_us,
+                        msg.control_exec_p99_us,
+                        time.time(),
+                    )
+                )
+
+    def since(self, t: float) -> list[tuple[float, tuple[int, int, int], int, int, int, float]]:
+        with self.lock:
+            return [r for r in self.rows if r[0] >= t]
+
+
+def loop_window(log: TelemetryLog, seconds: float, page: Any = None) -> dict[str, float]:
+    """Firmware loop figures over the next ``seconds`` (pumping the page's events if given)."""
+    t0 = time.monotonic()
+    if page is None:
+        time.sleep(seconds)
+    else:
+        while time.monotonic() - t0 < seconds:
+            page.wait_for_timeout(100)
+    rows = log.since(t0)
+    if len(rows) < 2:
+        return {"late_per_1000": float("nan"), "lateness_max_us": float("nan"), "exec_p99_us": float("nan")}
+    late = rows[-1][2] - rows[0][2]
+    ticks = max(1.0, (rows[-1][0] - rows[0][0]) * 1000.0)  # 1 kHz control task
+    return {
+        "late_per_1000": 1000.0 * late / ticks,
+        "lateness_max_us": float(max(r[3] for r in rows)),
+        "exec_p99_us": float(statistics.median(r[4] for r in rows)),
+    }
+
+
+def main() -> int:
+    sys.setswitchinterval(0.001)
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--moves", type=int, default=30, help="stick moves for the latency figure")
+    p.add_argument("--fake", action="store_true", help="use the scripted fake board (no hil.board)")
+    p.add_argument("--window", type=float, default=5.0, help="seconds per loop-timing window")
+    args = p.parse_args()
+
+    from playwright.sync_api import sync_playwright
+
+    from host.cli import HostApp, HostOptions
+
+    with contextlib.ExitStack() as stack:
+        if args.fake:
+            from link_peer import LinkPeerProcess
+
+            peer = stack.enter_context(LinkPeerProcess("socket"))
+            opts = HostOptions(port=peer.url, ui_port=0)
+        else:
+            opts = HostOptions(ui_port=0)
+        app = stack.enter_context(HostApp(opts))
+        print("starting the host and the board...", flush=True)
+        app.start()
+        assert app.client is not None and app.panel is not None
+        log = TelemetryLog()
+        app.client.add_listener(log)
+        deadline = time.monotonic() + 60
+        while app.model.telemetry is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        if app.model.telemetry is None:
+            print("error: no telemetry from the board", file=sys.stderr)
+            return 1
+
+        print(f"loop timing without a browser ({args.window:.0f} s)...", flush=True)
+        quiet = loop_window(log, args.window)
+
+        pw = stack.enter_context(sync_playwright())
+        tmp = stack.enter_context(tempfile.TemporaryDirectory())
+        ctx = pw.chromium.launch_persistent_context(
+            tmp,
+            executable_path="/usr/bin/chromium",
+            headless=True,
+            args=CHROMIUM_ARGS,
+            viewport={"width": 1280, "height": 860},
+        )
+        stack.callback(ctx.close)
+        page = ctx.new_page()
+        ws_frames = [0]
+
+        def on_ws(ws: Any) -> None:
+            ws.on("framereceived", lambda _payload: ws_frames.__setitem__(0, ws_frames[0] + 1))
+
+        page.on("websocket", on_ws)
+        page.goto(app.url + "?fixedDpr=1")
+        page.get_by_role("button", exact=True, name="Take control").wait_for(timeout=60_000)
+        time.sleep(2.0)
+
+        # 1. Scene updates while a browser is connected.
+        u0, f0, t0 = app.panel.scene.updates, ws_frames[0], time.monotonic()
+        print(f"loop timing with a browser attached ({args.window:.0f} s)...", flush=True)
+        p0 = app.model.poses_count
+        busy = loop_window(log, args.window, page)
+        dt = time.monotonic() - t0
+        poses_rate = (app.model.poses_count - p0) / dt
+        live_ups = (app.panel.scene.updates - u0) / dt
+        browser_fps = (ws_frames[0] - f0) / dt
+        n_bodies = 0 if app.model.poses is None else len(app.model.poses.positions_m)
+
+        # Full speed with a synthetic 40-body arm (drone + 39 units), panel loop paused meanwhile.
+        import numpy as np
+
+        from host.scene import ArmGeometry, default_hanging_pose
+
+        app.panel.stop()
+        geom = ArmGeometry.default().resized(39)
+        pos, quat = default_hanging_pose(geom)
+        n = 0
+        t0 = time.monotonic()
+        f0 = ws_frames[0]
+        while time.monotonic() - t0 < 3.0:
+            wobble = pos.copy()
+            wobble[1:, 0] += 0.02 * np.sin(n / 10.0) * np.linspace(0, 1, len(pos) - 1)
+            app.panel.scene.update(wobble, quat)
+            n += 1
+            page.wait_for_timeout(1)  # let Playwright pump its events
+        synth_ups = n / (time.monotonic() - t0)
+        synth_fps = (ws_frames[0] - f0) / (time.monotonic() - t0)
+        app.panel.start()
+
+        # 2. Stick latency: take control, gate (DOWN), MANUAL (MIDDLE), arm, then move the curl stick.
+        page.get_by_role("button", exact=True, name="Take control").click()
+        page.get_by_text("You hold control.").wait_for(timeout=10_000)
+        page.get_by_role("button", exact=True, name="DOWN").first.click()
+        time.sleep(0.5)
+        page.get_by_role("button", exact=True, name="MIDDLE").first.click()
+        page.get_by_role("button", exact=True, name="Arm").click()
+        time.sleep(1.0)
+        # The stick moves by keyboard on the focused slider thumb (End = full up, Home = full down), and
+        # the move is timestamped inside the page at the keydown event (wall clock, same machine), so
+        # Playwright's own actionability waits are not counted.
+        thumb = page.locator(
+            "xpath=//label[normalize-space()='Left ↕ curl']/ancestor::div"
+            "[contains(@class,'mantine-Flex-root')][1]//div[@role='slider']"
+        ).first
+        thumb.focus()
+        t = app.model.telemetry
+        print(
+            f"board before the moves: mode {t.mode.name if t else '?'}, phase {t.phase.name if t else '?'}",
+            flush=True,
+        )
+        page.evaluate("document.addEventListener('keydown', () => { window.__keyMs = Date.now(); }, true)")
+        latencies: list[float] = []
+        misses = 0
+        input_lost = 0
+        for i in range(args.moves):
+            key = "End" if i % 2 == 0 else "Home"
+            page.wait_for_timeout(700)  # settle (slew-rate limit)
+            before = log.since(time.monotonic() - 0.05)
+            if not before:
+                misses += 1
+                continue
+            base = before[-1][1]
+            t_move = time.monotonic()
+            page.keyboard.press(key)
+            key_ms = float(page.evaluate("window.__keyMs"))
+            changed = None
+            end = t_move + 2.0
+            while changed is None and time.monotonic() < end:
+                for row in log.since(t_move - 0.5):
+                    if (
+                        row[5] * 1000.0 >= key_ms
+                        and max(abs(a - b) for a, b in zip(row[1], base, strict=True)) >= 20
+                    ):
+                        changed = row[5] * 1000.0
+                        break
+                page.wait_for_timeout(2)
+            target = 660 if key == "End" else -660
+            if changed is None and app.model.operator_input()[0][3] != target:
+                input_lost += 1  # the page never delivered the key to the slider (focus, load)
+                thumb.focus()
+            elif changed is None:
+                misses += 1
+                t_now = app.model.telemetry
+                print(
+                    f"  no change after {key}: sticks {app.model.operator_input()[0]}, board phase "
+                    f"{t_now.phase.name if t_now else '?'}, mode {t_now.mode.name if t_now else '?'}",
+                    flush=True,
+                )
+            else:
+                latencies.append(changed - key_ms)
+        stats = app.client.stats()
+
+    print()
+    print("spirob-host panel benchmark" + (" (FAKE board)" if args.fake else " (virtual board)"))
+    print(f"  scene updates/s, live poses ({n_bodies} bodies): {live_ups:6.1f}   (target >= 30)")
+    print(f"  poses received/s from the board:               {poses_rate:6.1f}")
+    print(f"  scene updates/s, synthetic 40 bodies:          {synth_ups:6.1f}")
+    print(
+        f"  websocket frames/s received by the browser:    {browser_fps:6.1f} live, {synth_fps:6.1f} synth."
+    )
+    if latencies:
+        print(
+            f"  stick -> current latency over {len(latencies)} moves: "
+            f"median {statistics.median(latencies):5.1f} ms, p99 {percentile(latencies, 99):5.1f} ms, "
+            f"max {max(latencies):5.1f} ms   (target p99 <= 100 ms)"
+            + (f", {misses} moves without a change" if misses else "")
+            + (f", {input_lost} key presses lost in the page" if input_lost else "")
+        )
+    else:
+        print(f"  stick -> current latency: no change seen in {args.moves} moves (is the board in MANUAL?)")
+    print(
+        "  firmware loop without browser: late {late_per_1000:.2f}/1000 ticks, lateness max "
+        "{lateness_max_us:.0f} us, exec p99 {exec_p99_us:.0f} us".format(**quiet)
+    )
+    print(
+        "  firmware loop with browser:    late {late_per_1000:.2f}/1000 ticks, lateness max "
+        "{lateness_max_us:.0f} us, exec p99 {exec_p99_us:.0f} us".format(**busy)
+    )
+    q, b = quiet["lateness_max_us"], busy["lateness_max_us"]
+    ratio = b / q if q and q == q and b == b else float("nan")
+    print(f"  loop lateness ratio (with/without browser, max lateness): {ratio:.2f}   (target <= 1.2)")
+    print(
+        f"  virtual RC: max gap {stats.rc_max_gap_us / 1000:.1f} ms, "
+        f"gaps > 30 ms: {stats.rc_gaps_over_timeout}, link process real-time: {stats.realtime}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

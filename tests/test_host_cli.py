@@ -1,0 +1,241 @@
+"""`spirob-host` command line: argv in, exit status and one-line errors out.
+
+Runs against the scripted fake board (tests/link_peer.py) on a real pty / TCP socket, and against the
+real virtual board (``hil.board``) when it can be imported.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import socket
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from link_peer import LinkPeer
+
+from host.cli import HostApp, HostOptions, build_parser, main
+from protocol.dbus import Lever
+from protocol.messages import Mode, Phase
+
+HAVE_VIRTUAL_BOARD = (
+    importlib.util.find_spec("hil.board") is not None if importlib.util.find_spec("hil") else False
+)
+needs_virtual_board = pytest.mark.skipif(
+    not HAVE_VIRTUAL_BOARD, reason="hil.board (the virtual board, issue 5) cannot be imported yet"
+)
+
+
+def wait_for(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.02)
+    return cond()
+
+
+def one_error_line(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, f"expected one line, got {lines!r}"
+    assert "Traceback" not in err
+    return lines[0]
+
+
+@pytest.fixture
+def peer() -> Iterator[LinkPeer]:
+    with LinkPeer("pty") as p:
+        yield p
+
+
+@pytest.fixture
+def busy_port() -> Iterator[int]:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    s.listen(1)
+    try:
+        yield s.getsockname()[1]
+    finally:
+        s.close()
+
+
+# ---------------------------------------------------------------------- parsing
+
+
+def test_parser_defaults() -> None:
+    ns = build_parser().parse_args([])
+    assert ns.port is None and ns.ui_host == "127.0.0.1" and ns.ui_port == 8080
+    assert not ns.headless and ns.duration is None and ns.mav_sysid == 1 and ns.mav_compid == 25
+    opts = HostOptions.from_args(ns)
+    assert opts.token is None and opts.ui
+
+
+def test_non_loopback_ui_requires_a_token() -> None:
+    opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "192.0.2.7"]))
+    assert opts.token is not None and len(opts.token) >= 16
+    opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "192.0.2.7", "--token", "abc"]))
+    assert opts.token == "abc"
+    opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "::1"]))
+    assert opts.token is None
+
+
+def test_virtual_rc_choices() -> None:
+    opts = HostOptions.from_args(build_parser().parse_args(["--virtual-rc", "manual"]))
+    assert opts.virtual_rc == Lever.MIDDLE
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--bogus"],
+        ["--duration", "-1"],
+        ["--ui-port", "70000"],
+        ["--mav-compid", "0"],
+        ["--virtual-rc", "fly"],
+    ],
+)
+def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert "error" in one_error_line(capsys.readouterr().err)
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--replay", "x.mcap", "--port", "loop://"], "cannot be combined"),
+        (["--replay", "/nonexistent/x.mcap", "--headless"], "no such recording"),
+        (["--record", "/nonexistent/dir/x.mcap", "--port", "loop://"], "does not exist"),
+        (["--mav-signing-key", "k.bin"], "needs --mavlink"),
+    ],
+)
+def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(argv) == 2
+    assert needle in one_error_line(capsys.readouterr().err)
+
+
+# ---------------------------------------------------------------------- port errors
+
+
+def test_nonexistent_port_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--port", str(tmp_path / "ttyACM7"), "--headless", "--duration", "1"]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "no such device" in line and "ttyACM7" in line
+
+
+def test_refused_socket_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
+    # A port nobody listens on: take one, then free it.
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    free = s.getsockname()[1]
+    s.close()
+    assert main(["--port", f"socket://127.0.0.1:{free}", "--headless", "--duration", "1"]) == 2
+    assert "cannot open" in one_error_line(capsys.readouterr().err)
+
+
+def test_busy_port_exits_2(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
+    from host.board_client import open_port
+
+    holder = open_port(peer.url, timeout_s=0.01)
+    try:
+        assert main(["--port", peer.url, "--headless", "--duration", "1"]) == 2
+    finally:
+        holder.close()
+    assert "busy" in one_error_line(capsys.readouterr().err)
+
+
+def test_ui_port_taken_exits_2(peer: LinkPeer, busy_port: int, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--port", peer.url, "--ui-port", str(busy_port), "--duration", "1"]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert f"UI port {busy_port}" in line and "in use" in line
+
+
+# ---------------------------------------------------------------------- runs against the fake board
+
+
+def test_headless_run_for_a_duration(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--port", peer.url, "--headless", "--duration", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert f"board link {peer.url}" in out
+
+
+def test_panel_run_prints_the_url(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--port", peer.url, "--ui-port", "0", "--duration", "0.5"]) == 0
+    assert "panel at http://127.0.0.1:" in capsys.readouterr().out
+
+
+def test_virtual_rc_drives_the_gate_then_manual(peer: LinkPeer) -> None:
+    opts = HostOptions(port=peer.url, ui=False, virtual_rc=Lever.MIDDLE)
+    with HostApp(opts) as app:
+        app.start()
+        assert wait_for(lambda: app.model.telemetry is not None and app.model.telemetry.mode == Mode.MANUAL)
+        assert app.model.telemetry is not None and app.model.telemetry.phase == Phase.OK
+
+
+def test_unplugged_board_is_retried_and_shown_disconnected() -> None:
+    with LinkPeer("socket") as peer, HostApp(HostOptions(port=peer.url, ui=False)) as app:
+        app.start()
+        assert wait_for(lambda: app.model.telemetry_count > 5)
+        peer.drop_connection()
+        assert wait_for(lambda: app.model.link_state.value == "disconnected")
+        assert "disconnected" in app.status_line()
+        peer.resume()
+        assert wait_for(lambda: app.model.link_state.value == "connected", timeout_s=15)
+        n = app.model.telemetry_count
+        assert wait_for(lambda: app.model.telemetry_count > n + 5)
+
+
+def test_record_then_replay(peer: LinkPeer, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("mcap")
+    path = tmp_path / "run.mcap"
+    assert main(["--port", peer.url, "--headless", "--duration", "1", "--record", str(path)]) == 0
+    assert path.stat().st_size > 1000
+    with HostApp(HostOptions(replay=path, ui=False, replay_speed=20.0)) as app:
+        app.start()
+        assert app.run(duration_s=30.0) == 0  # headless replay ends by itself
+        assert app.replay_done.is_set()
+        assert app.model.telemetry_count >= 50
+        assert app.model.poses is not None
+    assert main(["--replay", str(path), "--headless", "--replay-speed", "50"]) == 0
+
+
+def test_mavlink_flags(peer: LinkPeer, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--port", peer.url, "--headless", "--duration", "1", "--mavlink", "bogus:xyz"]) == 2
+    assert "--mavlink" in one_error_line(capsys.readouterr().err)
+    key = tmp_path / "key.txt"
+    key.write_text("a passphrase")
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    try:
+        url = f"udpout:127.0.0.1:{s.getsockname()[1]}"
+        argv = ["--port", peer.url, "--headless", "--duration", "1", "--mavlink", url]
+        assert main([*argv, "--mav-signing-key", str(key)]) == 0
+        s.settimeout(5.0)
+        assert s.recv(512)  # our HEARTBEAT reached the "autopilot"
+    finally:
+        s.close()
+
+
+# ---------------------------------------------------------------------- the real virtual board
+
+
+@needs_virtual_board
+def test_default_starts_the_virtual_board(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--headless", "--duration", "2", "--virtual-rc", "safe"]) == 0
+    assert "board link" in capsys.readouterr().out
+
+
+@needs_virtual_board
+def test_virtual_board_over_a_pty_with_manual_rc() -> None:
+    from hil.board import VirtualBoardProcess  # type: ignore[import-not-found,unused-ignore]
+
+    with VirtualBoardProcess(pty=True) as vb:
+        url = vb.start(timeout_s=60.0)
+        with HostApp(HostOptions(port=url, ui=False, virtual_rc=Lever.MIDDLE)) as app:
+            app.start()
+            assert wait_for(
+                lambda: app.model.telemetry is not None and app.model.telemetry.mode == Mode.MANUAL, 20.0
+            )
+            assert app.model.poses is not None

@@ -1,0 +1,178 @@
+"""host.model (control ownership, server-side clamps, history, notices) and host.scene geometry."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from host.board_client import LinkState
+from host.model import CLI_CLIENT, ControlResult, RingBuffer, UiModel
+from host.scene import ArmGeometry, DronePose, arm_drawing, default_hanging_pose, quat_mul, quat_rotate
+from protocol.dbus import Lever
+from protocol.messages import (
+    Command,
+    CommandCode,
+    Event,
+    EventKind,
+    Message,
+    Mode,
+    Phase,
+    Telemetry,
+)
+
+
+def make_model(token: str | None = None) -> tuple[UiModel, list[Message]]:
+    sent: list[Message] = []
+
+    def send(msg: Message) -> bool:
+        sent.append(msg)
+        return True
+
+    return UiModel(send, token=token), sent
+
+
+def test_first_client_gets_control_second_must_be_handed_it() -> None:
+    m, _ = make_model()
+    assert m.request_control(1) is ControlResult.GRANTED
+    assert m.request_control(2) is ControlResult.PENDING
+    assert m.holder == 1 and m.pending == 2
+    # The requester cannot act meanwhile.
+    assert not m.set_stick(2, 3, 400)
+    assert not m.command(2, CommandCode.ARM)
+    assert m.answer_request(1, grant=False) is False
+    assert m.holder == 1 and m.pending is None
+    m.request_control(2)
+    assert not m.answer_request(2, grant=True)  # only the holder answers
+    assert m.answer_request(1, grant=True)
+    assert m.holder == 2
+    assert not m.set_stick(1, 3, 400)
+
+
+def test_new_holder_starts_safe_and_leaving_releases() -> None:
+    m, _ = make_model()
+    m.request_control(1)
+    assert m.set_lever(1, "right", "MIDDLE")
+    assert m.set_stick(1, 3, 500)
+    m.request_control(2)
+    m.answer_request(1, grant=True)
+    frame = m.virtual_rc_frame()
+    assert frame is not None
+    assert frame.right_lever == Lever.DOWN and frame.channels == (0, 0, 0, 0)
+    m.client_left(2)
+    assert m.holder is None
+    assert m.virtual_rc_frame() is None  # nobody holds control: no RC at all
+
+
+def test_values_are_clamped_server_side() -> None:
+    m, sent = make_model()
+    m.request_control(1)
+    m.set_stick(1, 0, 10_000)
+    m.set_stick(1, 1, -10_000)
+    m.set_stick(1, 2, float("nan"))
+    frame = m.virtual_rc_frame()
+    assert frame is not None and frame.channels[:3] == (660, -660, 0)
+    assert frame.is_valid()
+    assert not m.set_lever(1, "right", "SIDEWAYS")
+    with pytest.raises(ValueError):
+        m.set_stick(1, 7, 0)
+    m.set_direct_tension(1, 0, 1e9)
+    m.set_direct_tension(1, 1, -5)
+    cmd = sent[-1]
+    assert isinstance(cmd, Command) and cmd.code == CommandCode.SET_TENSIONS
+    assert cmd.args[0] == m.limits.tension_max_n and cmd.args[1] == 0.0
+    assert not m.command(1, CommandCode.SET_MODE, (42.0, 0.0, 0.0))
+    assert m.command(1, CommandCode.SET_MODE, (float(Mode.DIRECT), 0.0, 0.0))
+
+
+def test_estop_is_open_to_every_authorised_client_and_forces_safe() -> None:
+    m, sent = make_model()
+    m.request_control(1)
+    m.set_lever(1, "right", Lever.MIDDLE)
+    assert m.estop(2)
+    assert isinstance(sent[-1], Command) and sent[-1].code == CommandCode.ESTOP
+    frame = m.virtual_rc_frame()
+    assert frame is not None and frame.right_lever == Lever.DOWN
+    assert any(n.title == "E-STOP pressed" for n in m.notices_after(0))
+
+
+def test_token_gates_everything_but_watching() -> None:
+    m, sent = make_model(token="s3cret")
+    assert not m.authorise(1, None)
+    assert not m.authorise(1, "wrong")
+    assert m.request_control(1) is ControlResult.DENIED
+    assert not m.estop(1)
+    assert not sent
+    assert m.authorise(1, "s3cret")
+    assert m.request_control(1) is ControlResult.GRANTED
+    assert m.is_authorised(CLI_CLIENT)
+
+
+def test_reconnect_resets_levers_and_notifies() -> None:
+    m, _ = make_model()
+    m.request_control(1)
+    m.set_lever(1, "right", Lever.MIDDLE)
+    m.on_link_state(LinkState.CONNECTED)
+    m.on_link_state(LinkState.DISCONNECTED)
+    m.on_link_state(LinkState.CONNECTED)
+    frame = m.virtual_rc_frame()
+    assert frame is not None and frame.right_lever == Lever.DOWN
+    titles = [n.title for n in m.notices_after(0)]
+    assert "Board disconnected" in titles and "Board reconnected" in titles
+
+
+def test_telemetry_history_and_phase_notices() -> None:
+    m, _ = make_model()
+    for i in range(5):
+        m.on_board_message(Telemetry(time_us=i * 10_000, phase=Phase.OK, commanded_current=(1000, 0, 0)))
+    m.on_board_message(Telemetry(time_us=60_000, phase=Phase.RC_LOST))
+    m.on_board_message(Event(61_000, EventKind.FAULT, 2, 0.0, "motor 2 silent"))
+    data = m.history.snapshot()
+    assert data.shape == (6, 16)
+    assert data[0, 7] == pytest.approx(1.0)  # commanded current of motor 1 in A
+    titles = [n.title for n in m.notices_after(0)]
+    assert titles == ["RC lost", "Fault"]
+
+
+def test_ring_buffer_keeps_newest_and_decimates() -> None:
+    rb = RingBuffer(4, 1)
+    for i in range(10):
+        rb.append(float(i), [float(i * 2)])
+    snap = rb.snapshot()
+    assert snap[:, 0].tolist() == [6.0, 7.0, 8.0, 9.0]
+    assert rb.snapshot(max_points=2)[:, 0].tolist() == [7.0, 9.0]
+    with pytest.raises(ValueError):
+        RingBuffer(0, 1)
+
+
+def test_arm_drawing_of_a_hanging_arm() -> None:
+    geom = ArmGeometry.default()
+    pos, quat = default_hanging_pose(geom, DronePose((0.0, 0.0, 1.0)))
+    d = arm_drawing(pos, quat, geom)
+    n = geom.units
+    assert d.unit_positions.shape == (n, 3) and d.unit_scales.shape == (n, 3)
+    assert d.cable_segments.shape == (3 * (n + 1), 2, 3)
+    # Hanging straight down: every unit below the previous one, the tip lowest, cables 120° apart.
+    assert np.all(np.diff(d.unit_positions[:, 2]) < 0)
+    assert d.tip_m[2] == pytest.approx(1.0 - 0.03 - sum(geom.unit_lengths_m), abs=1e-9)
+    a, b = d.cable_segments[1, 0, :2], d.cable_segments[n + 2, 0, :2]
+    angle = math.degrees(math.atan2(a[0] * b[1] - a[1] * b[0], a @ b))
+    assert abs(angle) == pytest.approx(120.0, abs=1e-6)
+    # Units point along the hang: each instance's +z maps to -z in the world.
+    z = quat_rotate(d.unit_wxyzs, np.tile([0.0, 0.0, 1.0], (n, 1)))
+    assert np.allclose(z, [0.0, 0.0, -1.0])
+
+
+def test_arm_drawing_resamples_other_unit_counts() -> None:
+    geom = ArmGeometry.default()
+    pos, quat = default_hanging_pose(geom.resized(10))
+    assert arm_drawing(pos, quat, geom).unit_positions.shape == (10, 3)
+    with pytest.raises(ValueError):
+        arm_drawing(pos[:1], quat[:1], geom)
+
+
+def test_quaternion_helpers() -> None:
+    q = np.array([math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)])  # 90° about z
+    assert np.allclose(quat_rotate(q, np.array([1.0, 0.0, 0.0])), [0.0, 1.0, 0.0])
+    assert np.allclose(quat_mul(q, q), [0.0, 0.0, 0.0, 1.0])
