@@ -453,11 +453,25 @@ def _run_run(args: argparse.Namespace) -> int:
     console = _progress_console()
     results: list[ScenarioResult] = []
     if args.port:
-        from hil.realtime import run_scenario_on_port
+        from hil.errors import HilError
+        from hil.realtime import check_port_run, port_scenario_names, run_scenario_on_port
 
-        for name in names:
-            console.print(f"running {name} on {args.port} in real time ...")
-            results.append(run_scenario_on_port(name, args.port, seed=args.seed, faults=faults))
+        if args.record or args.report:
+            raise UsageError(
+                "--record and --report work in lockstep runs only, not with --port", f"{PROG} run"
+            )
+        if args.all:
+            names = port_scenario_names()
+        try:
+            for name in names:  # refuse lockstep-only scenarios before the first run starts
+                check_port_run(name, faults)
+            for name in names:
+                with console.status(f"running {name} on {args.port} in real time ..."):
+                    result = run_scenario_on_port(name, args.port, seed=args.seed, faults=faults)
+                console.print(f"{name}: {'passed' if result.passed else 'FAILED'}")
+                results.append(result)
+        except HilError as exc:
+            raise UsageError(str(exc), f"{PROG} run") from exc
     else:
         with Progress(
             TextColumn("{task.description}"),
@@ -558,6 +572,12 @@ COMMANDS: list[Command] = [
         "replay a recording through the firmware and compare every output byte",
         _configure_replay,
         _run_replay,
+    ),
+    Command(
+        "experiment",
+        "reproduce a result of the paper: workspace, packing, strategy, grasp-range, load, dynamic",
+        lambda p: __import__("hil.experiments", fromlist=["_"]).configure_experiment(p),
+        lambda a: __import__("hil.experiments", fromlist=["_"]).run_experiment_command(a),
     ),
 ]
 """The subcommands, in ``--help`` order. Later issues append theirs."""

@@ -1,0 +1,195 @@
+"""hil.realtime: scenarios played in real time over a port against a board (``spirob-hil run --port``).
+
+The board is the real-time virtual board in a child process, on TCP and on a pty. Nothing here asserts a
+wall-clock duration: every check is measured on the board's clock from its telemetry.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import serial
+
+from hil.board import VirtualBoardProcess
+from hil.cli import main
+from hil.errors import HilError
+from hil.faults import Fault
+from hil.realtime import (
+    PORT_CHECKS,
+    RC_GAP_CHECK,
+    PortRun,
+    check_port_run,
+    port_scenario_names,
+    run_scenario_on_port,
+)
+from hil.scenarios import MS, SCENARIOS, ScenarioResult
+from protocol.dbus import Lever, RcFrame
+from protocol.messages import Event, EventKind, Phase
+
+
+def _failed(result: ScenarioResult) -> list[str]:
+    return [f"{c.name}: {c.value:g} {c.op} {c.bound:g} {c.unit}" for c in result.checks if not c.passed]
+
+
+def _void(result: ScenarioResult) -> bool:
+    return any(c.name.startswith(RC_GAP_CHECK) and not c.passed for c in result.checks)
+
+
+def _run(name: str, url: str, attempts: int = 3) -> ScenarioResult:
+    """Run ``name``; again if the run was void (the machine is shared: the host or the pty stalled)."""
+    result = run_scenario_on_port(name, url)
+    for _ in range(attempts - 1):
+        if not _void(result):
+            break
+        result = run_scenario_on_port(name, url)
+    return result
+
+
+def test_scenarios_pass_against_the_realtime_virtual_board_over_tcp() -> None:
+    names = ("startup-gate", "rc-loss", "host-loss", "link-noise")
+    with VirtualBoardProcess(listen="socket://127.0.0.1:0") as board:
+        url = board.start(timeout_s=60)
+        results = {name: _run(name, url) for name in names}
+        assert board.alive
+    for name, result in results.items():
+        assert result.passed, (name, _failed(result))
+        assert result.name == name and result.duration_us == SCENARIOS[name].duration_us
+        assert result.as_dict()["passed"] is True
+    checks = {name: {c.name: c for c in r.checks} for name, r in results.items()}
+    # Same names as the lockstep checks where the meaning is the same; bounds widened by the resolution.
+    zero = checks["rc-loss"]["zero current after the last valid frame"]
+    assert zero.bound == 30 * MS + 1 * MS + 10 * MS + 2 * MS  # timeout + tick + telemetry + lateness
+    assert checks["rc-loss"]["RC_LOST reported after the last valid frame (board event)"].value > 30 * MS
+    assert checks["host-loss"]["telemetry frames reporting HOST_LOST"].value >= 1
+    noise = results["link-noise"].counters
+    assert noise["injected_link_bytes_lost"] > 0 and noise["injected_link_bits_flipped"] > 0
+    assert noise["link_crc_errors"] > 0
+
+
+def test_a_pty_board_runs_and_a_busy_port_is_refused() -> None:
+    with VirtualBoardProcess(pty=True) as board:
+        path = board.start(timeout_s=60)
+        holder = serial.serial_for_url(path, exclusive=True)
+        try:
+            with pytest.raises(HilError, match="cannot open link port") as info:
+                run_scenario_on_port("rc-loss", path)
+            assert "\n" not in str(info.value)
+        finally:
+            holder.close()
+        # A pty's delivery waits for a normal-priority kernel worker: on a loaded machine the board
+        # sometimes gets RC gaps of 50-70 ms (the run's validity check says so); the shortest scenario.
+        result = _run("startup-gate", path)
+    assert result.passed, _failed(result)
+
+
+def test_cli_runs_a_scenario_on_a_port_as_json(capsys: pytest.CaptureFixture[str]) -> None:
+    with VirtualBoardProcess(listen="socket://127.0.0.1:0") as board:
+        url = board.start(timeout_s=60)
+        for _ in range(3):
+            status = main(["run", "rc-loss", "--port", url, "--json"])
+            out = json.loads(capsys.readouterr().out)
+            if status == 0 or not any(
+                c["name"].startswith(RC_GAP_CHECK) and not c["passed"] for c in out["checks"]
+            ):
+                break
+    assert status == 0, [c for c in out["checks"] if not c["passed"]]
+    assert out["name"] == "rc-loss" and out["passed"] is True
+    assert {"zero current after the last valid frame", "|current| after re-arming"} <= {
+        c["name"] for c in out["checks"]
+    }
+    assert all({"value", "bound", "op", "passed"} <= set(c) for c in out["checks"])
+
+
+def test_a_missing_port_is_a_one_line_hil_error() -> None:
+    for port in ("/dev/no-such-board", "socket://127.0.0.1:1"):
+        with pytest.raises(HilError, match="cannot open link port") as info:
+            run_scenario_on_port("rc-loss", port)
+        assert "\n" not in str(info.value)
+
+
+def test_a_port_without_a_board_is_reported() -> None:
+    # loop:// echoes our own frames: no telemetry ever comes back.
+    with pytest.raises(HilError, match="no telemetry from loop://"):
+        run_scenario_on_port("startup-gate", "loop://")
+
+
+def test_lockstep_only_scenarios_and_faults_are_refused_before_the_port_opens() -> None:
+    # The port does not exist: the refusal must come first, and name the fault.
+    with pytest.raises(HilError, match="needs fault motor-silence, which only a lockstep run can inject"):
+        run_scenario_on_port("motor-silence", "/dev/no-such-board")
+    with pytest.raises(HilError, match="fault loop-jitter can only be injected in a lockstep run"):
+        run_scenario_on_port(
+            "rc-loss", "/dev/no-such-board", faults=[Fault.parse("loop-jitter@1:delay=0.002")]
+        )
+    with pytest.raises(KeyError):
+        check_port_run("no-such-scenario")
+    runnable = port_scenario_names()
+    assert "motor-silence" not in runnable
+    assert {"startup-gate", "rc-loss", "host-loss", "link-noise", "link-disconnect"} <= set(runnable)
+    for name in SCENARIOS:  # every scenario either runs on a port or says why not
+        if name in runnable:
+            check_port_run(name)
+        else:
+            with pytest.raises(HilError, match=name):
+                check_port_run(name)
+    check_port_run("rc-loss", [Fault.parse("link-byte-loss@1-2:rate=0.01"), Fault.parse("host-loss@3-4")])
+
+
+def test_cli_reports_a_missing_port_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["run", "rc-loss", "--port", "/dev/no-such-board"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot open link port" in err[0]
+
+
+# --- the checks themselves, on synthetic telemetry (they must be able to fail) -----------------------
+
+
+def _rc_loss_run(cut_us: int | None) -> PortRun:
+    """rc-loss as a board would report it; ``cut_us`` after the last valid frame it zeroes the current."""
+    plan = SCENARIOS["rc-loss"].plan()
+    duration = SCENARIOS["rc-loss"].duration_us
+    pull = RcFrame((300, 0, 0, 400), Lever.MIDDLE, Lever.DOWN)
+    safe = RcFrame.neutral()
+    rc: list[tuple[int, RcFrame]] = []
+    for t in range(0, duration, 14 * MS):
+        if 1500 * MS <= t < 2500 * MS:
+            continue
+        rc.append((t, safe if t < 200 * MS or 3000 * MS <= t < 3300 * MS else pull))
+    last = max(t for t, _ in rc if t < 2500 * MS)
+    t_us = np.arange(5 * MS, duration, 10 * MS, dtype=np.int64)
+    on = (t_us >= 200 * MS) & (t_us < 3000 * MS) | (t_us >= 3300 * MS)
+    if cut_us is not None:
+        on &= ~((t_us >= last + cut_us) & (t_us < 3300 * MS))
+    current = np.where(on, 400, 0).astype(np.int64)
+    events = [(last + cut_us, Event(0, EventKind.PHASE, int(Phase.RC_LOST)))] if cut_us is not None else []
+    n = t_us.size
+    return PortRun(
+        plan=plan,
+        config=plan.firmware,
+        duration_us=duration,
+        t_us=t_us,
+        current_raw=np.repeat(current[:, None], 3, axis=1),
+        target_n=np.zeros((n, 3)),
+        phase=np.where(on, int(Phase.OK), int(Phase.RC_LOST)).astype(np.int64),
+        mode=np.zeros(n, np.int64),
+        rc_frames_ok=np.zeros(n, np.int64),
+        rc_rejected=np.zeros(n, np.int64),
+        link_crc_errors=np.zeros(n, np.int64),
+        rc=rc,
+        events=events,
+        rc_sent_us=[t for t, _ in rc],
+    )
+
+
+def test_rc_loss_checks_pass_a_board_that_cuts_in_time_and_fail_one_that_does_not() -> None:
+    good = {c.name: c for c in PORT_CHECKS["rc-loss"](_rc_loss_run(31 * MS))}
+    assert all(c.passed for c in good.values()), [c for c in good.values() if not c.passed]
+    late = {c.name: c for c in PORT_CHECKS["rc-loss"](_rc_loss_run(60 * MS))}
+    assert not late["zero current after the last valid frame"].passed
+    assert not late["RC_LOST reported after the last valid frame (board event)"].passed
+    never = {c.name: c for c in PORT_CHECKS["rc-loss"](_rc_loss_run(None))}
+    assert math.isnan(never["RC_LOST reported after the last valid frame (board event)"].value)
+    assert not never["max |current| from 30 ms after the loss to re-arming"].passed
