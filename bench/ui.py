@@ -7,8 +7,10 @@ Prints:
    actually received;
 2. end-to-end latency from a stick move in the page (Playwright fills the slider's number box) to the
    first telemetry whose commanded current changed: median and p99;
-3. the firmware control loop's timing without and with a browser attached (late ticks, lateness max,
-   and the p99 execution time the board reports) and their ratio.
+3. the firmware control loop's timing without and with a browser attached, from the board's own
+   telemetry: the p99 start lateness of the control task (``Telemetry.control_lateness_p99_us``, over
+   the board's last ~1 s, refreshed at 2 Hz; the window's figure is the median of those, its worst
+   one is printed too), late ticks, and the p99 execution time; and the ratio of the p99 latenesses.
 
 Targets (issue 6): >= 30 updates/s, latency p99 <= 100 ms, loop lateness ratio <= 1.2.
 
@@ -52,11 +54,13 @@ def percentile(values: list[float], q: float) -> float:
 
 
 class TelemetryLog:
-    """Listener: (host time, commanded currents, loop counters) of every telemetry frame."""
+    """Listener: (host time, commanded currents, loop counters, wall time, lateness p99) per telemetry."""
+
+    Row = tuple[float, tuple[int, int, int], int, int, int, float, int]
 
     def __init__(self) -> None:
         self.lock = threading.Lock()
-        self.rows: list[tuple[float, tuple[int, int, int], int, int, int, float]] = []
+        self.rows: list[TelemetryLog.Row] = []
 
     def __call__(self, msg: Any) -> None:
         from protocol.messages import Telemetry
@@ -71,10 +75,11 @@ class TelemetryLog:
                         msg.control_lateness_max_us,
                         msg.control_exec_p99_us,
                         time.time(),
+                        msg.control_lateness_p99_us,
                     )
                 )
 
-    def since(self, t: float) -> list[tuple[float, tuple[int, int, int], int, int, int, float]]:
+    def since(self, t: float) -> list[TelemetryLog.Row]:
         with self.lock:
             return [r for r in self.rows if r[0] >= t]
 
@@ -88,13 +93,24 @@ def loop_window(log: TelemetryLog, seconds: float, page: Any = None) -> dict[str
         while time.monotonic() - t0 < seconds:
             page.wait_for_timeout(100)
     rows = log.since(t0)
+    nan = float("nan")
     if len(rows) < 2:
-        return {"late_per_1000": float("nan"), "lateness_max_us": float("nan"), "exec_p99_us": float("nan")}
+        return dict.fromkeys(
+            ("late_per_1000", "lateness_p99_us", "lateness_p99_worst_us", "lateness_max_us", "exec_p99_us"),
+            nan,
+        )
     late = rows[-1][2] - rows[0][2]
     ticks = max(1.0, (rows[-1][0] - rows[0][0]) * 1000.0)  # 1 kHz control task
+    # The board's p99 covers its last ~1 s and is refreshed every 0.5 s: skip the first 1.5 s so every
+    # figure used describes this window only.
+    inside = [r[6] for r in rows if r[0] >= t0 + 1.5] or [r[6] for r in rows[len(rows) // 2 :]]
+    # control_lateness_max_us is since boot: it only says something if it grew in this window.
+    grew = rows[-1][3] > rows[0][3]
     return {
         "late_per_1000": 1000.0 * late / ticks,
-        "lateness_max_us": float(max(r[3] for r in rows)),
+        "lateness_p99_us": float(statistics.median(inside)),
+        "lateness_p99_worst_us": float(max(inside)),
+        "lateness_max_us": float(rows[-1][3]) if grew else nan,
         "exec_p99_us": float(statistics.median(r[4] for r in rows)),
     }
 
@@ -269,17 +285,17 @@ def main() -> int:
         )
     else:
         print(f"  stick -> current latency: no change seen in {args.moves} moves (is the board in MANUAL?)")
-    print(
-        "  firmware loop without browser: late {late_per_1000:.2f}/1000 ticks, lateness max "
-        "{lateness_max_us:.0f} us, exec p99 {exec_p99_us:.0f} us".format(**quiet)
-    )
-    print(
-        "  firmware loop with browser:    late {late_per_1000:.2f}/1000 ticks, lateness max "
-        "{lateness_max_us:.0f} us, exec p99 {exec_p99_us:.0f} us".format(**busy)
-    )
-    q, b = quiet["lateness_max_us"], busy["lateness_max_us"]
-    ratio = b / q if q and q == q and b == b else float("nan")
-    print(f"  loop lateness ratio (with/without browser, max lateness): {ratio:.2f}   (target <= 1.2)")
+    for name, w in (("without browser", quiet), ("with browser   ", busy)):
+        new_max = "-" if w["lateness_max_us"] != w["lateness_max_us"] else f"{w['lateness_max_us']:.0f} us"
+        print(
+            f"  firmware loop {name}: lateness p99 {w['lateness_p99_us']:.0f} us (worst 1-s p99 "
+            f"{w['lateness_p99_worst_us']:.0f} us), late {w['late_per_1000']:.2f}/1000 ticks, "
+            f"new lateness max {new_max}, exec p99 {w['exec_p99_us']:.0f} us"
+        )
+    q, b = quiet["lateness_p99_us"], busy["lateness_p99_us"]
+    # A p99 of 0 µs (a perfectly idle machine) would make any ratio infinite: floor both at 1 µs.
+    ratio = max(b, 1.0) / max(q, 1.0) if q == q and b == b else float("nan")
+    print(f"  loop lateness p99 ratio (with/without browser): {ratio:.2f}   (target <= 1.2)")
     print(
         f"  virtual RC: max gap {stats.rc_max_gap_us / 1000:.1f} ms, "
         f"gaps > 30 ms: {stats.rc_gaps_over_timeout}, link process real-time: {stats.realtime}"

@@ -200,8 +200,18 @@ class Firmware:
             The number of tasks that ran.
         """
         if not self.scheduler.started:
-            self.events.push(now_us, EventKind.BOOT, 0, 0.0, FIRMWARE_VERSION)
+            self.start(now_us)
         return self.scheduler.run_due(now_us)
+
+    def start(self, first_deadline_us: int) -> None:
+        """Boot: log the BOOT event and put the task grid's first deadline at ``first_deadline_us``.
+
+        :meth:`run_due` boots on its first call, at whatever time it is given. A driver with its own
+        deadline grid (a real-time loop that also steps a plant) boots explicitly on that grid instead, so
+        a tick that wakes slightly earlier than the first one still finds its task due.
+        """
+        self.events.push(first_deadline_us, EventKind.BOOT, 0, 0.0, FIRMWARE_VERSION)
+        self.scheduler.start(first_deadline_us)
 
     def run(
         self,
@@ -655,6 +665,7 @@ class Firmware:
             (link.crc_errors if link else 0) & u32,
             self.failsafe.motor_offline_events & u32,
             self.bus.can_errors & u32,
+            ctl.lateness_p99_us,  # cached like exec_p99_us: refreshed with BoardStatus, not per tick
         )
 
     def _task_telemetry(self, now_us: int) -> None:

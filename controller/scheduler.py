@@ -5,8 +5,9 @@ grid (``offset + k * period``): a task that starts a whole period or more after 
 it; it counts as *late*, the missed ticks are *skipped* (never burst-caught-up) and its next deadline is
 the next grid point after now. Offsets stagger the slow tasks so they do not all land on one tick.
 
-Statistics per task: runs, late, skipped, max and p99 execution time (a fixed ring of recent samples,
-about one second's worth, no allocation per run), max lateness, and a lateness histogram over the whole
+Statistics per task: runs, late, skipped, max and p99 execution time and p99 start lateness (two fixed
+rings of recent samples, about one second's worth, no allocation per run; the p99s are recomputed on
+demand by :meth:`Task.update_p99`, never per tick), max lateness, and a lateness histogram over the whole
 run (1 µs bins up to 2 ms, then one overflow bin) for percentiles.
 """
 
@@ -47,12 +48,14 @@ class Task:
     __slots__ = (
         "_count",
         "_idx",
+        "_late_ring",
         "_ring",
         "exec_max_us",
         "exec_p99_us",
         "late",
         "lateness_hist",
         "lateness_max_us",
+        "lateness_p99_us",
         "name",
         "next_deadline_us",
         "offset_us",
@@ -85,8 +88,11 @@ class Task:
         self.exec_max_us = 0
         self.exec_p99_us = 0
         self.lateness_max_us = 0
+        self.lateness_p99_us = 0
+        """Start lateness p99 (µs) over the recent window, as of the last :meth:`update_p99`."""
         window = max(64, min(1024, 1_000_000 // spec.period_us))  # about 1 s of samples
         self._ring = array("I", bytes(4 * window))
+        self._late_ring = array("I", bytes(4 * window))
         self._idx = 0
         self._count = 0
         self.lateness_hist = array("I", bytes(4 * (_HIST_BINS + 1)))
@@ -101,7 +107,9 @@ class Task:
             self.lateness_max_us = lateness_us
         self.lateness_hist[lateness_us if lateness_us < _HIST_BINS else _HIST_BINS] += 1
         ring = self._ring
-        ring[self._idx] = exec_us if exec_us < 0xFFFF_FFFF else 0xFFFF_FFFF
+        idx = self._idx
+        ring[idx] = exec_us if exec_us < 0xFFFF_FFFF else 0xFFFF_FFFF
+        self._late_ring[idx] = lateness_us if lateness_us < 0xFFFF_FFFF else 0xFFFF_FFFF
         self._idx += 1
         if self._idx == len(ring):
             self._idx = 0
@@ -109,13 +117,18 @@ class Task:
             self._count += 1
 
     def update_p99(self) -> int:
-        """Recompute and cache the p99 execution time over the recent window (sorts: not per tick)."""
+        """Recompute and cache the p99 execution time and start lateness over the recent window.
+
+        Sorts both rings, so it runs at a status rate, never per tick. Returns the execution p99 (the
+        lateness p99 is in :attr:`lateness_p99_us`).
+        """
         n = self._count
         if n == 0:
-            self.exec_p99_us = 0
+            self.exec_p99_us = self.lateness_p99_us = 0
         else:
-            samples = sorted(self._ring[:n])
-            self.exec_p99_us = samples[min(n - 1, (99 * n) // 100)]
+            k = min(n - 1, (99 * n) // 100)
+            self.exec_p99_us = sorted(self._ring[:n])[k]
+            self.lateness_p99_us = sorted(self._late_ring[:n])[k]
         return self.exec_p99_us
 
     def lateness_percentile_us(self, q: float) -> int:
@@ -149,7 +162,7 @@ class Task:
     def reset_stats(self) -> None:
         """Zero the statistics (not the deadlines)."""
         self.runs = self.late = self.skipped = 0
-        self.exec_max_us = self.exec_p99_us = self.lateness_max_us = 0
+        self.exec_max_us = self.exec_p99_us = self.lateness_max_us = self.lateness_p99_us = 0
         self._idx = self._count = 0
         for i in range(len(self.lateness_hist)):
             self.lateness_hist[i] = 0

@@ -344,6 +344,8 @@ def run_realtime(
         offset = start - board.plant.time_us
         end = None if duration_us is None else start + duration_us
         deadline = start + period
+        if not board.firmware.scheduler.started:
+            board.firmware.start(deadline - offset)  # the firmware's task grid is this loop's grid
         try:
             while stop is None or not stop.is_set():
                 clock.sleep_until_us(deadline)

@@ -48,11 +48,8 @@ import dataclasses
 import itertools
 import logging
 import math
-import os
 import queue
 import select
-import socket
-import stat
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -758,12 +755,6 @@ def _fileno(transport: SerialTransport) -> int | None:
         fd = int(transport.serial.fileno())
     except Exception:  # loop:// and friends: no descriptor, the host polls every tick instead
         return None
-    if stat.S_ISSOCK(os.fstat(fd).st_mode):
-        # pyserial's socket:// leaves Nagle on: a heartbeat written just after an RC frame then waits
-        # for the board's delayed ACK (measured: 4-10 ms, riding on its next telemetry), which shifts
-        # every host-timed check. The board's side sets TCP_NODELAY too (hil.transports).
-        with contextlib.suppress(OSError), socket.fromfd(fd, socket.AF_INET, socket.SOCK_STREAM) as sock:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     return fd
 
 

@@ -107,4 +107,3 @@ def plot_run(probe: Probe, out_dir: str | Path, name: str) -> Path:
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
-

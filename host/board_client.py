@@ -43,6 +43,7 @@ from typing import Any, Literal
 
 import serial
 
+from controller.transport import set_tcp_nodelay
 from protocol.dbus import FRAME_LEN, FRAME_PERIOD_US, RcFrame
 from protocol.errors import DecodeError, UnknownMessageError
 from protocol.link import LinkParser, encode_frame
@@ -239,7 +240,7 @@ def open_port(url: str, *, timeout_s: float, exclusive: bool = True) -> Any:
         if exclusive:
             kwargs["exclusive"] = True
     try:
-        return serial.serial_for_url(url, **kwargs)
+        port = serial.serial_for_url(url, **kwargs)
     except serial.SerialException as exc:
         text = str(exc)
         if "exclusively lock" in text or "Resource temporarily unavailable" in text:
@@ -247,6 +248,9 @@ def open_port(url: str, *, timeout_s: float, exclusive: bool = True) -> Any:
         raise BoardLinkError(f"cannot open {url}: {text}") from exc
     except (OSError, ValueError) as exc:
         raise BoardLinkError(f"cannot open {url}: {exc}") from exc
+    with contextlib.suppress(Exception):  # loop:// has no descriptor
+        set_tcp_nodelay(port.fileno())  # socket://: heartbeats must not wait behind RC frames (Nagle)
+    return port
 
 
 # ---------------------------------------------------------------------- the link process

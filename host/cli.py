@@ -18,6 +18,7 @@ import io
 import ipaddress
 import logging
 import math
+import os
 import signal
 import socket
 import sys
@@ -30,7 +31,8 @@ from typing import Any
 
 from host.board_client import BoardClient, BoardLinkError, LinkState
 from host.model import CLI_CLIENT, UiModel, new_token
-from host.scene import DronePose, SceneObject
+from host.scene import DronePose, SceneObject, scene_objects
+from host.shadow import ShadowPlant
 from protocol.dbus import Lever
 from protocol.errors import DecodeError
 from protocol.link import LinkParser
@@ -112,6 +114,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="drive the virtual radio from the command line: right lever DOWN first (start-up gate), "
         "then SAFE / MANUAL / GRASP; a browser tab can ask for control and gets it",
     )
+    src.add_argument(
+        "--no-shadow",
+        action="store_true",
+        help="with --port: do not run the shadow plant (the arm's shape from the measured motor currents "
+        "of a board that sends no poses)",
+    )
     ui = p.add_argument_group("panel")
     ui.add_argument("--ui-host", default="127.0.0.1", help="address the panel binds (default 127.0.0.1)")
     ui.add_argument("--ui-port", type=_port_number, default=8080, help="panel port (default 8080; 0 = any)")
@@ -134,6 +142,12 @@ def build_parser() -> argparse.ArgumentParser:
     mav.add_argument("--mav-sysid", type=_mav_id, default=1, help="the drone's system id (default 1)")
     mav.add_argument("--mav-compid", type=_mav_id, default=25, help="the arm's component id (default 25)")
     mav.add_argument("--mav-signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key file")
+    mav.add_argument(
+        "--mav-signing-timestamp",
+        type=Path,
+        metavar="FILE",
+        help="where the signing timestamp persists across restarts (default: <key file>.timestamp)",
+    )
     p.add_argument(
         "--log-level",
         default="warning",
@@ -162,6 +176,9 @@ class HostOptions:
         mav_sysid: drone system id.
         mav_compid: our component id.
         mav_signing_key: signing key file.
+        mav_signing_timestamp: file persisting the signing timestamp (None with a key:
+            ``<key file>.timestamp``).
+        shadow: with ``port``, run the shadow plant when the board sends no poses.
     """
 
     port: str | None = None
@@ -178,6 +195,8 @@ class HostOptions:
     mav_sysid: int = 1
     mav_compid: int = 25
     mav_signing_key: Path | None = None
+    mav_signing_timestamp: Path | None = None
+    shadow: bool = True
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> HostOptions:
@@ -201,6 +220,8 @@ class HostOptions:
             raise HostError("--mav-signing-key needs --mavlink")
         if ns.mav_signing_key is not None and not ns.mav_signing_key.is_file():
             raise HostError(f"no such signing key file: {ns.mav_signing_key}")
+        if ns.mav_signing_timestamp is not None and ns.mav_signing_key is None:
+            raise HostError("--mav-signing-timestamp needs --mav-signing-key")
         token = ns.token  # an explicit token is honoured on loopback too
         if not ns.headless and not is_loopback(ns.ui_host):
             token = token or new_token()
@@ -219,6 +240,45 @@ class HostOptions:
             mav_sysid=ns.mav_sysid,
             mav_compid=ns.mav_compid,
             mav_signing_key=ns.mav_signing_key,
+            mav_signing_timestamp=ns.mav_signing_timestamp,
+            shadow=not ns.no_shadow,
+        )
+
+
+def signing_timestamp_path(options: HostOptions) -> Path | None:
+    """Where the MAVLink signing timestamp persists (None without a signing key).
+
+    ``--mav-signing-timestamp`` if given, else ``<key file>.timestamp``, the default of
+    ``host.drone_link.DroneLinkConfig.with_signing_key_file``; passed explicitly so the check at start
+    and the drone link agree on one file.
+    """
+    if options.mav_signing_key is None:
+        return None
+    if options.mav_signing_timestamp is not None:
+        return options.mav_signing_timestamp
+    key = options.mav_signing_key
+    return key.with_name(key.name + ".timestamp")
+
+
+def check_signing_timestamp_writable(path: Path) -> None:
+    """Fail early if the signing timestamp cannot be persisted (issue 7: it must survive restarts).
+
+    The drone link only counts a failed save as an I/O error, so without this check a read-only key
+    directory would silently restart the timestamp from the wall clock every run.
+
+    Raises:
+        HostError: the file or its directory is not writable.
+    """
+    target = path if path.exists() else path.parent
+    if path.exists() and not path.is_file():
+        raise HostError(f"signing timestamp {path} is not a regular file")
+    if not target.exists():
+        raise HostError(f"cannot persist the signing timestamp to {path}: {path.parent} does not exist")
+    # The save writes <path>.tmp beside it and renames: the directory must be writable too.
+    if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise HostError(
+            f"cannot persist the signing timestamp to {path}: not writable "
+            "(choose another place with --mav-signing-timestamp)"
         )
 
 
@@ -337,21 +397,25 @@ class HostApp:
     yourself, then :meth:`close` (safe twice; also a context manager).
     """
 
-    def __init__(self, options: HostOptions, *, panel_config: Any = None) -> None:
+    def __init__(self, options: HostOptions, *, panel_config: Any = None, board_config: Any = None) -> None:
         """Prepare a run (nothing starts until :meth:`start`).
 
         Args:
             options: the run's options.
             panel_config: ``host.panel.PanelConfig`` (rates); default rates when None.
+            board_config: ``hil.board.BoardConfig`` of the virtual board started without ``--port``
+                (default: the prototype arm, RC over the link); its objects are drawn in the scene.
         """
         self.options = options
         self.panel_config = panel_config
+        self.board_config = board_config
         self.model = UiModel(token=options.token)
         self.client: BoardClient | None = None
         self.board: Any = None
         self.server: Any = None
         self.panel: Any = None
         self.recording: LinkRecording | None = None
+        self.shadow: ShadowPlant | None = None
         self.drone_link: Any = None
         self.url = ""
         self.board_url = ""
@@ -392,6 +456,12 @@ class HostApp:
             self.model.source_label = "virtual board" if o.port is None else f"board {o.port}"
             self.client.add_listener(self.model.on_board_message)
             self.client.add_state_listener(self.model.on_link_state)
+            if o.port is not None and o.shadow:
+                # A board that sends no SimPoses (hardware) gets its shape from a local plant driven by
+                # the measured currents; it switches itself off when SimPoses arrive.
+                self.shadow = ShadowPlant(self.model.on_shadow_poses)
+                self.client.add_listener(self.shadow.on_board_message)
+                self.shadow.start()
             if o.record is not None:
                 self.recording = LinkRecording(o.record, {"source": "spirob-host", "port": self.board_url})
                 self.client.add_tap(self.recording.tap)
@@ -424,16 +494,17 @@ class HostApp:
             raise HostError(
                 f"the virtual board is not available ({exc}); pass --port to use a real board"
             ) from exc
+        from hil.board import BoardConfig  # type: ignore[import-not-found,unused-ignore]
         from hil.errors import HilError  # type: ignore[import-not-found,unused-ignore]
 
-        self.board = VirtualBoardProcess(listen="socket://127.0.0.1:0")
+        config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
+        self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
             url = str(self.board.start(timeout_s=30.0))
         except HilError as exc:
             raise HostError(f"virtual board: {exc}") from exc
-        for obj in getattr(self.board, "objects", ()) or ():
-            with contextlib.suppress(Exception):
-                self.objects.append(SceneObject(**obj) if isinstance(obj, dict) else obj)
+        # The objects of the plant we asked for (free objects drawn where they start).
+        self.objects.extend(scene_objects(config.plant.model.objects))
         return url
 
     def _start_drone_link(self) -> None:
@@ -445,8 +516,10 @@ class HostApp:
             raise HostError(f"--mavlink: the drone link is not available yet ({exc})") from exc
         try:
             cfg = drone_link.DroneLinkConfig(url=o.mavlink, sysid=o.mav_sysid, compid=o.mav_compid)
-            if o.mav_signing_key is not None:
-                cfg = cfg.with_signing_key_file(o.mav_signing_key)
+            ts_path = signing_timestamp_path(o)
+            if o.mav_signing_key is not None and ts_path is not None:
+                check_signing_timestamp_writable(ts_path)
+                cfg = cfg.with_signing_key_file(o.mav_signing_key, timestamp_path=ts_path)
             if o.record is not None:
                 cfg = _replace(cfg, tlog_path=o.record.with_suffix(".tlog"))
             client = self.client
@@ -482,6 +555,7 @@ class HostApp:
             objects=self.objects,
             drone_pose=self._drone_pose if self.drone_link is not None else None,
             mavlink_status=self._mavlink_status if self.drone_link is not None else None,
+            shadow_status=self._shadow_status if self.shadow is not None else None,
             config=self.panel_config,
         )
         self.panel.start()
@@ -503,6 +577,10 @@ class HostApp:
         if pose.position is None and pose.attitude is None:
             return None
         return ned_to_scene(pose.position, pose.attitude)
+
+    def _shadow_status(self) -> str:
+        shadow = self.shadow
+        return "shadow plant off" if shadow is None else shadow.stats().describe()
 
     def _mavlink_status(self) -> str:
         link = self.drone_link
@@ -620,6 +698,9 @@ class HostApp:
         if self.client is not None:
             self.client.stop()
             self.client = None
+        if self.shadow is not None:
+            self.shadow.stop()
+            self.shadow = None
         if self.recording is not None:
             self.recording.close()
             self.recording = None

@@ -49,6 +49,7 @@ __all__ = [
     "ControlLimits",
     "ControlResult",
     "Notice",
+    "PoseSource",
     "RingBuffer",
     "UiModel",
     "new_token",
@@ -84,6 +85,16 @@ PLOT_COLUMNS = (
 def new_token() -> str:
     """A fresh URL-safe access token (128 bits)."""
     return secrets.token_urlsafe(16)
+
+
+class PoseSource(enum.Enum):
+    """Where the arm's drawn shape comes from (the value is what the panel says)."""
+
+    NONE = "no pose source"
+    SIMULATION = "simulation (SimPoses)"
+    """The plant of a virtual board, over the board link."""
+    SHADOW = "shadow plant (measured currents)"
+    """A local plant driven by a real board's measured motor currents (``host.shadow``)."""
 
 
 class ControlResult(enum.Enum):
@@ -223,6 +234,10 @@ class UiModel:
         self.poses_count = 0
         self.poses_event = threading.Event()
         """Set whenever new poses arrive (the panel waits on it)."""
+        self.pose_source = PoseSource.NONE
+        """Where :attr:`poses` came from."""
+        self.sim_poses_count = 0
+        """``SimPoses`` received from the board (after the first, shadow poses are ignored)."""
         self.status: BoardStatus | None = None
         self.params: dict[str, float] = {}
         self.last_ack: CommandAck | None = None
@@ -252,6 +267,8 @@ class UiModel:
             with self._lock:
                 self.poses = msg
                 self.poses_count += 1
+                self.sim_poses_count += 1
+                self.pose_source = PoseSource.SIMULATION
             self.poses_event.set()
         elif isinstance(msg, Event):
             self._on_event(msg)
@@ -266,6 +283,21 @@ class UiModel:
         elif isinstance(msg, CommandAck):
             with self._lock:
                 self.last_ack = msg
+
+    def on_shadow_poses(self, poses: SimPoses) -> bool:
+        """Poses of the shadow plant (``host.shadow``); ignored once the board itself sent ``SimPoses``.
+
+        Returns:
+            True if they became the poses shown.
+        """
+        with self._lock:
+            if self.sim_poses_count:
+                return False
+            self.poses = poses
+            self.poses_count += 1
+            self.pose_source = PoseSource.SHADOW
+        self.poses_event.set()
+        return True
 
     def _on_telemetry(self, t: Telemetry) -> None:
         row = (

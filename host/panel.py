@@ -8,8 +8,9 @@ Areas and who sees what:
   per-cable tension sliders of DIRECT mode. Controls are disabled for tabs that do not hold control;
   the model refuses their input anyway (server-side check and clamp of every value).
 - **Plots** (shared): uPlot charts of tensions, commanded and measured currents, cable lengths.
-- **Health** (shared): link state, rates, errors, latency, loop statistics, RC / motors, failsafe
-  phase, pose source, MAVLink state.
+- **Health** (shared): link state, rates, errors, latency, loop statistics (late count, execution and
+  lateness p99), RC / motors, failsafe phase, pose source (simulation, shadow plant, none), MAVLink
+  state.
 
 :class:`TeleopPanel` pushes the model to the browser at fixed rates from one thread (scene at up to
 60 Hz when new poses arrive, plots at 10 Hz, health and control state at 4 Hz): the latest value wins,
@@ -35,7 +36,7 @@ from typing import Any, Literal
 import numpy as np
 import viser
 
-from host.model import CLI_CLIENT, ControlResult, UiModel
+from host.model import CLI_CLIENT, ControlResult, PoseSource, UiModel
 from host.scene import ArmGeometry, DronePose, SceneObject, SceneView, build_scene, default_hanging_pose
 from protocol.dbus import Lever
 from protocol.messages import CommandCode, GraspState, Mode, Phase, TelemetryFlags
@@ -442,7 +443,9 @@ def _fmt_rate(rates: dict[str, float] | Any, name: str) -> str:
     return f"{rates.get(name, 0.0):.0f}"
 
 
-def health_text(model: UiModel, pose_source: str, mavlink_status: str | None) -> tuple[str, str, str]:
+def health_text(
+    model: UiModel, pose_source: str, mavlink_status: str | None, shadow_status: str | None = None
+) -> tuple[str, str, str]:
     """Markdown of the three health blocks (summary, link, loop)."""
     t = model.telemetry
     stats = model.link_stats
@@ -466,6 +469,8 @@ def health_text(model: UiModel, pose_source: str, mavlink_status: str | None) ->
             f"{' (required)' if flags & TelemetryFlags.HOST_REQUIRED else ''}  \n"
             f"**Pose source**: {pose_source}"
         )
+    if shadow_status is not None:
+        summary += f"  \n**Shadow**: {shadow_status}"
     if mavlink_status is not None:
         summary += f"  \n**MAVLink**: {mavlink_status}"
     if stats is None:
@@ -483,7 +488,8 @@ def health_text(model: UiModel, pose_source: str, mavlink_status: str | None) ->
     else:
         loop = (
             f"**Loop**: late {t.control_late} · exec p99 {t.control_exec_p99_us} µs · "
-            f"max {t.control_exec_max_us} µs · lateness max {t.control_lateness_max_us} µs  \n"
+            f"max {t.control_exec_max_us} µs · lateness p99 {t.control_lateness_p99_us} µs · "
+            f"max {t.control_lateness_max_us} µs  \n"
             f"**Counters**: RC ok {t.rc_frames_ok} · RC rejected {t.rc_rejected} · DBUS dropped "
             f"{t.dbus_bytes_dropped} B · link CRC {t.link_crc_errors} · motor offline "
             f"{t.motor_offline_events} · CAN errors {t.can_errors}"
@@ -510,6 +516,7 @@ class TeleopPanel:
         objects: static objects to draw.
         drone_pose: optional provider of the drone pose (MAVLink), in the scene's z-up world frame.
         mavlink_status: optional provider of a one-line MAVLink link state.
+        shadow_status: optional provider of a one-line shadow-plant state (``host.shadow``).
         config: rates.
     """
 
@@ -522,6 +529,7 @@ class TeleopPanel:
         objects: Sequence[SceneObject] = (),
         drone_pose: Callable[[], DronePose | None] | None = None,
         mavlink_status: Callable[[], str] | None = None,
+        shadow_status: Callable[[], str] | None = None,
         config: PanelConfig | None = None,
     ) -> None:
         self.server = server
@@ -530,6 +538,7 @@ class TeleopPanel:
         self.geometry = geometry or ArmGeometry.default()
         self._drone_pose = drone_pose
         self._mavlink_status = mavlink_status
+        self._shadow_status = shadow_status
         harden(server)
         server.gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         self._framed = False
@@ -544,7 +553,7 @@ class TeleopPanel:
         self._last_poses = -1
         self._last_notice = 0
         self._health_cache: tuple[str, str, str] = ("", "", "")
-        self.pose_source = "no pose source"
+        self.pose_source = PoseSource.NONE.value
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
 
@@ -695,35 +704,44 @@ class TeleopPanel:
         """Send a scene update if new poses arrived (or the drone moved); returns True if one was sent."""
         m = self.model
         poses = m.poses
+        source = m.pose_source
         drone = self._drone_override()
-        if poses is not None and len(poses.positions_m) >= 2:
+        if poses is not None and len(poses.positions_m) >= 2 and source is not PoseSource.NONE:
             if m.poses_count == self._last_poses and drone is None:
                 return False
             self._last_poses = m.poses_count
-            self.pose_source = "simulation (plant poses over the board link)"
+            # "simulation (SimPoses)" or "shadow plant (measured currents)": said in the scene and in
+            # the health area, so nobody mistakes a model's shape for the measured one.
+            self.pose_source = source.value
             if not self._framed:
                 self._framed = True
                 self._frame_camera(np.mean(np.asarray(poses.positions_m), axis=0))
+            label = f"pose source: {source.value}"
+            if drone is not None:
+                label += " · drone: MAVLink"
             self.scene.update(
                 np.asarray(poses.positions_m),
                 np.asarray(poses.quats_wxyz),
                 drone_override=drone,
-                label="" if drone is None else "drone: MAVLink",
+                label=label,
             )
             return True
         # Hardware or replay without poses: draw the arm hanging, say there is no pose source.
         t = m.telemetry
+        none = PoseSource.NONE.value
         if t is not None and TelemetryFlags(t.flags) & TelemetryFlags.SIM:
-            self.pose_source = "simulation, waiting for poses — arm drawn hanging"
+            self.pose_source = f"{none} (simulation, waiting for SimPoses) — arm drawn hanging"
         elif m.source_label.startswith("replay"):
-            self.pose_source = "no pose source (the recording has no poses) — arm drawn hanging"
+            self.pose_source = f"{none} (the recording has no poses) — arm drawn hanging"
+        elif self._shadow_status is not None:
+            self.pose_source = f"{none} yet (shadow plant waiting for telemetry) — arm drawn hanging"
         else:
-            self.pose_source = "no pose source (hardware: shadow plant not available) — arm drawn hanging"
+            self.pose_source = f"{none} (hardware, shadow plant off) — arm drawn hanging"
         if self._last_poses == -2 and drone is None:
             return False
         self._last_poses = -2
         pos, quat = default_hanging_pose(self.geometry, drone)
-        self.scene.update(pos, quat, label="no pose source", trail=False)
+        self.scene.update(pos, quat, label=none, trail=False)
         return True
 
     def update_plots(self) -> None:
@@ -752,7 +770,13 @@ class TeleopPanel:
                 status = self._mavlink_status()
             except Exception:
                 status = "error reading MAVLink state"
-        texts = health_text(self.model, self.pose_source, status)
+        shadow = None
+        if self._shadow_status is not None:
+            try:
+                shadow = self._shadow_status()
+            except Exception:
+                shadow = "error reading the shadow plant's state"
+        texts = health_text(self.model, self.pose_source, status, shadow)
         for handle, old, new in zip(
             (self.health.summary, self.health.link, self.health.loop), self._health_cache, texts, strict=True
         ):

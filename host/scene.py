@@ -40,6 +40,7 @@ __all__ = [
     "default_hanging_pose",
     "quat_mul",
     "quat_rotate",
+    "scene_objects",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -75,9 +76,11 @@ class SceneObject:
 
     Attributes:
         name: unique name.
-        kind: ``cylinder``, ``box`` or ``sphere``.
+        kind: ``cylinder``, ``capsule``, ``box`` or ``sphere``.
         position_m: centre.
-        size_m: cylinder (radius, radius, height); box (x, y, z); sphere (radius, radius, radius).
+        size_m: cylinder (radius, radius, height); capsule (radius, radius, length between the centres
+            of its end caps); box (x, y, z); sphere (radius, radius, radius). Cylinders and capsules lie
+            along their local z.
         wxyz: orientation.
         color: RGB 0..255.
     """
@@ -318,6 +321,8 @@ def _object_mesh(obj: SceneObject) -> trimesh.Trimesh:
     mesh: trimesh.Trimesh
     if obj.kind == "cylinder":
         mesh = trimesh.creation.cylinder(radius=obj.size_m[0], height=obj.size_m[2], sections=32)
+    elif obj.kind == "capsule":
+        mesh = trimesh.creation.capsule(height=obj.size_m[2], radius=obj.size_m[0], count=[24, 12])
     elif obj.kind == "box":
         mesh = trimesh.creation.box(extents=obj.size_m)
     elif obj.kind == "sphere":
@@ -325,6 +330,44 @@ def _object_mesh(obj: SceneObject) -> trimesh.Trimesh:
     else:
         raise ValueError(f"unknown object kind {obj.kind!r} (cylinder, box, sphere)")
     return mesh
+
+
+_OBJECT_FIXED_COLOR = (150, 110, 70)
+_OBJECT_FREE_COLOR = (200, 150, 60)
+
+
+def scene_objects(objects: Sequence[Any]) -> list[SceneObject]:
+    """Scene objects for the plant's objects (``hil.mjcf.ObjectConfig``).
+
+    Each is a cylinder or capsule of ``radius_m`` and ``length_m`` centred at ``pos_m`` along ``axis``,
+    in the plant's world frame (the frame ``SimPoses`` and the shadow plant use). Free objects (with a
+    mass) are drawn where they start: the board link carries no object poses. Anything that does not
+    look like an object config is skipped.
+    """
+    out: list[SceneObject] = []
+    for obj in objects:
+        try:
+            axis = np.asarray(obj.axis, dtype=np.float64).reshape(1, 3)
+            norm = float(np.linalg.norm(axis))
+            if not norm > 0:
+                continue
+            q = _align_z_to(axis / norm)[0]
+            r = float(obj.radius_m)
+            kind = "capsule" if getattr(obj, "shape", "cylinder") == "capsule" else "cylinder"
+            free = getattr(obj, "mass_kg", None) is not None
+            out.append(
+                SceneObject(
+                    str(obj.name),
+                    kind,
+                    (float(obj.pos_m[0]), float(obj.pos_m[1]), float(obj.pos_m[2])),
+                    (r, r, float(obj.length_m)),
+                    (float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+                    _OBJECT_FREE_COLOR if free else _OBJECT_FIXED_COLOR,
+                )
+            )
+        except (AttributeError, TypeError, ValueError, IndexError):
+            continue
+    return out
 
 
 # ---------------------------------------------------------------------- viser

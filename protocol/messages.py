@@ -353,7 +353,7 @@ def encode(msg: Message, seq: int) -> bytes:
 @_register
 @dataclass(frozen=True, slots=True)
 class Telemetry(Message):
-    """Board state at the telemetry rate (100 Hz). 123 bytes.
+    """Board state at the telemetry rate (100 Hz). 125 bytes.
 
     Attributes:
         time_us: board time.
@@ -384,11 +384,14 @@ class Telemetry(Message):
         link_crc_errors: board-link header + body CRC errors.
         motor_offline_events: times a motor went silent past the offline timeout.
         can_errors: CAN send/receive errors and undecodable feedback frames.
+        control_lateness_p99_us: control-task start lateness, 99th percentile (recent window, like
+            ``control_exec_p99_us``; saturates at 65535 on the wire). Last on the wire so the earlier
+            offsets stay where they were.
     """
 
     CMD_ID: ClassVar[int] = 0x0101
     DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
-    FORMAT: ClassVar[struct.Struct] = struct.Struct("<QBBBBB4hBB3H3h3h3h3f3f3fIHHI7I")
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<QBBBBB4hBB3H3h3h3h3f3f3fIHHI7IH")
 
     time_us: int
     mode: Mode = Mode.SAFE
@@ -417,6 +420,7 @@ class Telemetry(Message):
     link_crc_errors: int = 0
     motor_offline_events: int = 0
     can_errors: int = 0
+    control_lateness_p99_us: int = 0
 
     def pack(self) -> bytes:
         """Encode the payload: one ``struct.pack`` call (this runs on the firmware's telemetry task)."""
@@ -449,6 +453,7 @@ class Telemetry(Message):
                 self.link_crc_errors,
                 self.motor_offline_events,
                 self.can_errors,
+                min(self.control_lateness_p99_us, _U16_MAX),
             )
         except (struct.error, OverflowError) as exc:
             raise _pack_error("Telemetry", exc) from exc
@@ -475,7 +480,7 @@ class Telemetry(Message):
             v[24:27],
             v[27:30],
             v[30:33],
-            *v[33:44],
+            *v[33:45],
         )
 
 

@@ -178,6 +178,18 @@ def test_telemetry_rates_and_contents() -> None:
     assert control.period_us == 1000 and control.runs >= 500 and control.late == 0
 
 
+def test_telemetry_carries_the_control_lateness_p99() -> None:
+    rig = Rig(link=True)
+    # One control tick in ten starts 40 µs late (start-up jitter): p99 40 µs, max 40 µs.
+    for k in range(1000):
+        rig.fw.run_due(k * 1000 + (40 if k % 10 == 3 else 0))
+    tel = [m for m in rig.drain() if isinstance(m, Telemetry)]
+    assert tel[0].control_lateness_p99_us == 0  # refreshed with BoardStatus (2 Hz), like the exec p99
+    assert tel[-1].control_lateness_p99_us == 40
+    assert tel[-1].control_lateness_max_us == 40 and tel[-1].control_late == 0
+    assert rig.fw.build_telemetry(1_000_000).control_lateness_p99_us == 40
+
+
 def test_events_carry_board_time() -> None:
     rig = Rig(link=True)
     rig.arm()

@@ -109,6 +109,7 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--replay", "/nonexistent/x.mcap", "--headless"], "no such recording"),
         (["--record", "/nonexistent/dir/x.mcap", "--port", "loop://"], "does not exist"),
         (["--mav-signing-key", "k.bin"], "needs --mavlink"),
+        (["--mavlink", "udpout:127.0.0.1:9", "--mav-signing-timestamp", "t"], "needs --mav-signing-key"),
     ],
 )
 def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -218,6 +219,68 @@ def test_mavlink_flags(peer: LinkPeer, tmp_path: Path, capsys: pytest.CaptureFix
         s.close()
 
 
+def _signing_timestamps(sock: socket.socket, timeout_s: float) -> list[int]:
+    """Signing timestamps of the signed MAVLink 2 packets waiting on ``sock`` (one packet per datagram)."""
+    out: list[int] = []
+    sock.settimeout(timeout_s)
+    while True:
+        try:
+            data = sock.recv(2048)
+        except (TimeoutError, BlockingIOError):
+            return out
+        sock.settimeout(0.05)
+        if len(data) >= 12 and data[0] == 0xFD and data[2] & 0x01:  # MAVLink 2, signed
+            n = data[1]
+            # header 10 + payload n + CRC 2, then the signature: link id, 6-byte LE timestamp, 6-byte sig
+            out.append(int.from_bytes(data[13 + n : 19 + n], "little"))
+
+
+def test_mavlink_signing_timestamp_persists_across_restarts(peer: LinkPeer, tmp_path: Path) -> None:
+    from protocol import mavlink as mav
+
+    key = tmp_path / "key.txt"
+    key.write_text("a passphrase")
+    ts_file = tmp_path / "key.txt.timestamp"  # the default: next to the key
+    # A saved timestamp far ahead of any wall clock (year 2096): a run that continues from it is
+    # told apart from one that restarted from the clock without comparing against the clock.
+    saved = mav.signing_timestamp_from_unix_us(4_000_000_000_000_000)
+    ts_file.write_text(f"{saved}\n")
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    s.bind(("127.0.0.1", 0))
+    try:
+        url = f"udpout:127.0.0.1:{s.getsockname()[1]}"
+        argv = ["--port", peer.url, "--headless", "--duration", "1", "--mavlink", url]
+        argv += ["--mav-signing-key", str(key)]
+        for _run in range(2):  # the second run is the restart
+            assert main(argv) == 0
+            stamps = _signing_timestamps(s, 5.0)
+            assert stamps, "no signed packet received"
+            assert stamps[0] > saved  # continued from the persisted timestamp (plus a margin)
+            assert stamps == sorted(stamps)
+            persisted = int(ts_file.read_text(encoding="ascii"))
+            assert persisted >= stamps[-1]  # saved on the way out
+            saved = persisted
+    finally:
+        s.close()
+
+
+def test_mavlink_signing_timestamp_path_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from host.cli import signing_timestamp_path
+
+    key = tmp_path / "key.bin"
+    key.write_bytes(bytes(range(32)))
+    base = ["--mavlink", "udpout:127.0.0.1:9", "--mav-signing-key", str(key)]
+    opts = HostOptions.from_args(build_parser().parse_args(base))
+    assert signing_timestamp_path(opts) == tmp_path / "key.bin.timestamp"
+    opts = HostOptions.from_args(
+        build_parser().parse_args([*base, "--mav-signing-timestamp", str(tmp_path / "ts")])
+    )
+    assert signing_timestamp_path(opts) == tmp_path / "ts"
+    bad = [*base, "--mav-signing-timestamp", str(tmp_path / "missing" / "ts"), "--port", "loop://"]
+    assert main([*bad, "--headless", "--duration", "1"]) == 2
+    assert "cannot persist the signing timestamp" in one_error_line(capsys.readouterr().err)
+
+
 # ---------------------------------------------------------------------- the real virtual board
 
 
@@ -239,3 +302,38 @@ def test_virtual_board_over_a_pty_with_manual_rc() -> None:
                 lambda: app.model.telemetry is not None and app.model.telemetry.mode == Mode.MANUAL, 20.0
             )
             assert app.model.poses is not None
+
+
+def test_scene_objects_from_the_plant_objects() -> None:
+    pytest.importorskip("hil.mjcf")
+    import numpy as np
+
+    from hil.mjcf import ObjectConfig
+    from host.scene import quat_rotate, scene_objects
+
+    objs = scene_objects(
+        [
+            ObjectConfig("pole", 0.01, 0.2, (0.1, 0.0, 0.8), axis=(2.0, 0.0, 0.0)),
+            ObjectConfig("ball", 0.02, 0.05, (0.0, 0.1, 0.7), mass_kg=0.01, shape="capsule"),
+        ]
+    )
+    assert [(o.name, o.kind) for o in objs] == [("pole", "cylinder"), ("ball", "capsule")]
+    assert objs[0].size_m == (0.01, 0.01, 0.2) and objs[0].position_m == (0.1, 0.0, 0.8)
+    axis = quat_rotate(np.asarray(objs[0].wxyz), np.array([0.0, 0.0, 1.0]))
+    assert np.allclose(axis, [1.0, 0.0, 0.0])  # the mesh's z lies along the object's axis
+    assert objs[0].color != objs[1].color  # fixed and free objects look different
+
+
+@needs_virtual_board
+def test_the_virtual_boards_objects_are_drawn() -> None:
+    from hil.board import BoardConfig  # type: ignore[import-not-found,unused-ignore]
+    from hil.mjcf import ModelConfig, ObjectConfig  # type: ignore[import-not-found,unused-ignore]
+    from hil.plant import PlantConfig  # type: ignore[import-not-found,unused-ignore]
+
+    branch = ObjectConfig("branch", 0.01, 0.12, (0.08, 0.0, 0.85))
+    config = BoardConfig(rc="link", plant=PlantConfig(model=ModelConfig().with_objects(branch)))
+    with HostApp(HostOptions(ui_port=0), board_config=config) as app:
+        app.start()
+        assert [o.name for o in app.objects] == ["branch"]
+        assert app.panel is not None and len(app.panel.scene.handles.objects) == 1
+        assert app.shadow is None  # the embedded virtual board sends its own poses

@@ -120,6 +120,7 @@ STRATEGIES: dict[type[Message], st.SearchStrategy[Any]] = {
         link_crc_errors=u32,
         motor_offline_events=u32,
         can_errors=u32,
+        control_lateness_p99_us=u16,
     ),
     RawRc: st.builds(RawRc, u64, st.binary(min_size=18, max_size=18)),
     MotorFrames: st.builds(
@@ -254,9 +255,10 @@ def test_golden_telemetry_payload() -> None:
         link_crc_errors=4,
         motor_offline_events=5,
         can_errors=6,
+        control_lateness_p99_us=29,
     )
     payload = msg.pack()
-    assert len(payload) == 123
+    assert len(payload) == 125
     expected = (
         bytes.fromhex("40420f0000000000")  # time_us
         + bytes([1, 1, 0, 0b1001, 0b111])  # mode, phase, grasp_state, flags, motors_online
@@ -271,6 +273,7 @@ def test_golden_telemetry_payload() -> None:
         + bytes.fromhex("0000803e00000000000000be")
         + bytes.fromhex("0700000028002c01d2040000")
         + b"".join(struct.pack("<I", n) for n in (10, 1, 2, 3, 4, 5, 6))
+        + bytes.fromhex("1d00")  # control_lateness_p99_us, u16, last
     )
     assert payload == expected
     assert Telemetry.unpack(payload) == msg
@@ -457,6 +460,13 @@ def test_unpackable_fields_are_value_errors(msg: Message) -> None:
 def test_telemetry_saturates_u16_exec_times() -> None:
     t = Telemetry.unpack(Telemetry(time_us=0, control_exec_p99_us=70_000, control_exec_max_us=10**6).pack())
     assert (t.control_exec_p99_us, t.control_exec_max_us) == (0xFFFF, 0xFFFF)
+
+
+def test_telemetry_saturates_u16_lateness_p99() -> None:
+    t = Telemetry.unpack(Telemetry(time_us=0, control_lateness_p99_us=2**32 - 1).pack())
+    assert t.control_lateness_p99_us == 0xFFFF
+    with pytest.raises(ValueError):
+        Telemetry(time_us=0, control_lateness_p99_us=-1).pack()
 
 
 def test_truncate_utf8() -> None:

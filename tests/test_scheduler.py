@@ -103,3 +103,32 @@ def test_lateness_percentiles_from_the_histogram() -> None:
     assert fast.lateness_percentile_us(0.5) == 0
     assert fast.lateness_percentile_us(0.95) == 5
     assert fast.lateness_percentile_us(1.0) == 50 == fast.lateness_max_us
+
+
+def test_lateness_p99_over_the_recent_window() -> None:
+    s, _, _ = make()
+    s.start(0)
+    fast = s["fast"]
+    # 1000 ticks (the 1 kHz task's window): 5 start 80 µs late, 20 start 7 µs late, the rest on time.
+    for k in range(1000):
+        s.run_due(k * 1000 + (80 if k % 200 == 1 else 7 if k % 50 == 2 else 0))
+    assert fast.lateness_p99_us == 0  # cached: only update_p99 / stats() recompute it
+    stats = {st.name: st for st in s.stats()}
+    assert fast.lateness_p99_us == 7  # 0.5 % above 7 µs, 2.5 % at or above it
+    assert stats["fast"].lateness_max_us == 80
+    # One on-time second later the window has forgotten the late ticks; the whole-run histogram has not.
+    for k in range(1000, 2000):
+        s.run_due(k * 1000)
+    fast.update_p99()
+    assert fast.lateness_p99_us == 0
+    assert fast.lateness_percentile_us(0.99) == 7
+    fast.reset_stats()
+    assert fast.lateness_p99_us == 0 and fast.update_p99() == 0
+
+
+def test_lateness_p99_saturates_the_ring_not_the_loop() -> None:
+    s, _, _ = make()
+    s.start(0)
+    s.run_due(2**33)  # a huge stall: the ring stores u32, clamped
+    assert s["fast"].update_p99() == 0
+    assert s["fast"].lateness_p99_us == 0xFFFF_FFFF
