@@ -65,14 +65,32 @@ class FirmwareConfig:
         grasp_strategy_on: True = the bio-inspired strategy of seed Note S4 (pack, reach, detect
             contact, wrap); False = the "off" comparison (plain tension ramp from straight).
         grasp_direction_deg: grasp direction when neither the right stick nor the host gives one.
-        grasp_pack_n: curl tension of the packed (coiled) pose the grasp starts from.
-        grasp_reach_n: curl tension the reach phase ramps down to (arm unrolled).
+        grasp_pack_n: curl tension of the packed (coiled) pose the grasp starts from. The prototype
+            plant (base joint 0.5 N·m/rad, 12.8 mm hole radius) closes every joint at about 21 N
+            (``spirob-hil experiment packing``); with the 0.5 N pretension 18 N stays under the 20 N
+            cable ceiling and closes all but the one or two joints nearest the base. (It was 6 N: that
+            only curled the distal half, so the reach had little to unroll.)
+        grasp_pack_rate_n_per_s: rate at which IDLE winds the pack tension up.
+        grasp_reach_n: curl tension the reach phase ramps down to (arm unrolled); below half of
+            ``grasp_pack_n`` (the prototype hardly unrolls above half its pack tension).
         grasp_reach_rate_n_per_s: reach ramp-down rate.
-        grasp_wrap_n: object-side tension of the wrap / hold phases.
+        grasp_wrap_n: tension of the wrap / hold phases (strategy on: on the cables opposite the pack
+            side, which face the object at contact; off: toward the target).
         grasp_wrap_rate_n_per_s: wrap ramp-up rate.
+        grasp_takeup_n: curl tension that reels in the wrap-side cables' slack before the wrap ramp
+            (strategy on; 0 = no take-up). Above the drive friction (about 1 N at the cable) minus the
+            pretension, so the spools move.
+        grasp_takeup_speed_m_per_s: the take-up tension is cut while the slack reels in faster than
+            this (a spool carries about 1.3 kg of reflected rotor inertia: a fast one snaps the cable).
         grasp_release_rate_n_per_s: release ramp-down rate.
-        grasp_contact_speed_m_per_s: object-side cable speed below which the cable counts as stalled.
-        grasp_contact_dwell_us: stall duration that means contact.
+        grasp_contact_speed_m_per_s: pack-side pay-out speed that shows the arm unrolling; below it
+            the cable counts as stalled.
+        grasp_contact_slow_ratio: the cable also counts as stalled while its pay-out is below this
+            fraction of the fastest pay-out of the present reach (in free space the pay-out only
+            speeds up while the reach ramp runs; a body blocked by an object slows it down).
+        grasp_contact_dwell_us: stall duration that means contact; also how long a cable must stay
+            still for the packed arm to count as settled, the wrap-side slack as taken up, and the
+            wrap as closed (HOLD).
         grasp_contact_grace_us: no contact is detected this soon after the reach starts.
         grasp_contact_min_tension_n: the estimated tension must hold at least this for contact.
         grasp_reach_timeout_us: FAILED when no contact within this time after the reach starts.
@@ -105,13 +123,17 @@ class FirmwareConfig:
     stick_deadband: int = 20
     grasp_strategy_on: bool = True
     grasp_direction_deg: float = 0.0
-    grasp_pack_n: float = 6.0
-    grasp_reach_n: float = 0.5
-    grasp_reach_rate_n_per_s: float = 4.0
-    grasp_wrap_n: float = 10.0
+    grasp_pack_n: float = 18.0
+    grasp_pack_rate_n_per_s: float = 12.0
+    grasp_reach_n: float = 0.0
+    grasp_reach_rate_n_per_s: float = 10.0
+    grasp_wrap_n: float = 5.0
     grasp_wrap_rate_n_per_s: float = 8.0
+    grasp_takeup_n: float = 1.5
+    grasp_takeup_speed_m_per_s: float = 0.08
     grasp_release_rate_n_per_s: float = 8.0
     grasp_contact_speed_m_per_s: float = 0.004
+    grasp_contact_slow_ratio: float = 0.7
     grasp_contact_dwell_us: int = 60_000
     grasp_contact_grace_us: int = 200_000
     grasp_contact_min_tension_n: float = 0.3
@@ -161,11 +183,23 @@ class FirmwareConfig:
         _require("current_limit_a", 0.0 < self.current_limit_a <= _C610_MAX_A, "must be in (0, 10] A (C610)")
         _require("pretension_n", 0.0 <= self.pretension_n <= self.tension_max_n, "must be 0..tension_max_n")
         _require("tension_max_n", 0.0 < self.tension_max_n <= 1000.0, "must be in (0, 1000] N")
-        for name in ("common_max_n", "bend_max_n", "grasp_pack_n", "grasp_reach_n", "grasp_wrap_n"):
+        for name in (
+            "common_max_n",
+            "bend_max_n",
+            "grasp_pack_n",
+            "grasp_reach_n",
+            "grasp_wrap_n",
+            "grasp_takeup_n",
+        ):
             _require(name, 0.0 <= getattr(self, name) <= self.tension_max_n, "must be 0..tension_max_n")
-        _require("grasp_reach_n", self.grasp_reach_n < self.grasp_pack_n, "must be below grasp_pack_n")
+        _require(
+            "grasp_reach_n",
+            self.grasp_reach_n < 0.5 * self.grasp_pack_n,
+            "must be below half of grasp_pack_n",
+        )
         for name in (
             "slew_n_per_s",
+            "grasp_pack_rate_n_per_s",
             "grasp_reach_rate_n_per_s",
             "grasp_wrap_rate_n_per_s",
             "grasp_release_rate_n_per_s",
@@ -175,6 +209,10 @@ class FirmwareConfig:
         _require(
             "grasp_contact_speed_m_per_s", 0.0 < self.grasp_contact_speed_m_per_s <= 10.0, "must be (0, 10]"
         )
+        _require(
+            "grasp_takeup_speed_m_per_s", 0.0 < self.grasp_takeup_speed_m_per_s <= 10.0, "must be (0, 10]"
+        )
+        _require("grasp_contact_slow_ratio", 0.0 <= self.grasp_contact_slow_ratio < 1.0, "must be in [0, 1)")
         _require("grasp_contact_min_tension_n", self.grasp_contact_min_tension_n >= 0.0, "must be >= 0")
         for name in (
             "grasp_contact_dwell_us",
@@ -285,6 +323,10 @@ PARAM_FIELDS: dict[str, str] = {
     "GRASP_TIMEOUT_US": "grasp_reach_timeout_us",
     "GRASP_REL_DW_US": "grasp_release_dwell_us",
     "SPEED_TAU_US": "speed_filter_tau_us",
+    "GRASP_PACK_N_S": "grasp_pack_rate_n_per_s",
+    "GRASP_SLOW_RATIO": "grasp_contact_slow_ratio",
+    "GRASP_TAKEUP_N": "grasp_takeup_n",
+    "GRASP_TAKEUP_M_S": "grasp_takeup_speed_m_per_s",
 }
 """Wire name (at most 16 ASCII characters, MAVLink ``param_id`` style) -> ``FirmwareConfig`` field."""
 

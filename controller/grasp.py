@@ -7,22 +7,40 @@ Strategy on (octopus-inspired, Note S4 / Fig. S6B)::
       |                                          +--timeout--> FAILED                       |
       +--- dwell at 0 N <-- RELEASE <--release-- (REACH, WRAP, HOLD, FAILED) <--------------+
 
-- IDLE: the arm is held packed (coiled) toward the grasp direction with ``grasp_pack_n``. A grasp
-  request waits until the pack tension is reached, then starts the reach.
-- REACH: the curl tension ramps down to ``grasp_reach_n``: the spiral arm unrolls base-first toward the
-  target side, paying the object-side cable out. Contact = after that cable has been seen paying out
-  (faster than ``grasp_contact_speed_m_per_s``), it stalls (|speed| below that for
-  ``grasp_contact_dwell_us``) while its tension holds (estimate >= ``grasp_contact_min_tension_n``)
-  *and the ramp is still running*: in free space a falling tension keeps the cable paying out, so a
-  stall then means the body is blocked. Requiring the pay-out first ignores the speed passing through
-  zero when a still-settling pack reverses; stalls in the first ``grasp_contact_grace_us`` are ignored
-  too. No contact within ``grasp_reach_timeout_us``: FAILED.
-- WRAP: the object-side tension ramps up to ``grasp_wrap_n``, so the arm curls around the object.
-- HOLD: the tension is kept. RELEASE: it ramps to 0 (uncurl), stays there ``grasp_release_dwell_us``,
-  then IDLE re-packs.
+The grasp *target* :attr:`GraspMachine.target_rad` is the side of the arm the object is on (same
+convention as the right stick, ``controller.mapping``). :attr:`GraspMachine.direction_rad` is the
+direction the present curl tension bends the arm toward.
+
+- IDLE: the arm is held packed (coiled) toward the target with ``grasp_pack_n``, reached at
+  ``grasp_pack_rate_n_per_s``. A grasp request waits until the pack tension is reached and the arm has
+  settled (pack-side cable slower than ``grasp_contact_speed_m_per_s`` for ``grasp_contact_dwell_us``),
+  then reaches.
+- REACH: the curl tension ramps down to ``grasp_reach_n`` at ``grasp_reach_rate_n_per_s``: the spiral
+  unrolls base-first (a joint's closing tension scales with its size², so the base opens first) and the
+  coil rolls out toward the target, paying the pack-side cable out. Contact is the body being blocked:
+  while the ramp still runs (in free space a falling tension keeps the cable paying out faster and
+  faster), the pack-side cable's pay-out speed falls below ``grasp_contact_slow_ratio`` of the fastest
+  pay-out seen in this reach, or below ``grasp_contact_speed_m_per_s``, for ``grasp_contact_dwell_us``,
+  with the estimated tension at least ``grasp_contact_min_tension_n``. The cable must first have been
+  seen paying out faster than ``grasp_contact_speed_m_per_s`` (a still-settling pack reverses through
+  zero speed), and stalls in the first ``grasp_contact_grace_us`` are ignored. No contact within
+  ``grasp_reach_timeout_us``: FAILED.
+- WRAP: the coil meets the object with its outer face (the side opposite the pack cable), so the
+  wrap tension goes to the cables on that face (direction = target + 180°): the still-curled distal
+  part uncurls along the object's surface and bends around it ("uncurling the arms along the surface
+  to wrap around", Note S4), while the pack-side cable drops to the pretension. Those cables went slack
+  while the arm unrolled (a pretension below the drive's friction cannot reel them in), so the wrap
+  first takes the slack up: ``grasp_takeup_n``, cut back whenever they reel in faster than
+  ``grasp_takeup_speed_m_per_s`` (a fast spool would snap the cable taut), until they have been still
+  for ``grasp_contact_dwell_us``; then the tension ramps to ``grasp_wrap_n``.
+- HOLD (entered once the wrap tension is reached and the pulling cables have been still for
+  ``grasp_contact_dwell_us``: the arm has closed on the object): the tension is kept.
+- RELEASE: the tension ramps to 0 (uncurl), stays there ``grasp_release_dwell_us``, then IDLE re-packs
+  toward the target.
 
 Strategy off (Fig. S6A, for comparison): IDLE holds the arm straight (0 N); a grasp ramps the tension
-from straight up to ``grasp_wrap_n`` (WRAP, the arm curls from the tip), then HOLD; release as above.
+toward the target from straight up to ``grasp_wrap_n`` (WRAP: the arm curls from the tip), then HOLD;
+release as above.
 
 Triggers: left lever UP / DOWN edges in GRASP mode, host ``GRASP`` / ``RELEASE`` / ``HOLD`` commands
 (MAVLink DO_GRIPPER through the host).
@@ -47,8 +65,13 @@ class GraspMachine:
     Attributes:
         state: current ``GraspState``.
         curl_n: curl (bending) tension toward :attr:`direction_rad`, before shaping and slew.
-        direction_rad: grasp direction (same convention as the right stick, see ``controller.mapping``).
+        target_rad: the side of the arm the object is on (same convention as the right stick, see
+            ``controller.mapping``).
+        direction_rad: direction :attr:`curl_n` bends the arm toward: the target while packing and
+            reaching (and for the strategy off), the opposite side while wrapping and holding with the
+            strategy on.
         pending: a grasp was requested and waits for the arm to be packed.
+        peak_payout_m_s: fastest pack-side pay-out seen in the present reach (contact reference).
     """
 
     def __init__(self, config: FirmwareConfig, events: EventQueue) -> None:
@@ -57,14 +80,18 @@ class GraspMachine:
         self.state = GraspState.IDLE
         self.curl_n = 0.0
         self.pending = False
+        self.peak_payout_m_s = 0.0
         self._shares = [0.0] * MOTOR_COUNT
+        self._wrap_shares = [0.0] * MOTOR_COUNT
+        self._taut = True
         self._t_state_us = 0
         self._stall_since_us = -1
         self._zero_since_us = -1
         self._unrolling_seen = False
         self.configure(config)
+        self.target_rad = self._default_dir_rad
         self.direction_rad = self._default_dir_rad
-        self._set_direction(self.direction_rad)
+        self._set_target(self.target_rad)
 
     def configure(self, config: FirmwareConfig) -> None:
         """Take new grasp parameters."""
@@ -73,12 +100,16 @@ class GraspMachine:
         self._angles_rad = tuple(math.radians(a) for a in c.cable_angles_deg)
         self._default_dir_rad = math.radians(c.grasp_direction_deg)
         self._pack_n = c.grasp_pack_n
+        self._pack_rate = c.grasp_pack_rate_n_per_s / 1e6
         self._reach_n = c.grasp_reach_n
         self._wrap_n = c.grasp_wrap_n
+        self._takeup_n = c.grasp_takeup_n
+        self._takeup_m_s = c.grasp_takeup_speed_m_per_s
         self._reach_rate = c.grasp_reach_rate_n_per_s / 1e6
         self._wrap_rate = c.grasp_wrap_rate_n_per_s / 1e6
         self._release_rate = c.grasp_release_rate_n_per_s / 1e6
         self._stall_m_s = c.grasp_contact_speed_m_per_s
+        self._slow_ratio = c.grasp_contact_slow_ratio
         self._dwell_us = c.grasp_contact_dwell_us
         self._grace_us = c.grasp_contact_grace_us
         self._min_tension_n = c.grasp_contact_min_tension_n
@@ -90,11 +121,14 @@ class GraspMachine:
         """Curl held in IDLE: packed with the strategy on, straight (0 N) with it off."""
         return self._pack_n if self.strategy_on else 0.0
 
-    def _set_direction(self, direction_rad: float) -> None:
-        self.direction_rad = direction_rad
-        shares = bend_shares(direction_rad, self._angles_rad)
+    def _set_target(self, target_rad: float) -> None:
+        self.target_rad = target_rad
+        self.direction_rad = target_rad
+        shares = bend_shares(target_rad, self._angles_rad)
+        opposite = bend_shares(target_rad + math.pi, self._angles_rad)
         for i in range(MOTOR_COUNT):
             self._shares[i] = shares[i]
+            self._wrap_shares[i] = opposite[i]
 
     def _enter(self, now_us: int, state: GraspState, why: str) -> None:
         self.state = state
@@ -102,6 +136,10 @@ class GraspMachine:
         self._stall_since_us = -1
         self._zero_since_us = -1
         self._unrolling_seen = False
+        if state == GraspState.REACH:
+            self.peak_payout_m_s = 0.0
+        elif state == GraspState.IDLE:
+            self.direction_rad = self.target_rad
         self._events.push(now_us, EventKind.GRASP, int(state), self.curl_n, f"grasp {state.name}: {why}")
 
     # --- requests ---------------------------------------------------------------------------------
@@ -110,11 +148,12 @@ class GraspMachine:
         """Back to IDLE without a pending grasp (leaving GRASP mode), starting from ``curl_n``."""
         self.pending = False
         self.curl_n = curl_n
+        self.direction_rad = self.target_rad
         if self.state != GraspState.IDLE:
             self._enter(now_us, GraspState.IDLE, "reset")
 
     def request_grasp(self, now_us: int, direction_rad: float | None = None) -> AckResult:
-        """Start a grasp toward ``direction_rad`` (None = the configured default).
+        """Start a grasp of an object on the ``direction_rad`` side (None = the configured default).
 
         Accepted in IDLE, FAILED and RELEASE (the arm re-packs first); refused while one runs.
         """
@@ -122,7 +161,11 @@ class GraspMachine:
             return AckResult.REJECTED
         if direction_rad is not None and not math.isfinite(direction_rad):
             return AckResult.DENIED
-        self._set_direction(self._default_dir_rad if direction_rad is None else direction_rad)
+        target = self._default_dir_rad if direction_rad is None else direction_rad
+        if self.curl_n > 0.0 and target != self.direction_rad:
+            # Curled toward another side: start the new pack from 0 N (the slew limiter smooths it).
+            self.curl_n = 0.0
+        self._set_target(target)
         self.pending = True
         if self.state != GraspState.IDLE:
             self._enter(now_us, GraspState.IDLE, "re-pack before grasping")
@@ -162,40 +205,31 @@ class GraspMachine:
         if state == GraspState.IDLE:
             target = self.idle_curl_n
             if curl < target:
-                curl = min(target, curl + self._wrap_rate * dt_us)
+                curl = min(target, curl + self._pack_rate * dt_us)
             elif curl > target:
                 curl = max(target, curl - self._release_rate * dt_us)
             self.curl_n = curl
-            if self.pending and curl == target:
+            if (
+                self.pending
+                and curl == target
+                and (not self.strategy_on or self._settled(now_us, cable_speed_m_s))
+            ):
                 self.pending = False
                 if self.strategy_on:
                     self._enter(now_us, GraspState.REACH, "packed, unrolling toward the target")
                 else:
+                    self._taut = True
                     self._enter(now_us, GraspState.WRAP, "strategy off: plain tension ramp")
         elif state == GraspState.REACH:
-            ramping = curl > self._reach_n
-            if ramping:
-                curl = max(self._reach_n, curl - self._reach_rate * dt_us)
-                self.curl_n = curl
-            elapsed = now_us - self._t_state_us
-            speed, tension = self._object_side(cable_speed_m_s, tension_est_n)
-            if speed < -self._stall_m_s:
-                self._unrolling_seen = True
-            stalled = -self._stall_m_s < speed < self._stall_m_s and tension >= self._min_tension_n
-            if ramping and self._unrolling_seen and elapsed >= self._grace_us and stalled:
-                if self._stall_since_us < 0:
-                    self._stall_since_us = now_us
-                elif now_us - self._stall_since_us >= self._dwell_us:
-                    self._enter(now_us, GraspState.WRAP, "contact: cable stalled under tension")
-            else:
-                self._stall_since_us = -1
-            if self.state == GraspState.REACH and elapsed >= self._timeout_us:
-                self._enter(now_us, GraspState.FAILED, "no contact before the reach timeout")
+            self._reach(now_us, dt_us, cable_speed_m_s, tension_est_n)
         elif state == GraspState.WRAP:
-            curl = min(self._wrap_n, curl + self._wrap_rate * dt_us)
-            self.curl_n = curl
-            if curl >= self._wrap_n:
-                self._enter(now_us, GraspState.HOLD, "wrap tension reached")
+            if not self._taut:
+                self._take_up(now_us, cable_speed_m_s)
+            else:
+                curl = min(self._wrap_n, curl + self._wrap_rate * dt_us)
+                self.curl_n = curl
+                if curl >= self._wrap_n and self._still(now_us, self._pull_side_speed(cable_speed_m_s)):
+                    self._enter(now_us, GraspState.HOLD, "wrapped: wrap tension reached, cable still")
         elif state == GraspState.RELEASE:
             curl = max(0.0, curl - self._release_rate * dt_us)
             self.curl_n = curl
@@ -207,8 +241,74 @@ class GraspMachine:
         # HOLD and FAILED keep the tension.
         return self.curl_n
 
-    def _object_side(self, speed_m_s: Sequence[float], tension_n: Sequence[float]) -> tuple[float, float]:
-        """Share-weighted paid-in speed and estimated tension of the object-side cables."""
+    def _settled(self, now_us: int, cable_speed_m_s: Sequence[float]) -> bool:
+        """The pack-side cable has been still (slower than the stall speed) for the contact dwell time.
+
+        A reach that starts while the arm still moves would take the end of that motion for contact.
+        """
+        speed, _ = self._pack_side(cable_speed_m_s, cable_speed_m_s)
+        return self._still(now_us, speed)
+
+    def _reach(
+        self, now_us: int, dt_us: int, cable_speed_m_s: Sequence[float], tension_est_n: Sequence[float]
+    ) -> None:
+        curl = self.curl_n
+        ramping = curl > self._reach_n
+        if ramping:
+            curl = max(self._reach_n, curl - self._reach_rate * dt_us)
+            self.curl_n = curl
+        elapsed = now_us - self._t_state_us
+        speed, tension = self._pack_side(cable_speed_m_s, tension_est_n)
+        payout = -speed
+        if payout > self._stall_m_s:
+            self._unrolling_seen = True
+        if payout > self.peak_payout_m_s:
+            self.peak_payout_m_s = payout
+        slow = self._slow_ratio * self.peak_payout_m_s
+        stalled = payout < (slow if slow > self._stall_m_s else self._stall_m_s)
+        stalled = stalled and tension >= self._min_tension_n
+        if ramping and self._unrolling_seen and elapsed >= self._grace_us and stalled:
+            if self._stall_since_us < 0:
+                self._stall_since_us = now_us
+            elif now_us - self._stall_since_us >= self._dwell_us:
+                self._contact(now_us)
+        else:
+            self._stall_since_us = -1
+        if self.state == GraspState.REACH and elapsed >= self._timeout_us:
+            self._enter(now_us, GraspState.FAILED, "no contact before the reach timeout")
+
+    def _contact(self, now_us: int) -> None:
+        """Contact: wrap with the cables on the coil's outer face (the face that met the object)."""
+        self.curl_n = 0.0
+        self.direction_rad = math.remainder(self.target_rad + math.pi, 2.0 * math.pi)
+        self._enter(now_us, GraspState.WRAP, "contact: pay-out stalled while the reach ramp ran")
+        self._taut = self._takeup_n <= 0.0
+
+    def _take_up(self, now_us: int, cable_speed_m_s: Sequence[float]) -> None:
+        """Reel the wrap-side cables' slack in at a bounded speed; taut once they stay still."""
+        payin = self._pull_side_speed(cable_speed_m_s)
+        self.curl_n = self._takeup_n if payin < self._takeup_m_s else 0.0
+        if self._still(now_us, payin):
+            self._taut = True
+            self._stall_since_us = -1
+
+    def _still(self, now_us: int, speed_m_s: float) -> bool:
+        """``speed_m_s`` has stayed within ± the stall speed for the dwell time (call every tick)."""
+        if -self._stall_m_s < speed_m_s < self._stall_m_s:
+            if self._stall_since_us < 0:
+                self._stall_since_us = now_us
+            return now_us - self._stall_since_us >= self._dwell_us
+        self._stall_since_us = -1
+        return False
+
+    def _pull_side_speed(self, speed_m_s: Sequence[float]) -> float:
+        """Share-weighted paid-in speed of the cables that pull toward :attr:`direction_rad`."""
+        s = self._wrap_shares if self.direction_rad != self.target_rad else self._shares
+        total = s[0] + s[1] + s[2]
+        return (s[0] * speed_m_s[0] + s[1] * speed_m_s[1] + s[2] * speed_m_s[2]) / total
+
+    def _pack_side(self, speed_m_s: Sequence[float], tension_n: Sequence[float]) -> tuple[float, float]:
+        """Share-weighted paid-in speed and estimated tension of the pack-side (target-side) cables."""
         s = self._shares
         total = s[0] + s[1] + s[2]  # >= 1 for three cables at 120°
         v = (s[0] * speed_m_s[0] + s[1] * speed_m_s[1] + s[2] * speed_m_s[2]) / total

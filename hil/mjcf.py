@@ -217,7 +217,9 @@ class ObjectConfig:
         length_m: cylinder length.
         pos_m: centre in world coordinates.
         axis: direction of the cylinder axis in world coordinates (normalised here).
-        mass_kg: ``None`` = fixed to the world (a branch, a pole); otherwise a free body of this mass.
+        mass_kg: ``None`` = fixed to the world (a branch, a pole); otherwise a free body of this mass,
+            with a switchable support (``{name}_support``: a mocap body and a weld to it, inactive at
+            start) that :meth:`hil.plant.Plant.hold_object` uses to hold it where it is.
         friction: sliding friction coefficient.
         shape: ``"cylinder"`` (flat ends, convex collision) or ``"capsule"`` (rounded ends, analytic
             collision: cheaper).
@@ -338,6 +340,8 @@ class ModelConfig:
         self.solver.validate()
         names = [o.name for o in self.objects]
         _check(len(names) == len(set(names)), f"object names must be unique, got {names}")
+        supports = {f"{o.name}_support" for o in self.objects if o.mass_kg is not None}
+        _check(not supports & set(names), f"an object name clashes with another's support body: {names}")
         for o in self.objects:
             o.validate()
 
@@ -655,7 +659,20 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
             add(f'      <freejoint name="{obj.name}_free"/>')
             add(f'      {geom} mass="{_f(obj.mass_kg)}"/>')
         add("    </body>")
+    for obj in cfg.objects:
+        if obj.mass_kg is not None:
+            # A support the plant can switch on (Plant.hold_object): the object is welded to this mocap body.
+            add(f'    <body name="{obj.name}_support" pos="{_v(*obj.pos_m)}" mocap="true"/>')
     add("  </worldbody>")
+    free = [o for o in cfg.objects if o.mass_kg is not None]
+    if free:
+        add("  <equality>")
+        for obj in free:
+            add(
+                f'    <weld name="{obj.name}_support" body1="{obj.name}" body2="{obj.name}_support" '
+                f'relpose="0 0 0 1 0 0 0" active="false" solref="0.002 1"/>'
+            )
+        add("  </equality>")
 
     add("  <tendon>")
     for k in range(n_cables):

@@ -236,6 +236,14 @@ class Plant:
         self._spool_slice = slice(int(self._spool_dadr.min()), int(self._spool_dadr.max()) + 1)
         self._object_names = tuple(o.name for o in cfg.objects)
         self._object_bodies = {o.name: bid(o.name) for o in cfg.objects}
+        self._supports = {
+            o.name: (
+                int(m.body_mocapid[bid(f"{o.name}_support")]),
+                int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"{o.name}_support")),
+            )
+            for o in cfg.objects
+            if o.mass_kg is not None
+        }
         self._current_raw = np.zeros(n_cables, dtype=np.int64)
         self._current_raw_list = [0] * n_cables
         self._applied_a = np.zeros(n_cables)
@@ -666,6 +674,103 @@ class Plant:
         b = self._object_bodies[name]
         return Pose(self._d.xpos[b].copy(), self._d.xquat[b].copy())
 
+    def hold_object(
+        self, name: str, pos_m: Sequence[float] | None = None, quat_wxyz: Sequence[float] | None = None
+    ) -> None:
+        """Hold a free object still on its support (a weld to a mocap body), where it is or at a pose.
+
+        The support is a stiff constraint, so the arm can push against a held object as against a fixed
+        one (an object on a stand, or offered by a hand). :meth:`release_object` lets it go.
+
+        Raises:
+            KeyError: no free object of that name (fixed objects are always held).
+            ValueError: bad vector.
+        """
+        if name not in self._supports:
+            raise KeyError(
+                f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
+            )
+        if pos_m is not None or quat_wxyz is not None:
+            here = self.object_pose(name)
+            pos: Sequence[float] = here.pos_m.tolist() if pos_m is None else pos_m
+            quat: Sequence[float] = here.quat_wxyz.tolist() if quat_wxyz is None else quat_wxyz
+            self.set_object_pose(name, pos, quat)
+        else:
+            mujoco.mj_kinematics(self._m, self._d)  # xpos after mj_step lags qpos by one step
+        mocap, eq = self._supports[name]
+        d = self._d
+        body = self._object_bodies[name]
+        d.mocap_pos[mocap] = d.xpos[body]
+        d.mocap_quat[mocap] = d.xquat[body]
+        d.eq_active[eq] = 1
+
+    def release_object(self, name: str) -> None:
+        """Take a held free object off its support (it keeps its velocity, zero if it was held).
+
+        Raises:
+            KeyError: no free object of that name.
+        """
+        if name not in self._supports:
+            raise KeyError(
+                f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
+            )
+        self._d.eq_active[self._supports[name][1]] = 0
+
+    def object_held(self, name: str) -> bool:
+        """Whether a free object is on its support (fixed objects: always True).
+
+        Raises:
+            KeyError: no object of that name.
+        """
+        if name not in self._object_bodies:
+            raise KeyError(f"no object named {name!r}")
+        if name not in self._supports:
+            return True
+        return bool(self._d.eq_active[self._supports[name][1]])
+
+    def set_object_velocity(
+        self,
+        name: str,
+        linear_m_s: Sequence[float],
+        angular_rad_s: Sequence[float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        """Give a free object a velocity, e.g. to throw it at the arm.
+
+        ``linear_m_s`` is in the world frame; ``angular_rad_s`` in the object's own frame (MuJoCo's free
+        joint convention).
+
+        Raises:
+            KeyError: no free object of that name.
+            ValueError: bad vector.
+        """
+        if name not in self._supports:
+            raise KeyError(
+                f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
+            )
+        lin = _finite_vector("linear_m_s", linear_m_s, 3)
+        ang = _finite_vector("angular_rad_s", angular_rad_s, 3)
+        m, d = self._m, self._d
+        jnt = int(m.body_jntadr[self._object_bodies[name]])
+        da = int(m.jnt_dofadr[jnt])
+        d.qvel[da : da + 3] = lin
+        d.qvel[da + 3 : da + 6] = ang
+
+    def apply_object_force(self, name: str, force_n: Sequence[float]) -> None:
+        """Push a free object with a constant external force (world frame, at its centre of mass) until
+        changed; ``(0, 0, 0)`` removes it (so does :meth:`add_object`, which rebuilds the data). Used as an
+        extra load: a downward force F acts like F/g kg more.
+
+        Raises:
+            KeyError: no free object of that name.
+            ValueError: bad vector.
+        """
+        if name not in self._supports:
+            raise KeyError(
+                f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
+            )
+        force = _finite_vector("force_n", force_n, 3)
+        self._d.xfrc_applied[self._object_bodies[name], :3] = force
+
     def add_object(self, obj: ObjectConfig) -> None:
         """Add an object to grasp. The model is rebuilt; the arm's state, time and commands are kept.
 
@@ -674,6 +779,7 @@ class Plant:
         """
         old_m, old_d = self._m, self._d
         state = (old_d.qpos.copy(), old_d.qvel.copy(), old_d.mocap_pos.copy(), old_d.mocap_quat.copy())
+        eq_active = old_d.eq_active.copy()
         keep = (
             self._time_us,
             self._current_raw.copy(),
@@ -692,6 +798,7 @@ class Plant:
         nq, nv = old_m.nq, old_m.nv
         d.qpos[:nq], d.qvel[:nv] = state[0], state[1]
         d.mocap_pos[: len(state[2])], d.mocap_quat[: len(state[3])] = state[2], state[3]
+        d.eq_active[: len(eq_active)] = eq_active  # supports come in object order: old ones keep their ids
         for o in model.objects:
             body = self._object_bodies[o.name]
             jnt = int(m.body_jntadr[body])

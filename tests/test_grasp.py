@@ -8,6 +8,7 @@ import pytest
 from controller_harness import Rig, frame
 
 from controller.config import FirmwareConfig
+from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.grasp import GraspMachine
 from protocol.dbus import Lever
@@ -30,32 +31,77 @@ def run(g: GraspMachine, t: int, ms: int, speed: list[float] = MOVING, tension: 
     return t
 
 
+def start_reach(g: GraspMachine, t: int = 0, direction: float | None = 0.0) -> int:
+    """Pack (the arm settles: cable still), request a grasp, run until the reach starts."""
+    t = run(g, t, 2000, speed=STALLED)
+    assert g.request_grasp(t, direction) == AckResult.ACCEPTED
+    for _ in range(3000):
+        if g.state == GraspState.REACH:
+            return t
+        t = run(g, t, 1, speed=STALLED)
+    raise AssertionError("the reach never started")
+
+
 def test_idle_packs_then_reach_ramps_down_then_contact_wraps_and_holds() -> None:
     g, c = machine()
-    t = run(g, 0, 2000)
+    t = run(g, 0, 2000, speed=STALLED)
     assert g.state == GraspState.IDLE and g.curl_n == c.grasp_pack_n
+    assert g.direction_rad == 0.0 and g.target_rad == 0.0
     assert g.request_grasp(t, 0.0) == AckResult.ACCEPTED
-    t = run(g, t, 1)
+    t = run(g, t, 1, speed=STALLED)
+    assert g.state == GraspState.IDLE  # settling first: the pack-side cable must be still for the dwell
+    t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=STALLED)
     assert g.state == GraspState.REACH
+    t0_curl = g.curl_n
     t = run(g, t, 300)  # unrolling: tension falls at the reach rate
-    assert g.curl_n == pytest.approx(c.grasp_pack_n - c.grasp_reach_rate_n_per_s * 0.300, abs=1e-6)
-    assert g.state == GraspState.REACH
-    # contact: the object-side cable stalls while taut for the dwell time
+    assert g.curl_n == pytest.approx(t0_curl - c.grasp_reach_rate_n_per_s * 0.300, abs=1e-6)
+    assert g.state == GraspState.REACH and g.direction_rad == 0.0
+    # contact: the pack-side cable stalls while the ramp still runs, for the dwell time
     t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=STALLED)
     assert g.state == GraspState.WRAP
+    # the wrap pulls the cables on the coil's outer face, from 0 N
+    assert g.direction_rad == pytest.approx(math.pi) and g.target_rad == 0.0
+    assert g.curl_n < 0.1
     t = run(g, t, 3000, speed=STALLED)
     assert g.state == GraspState.HOLD and g.curl_n == c.grasp_wrap_n
     assert g.request_release(t) == AckResult.ACCEPTED
     assert g.state == GraspState.RELEASE
     t = run(g, t, 3000, speed=STALLED)
-    assert g.state == GraspState.IDLE
+    assert g.state == GraspState.IDLE and g.direction_rad == 0.0
+
+
+def test_a_slowdown_of_the_pay_out_is_contact_a_steady_or_faster_one_is_not() -> None:
+    g, c = machine()
+    t = start_reach(g)
+    fast = [-0.05, -0.05, -0.05]
+    faster = [-0.08, -0.08, -0.08]
+    t = run(g, t, 300, speed=fast)
+    t = run(g, t, 300, speed=faster)  # speeding up: free space
+    assert g.state == GraspState.REACH and g.peak_payout_m_s == pytest.approx(0.08)
+    slowed = [-0.08 * (c.grasp_contact_slow_ratio + 0.05)] * 3
+    t = run(g, t, 300, speed=slowed)  # just above the ratio: still unrolling freely
+    assert g.state == GraspState.REACH
+    blocked = [-0.08 * (c.grasp_contact_slow_ratio - 0.1)] * 3  # well above the absolute stall speed
+    t = run(g, t, c.grasp_contact_dwell_us // 1000 - 5, speed=blocked)
+    assert g.state == GraspState.REACH  # not for the whole dwell yet
+    t = run(g, t, 10, speed=blocked)
+    assert g.state == GraspState.WRAP
+
+
+def test_the_pack_side_is_the_target_side() -> None:
+    g, c = machine()
+    t = start_reach(g, direction=math.radians(120.0))  # cable 2 (at 120°) packs and pays out
+    t = run(g, t, 300, speed=[0.0, -0.05, 0.0])
+    t = run(g, t, 40, speed=[-0.05, 0.0, -0.05])  # the other cables moving do not count
+    assert g.state == GraspState.REACH
+    t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=[-0.05, 0.0, -0.05])
+    assert g.state == GraspState.WRAP
+    assert g.direction_rad == pytest.approx(math.radians(-60.0))
 
 
 def test_no_contact_during_the_grace_period_or_when_slack() -> None:
     g, c = machine()
-    t = run(g, 0, 2000)
-    g.request_grasp(t)
-    t = run(g, t, 1)
+    t = start_reach(g)
     t = run(g, t, c.grasp_contact_grace_us // 1000 - 1, speed=STALLED)  # not moving yet: ignored
     assert g.state == GraspState.REACH
     t = run(g, t, 200, speed=STALLED, tension=[0.0, 0.0, 0.0])  # stalled but slack: no contact
@@ -64,20 +110,19 @@ def test_no_contact_during_the_grace_period_or_when_slack() -> None:
 
 def test_reach_without_contact_fails_at_timeout() -> None:
     g, c = machine(grasp_reach_timeout_us=2_000_000)
-    t = run(g, 0, 2000)
-    g.request_grasp(t)
-    t = run(g, t, 1)
-    start = t - 1000
+    t = start_reach(g)
+    start = t
     while g.state == GraspState.REACH:
         t = run(g, t, 1, speed=MOVING)
         assert t - start <= 2_000_000 + 2000
     assert g.state == GraspState.FAILED
     assert g.curl_n == c.grasp_reach_n
     # a stall after the ramp has ended is not contact (the arm is simply unrolled)
-    g2, _ = machine()
-    t = run(g2, 0, 2000)
-    g2.request_grasp(t)
-    t = run(g2, t, 2000, speed=MOVING)  # ramp done (6 N -> 0.5 N at 4 N/s)
+    g2, c2 = machine()
+    t = start_reach(g2)
+    ramp_ms = math.ceil((c2.grasp_pack_n - c2.grasp_reach_n) / c2.grasp_reach_rate_n_per_s * 1000)
+    t = run(g2, t, ramp_ms + 10, speed=MOVING)
+    assert g2.curl_n == c2.grasp_reach_n
     t = run(g2, t, 500, speed=STALLED)
     assert g2.state == GraspState.REACH
 
@@ -89,15 +134,16 @@ def test_strategy_off_is_a_plain_ramp_from_straight() -> None:
     g.request_grasp(t)
     t = run(g, t, 1)
     assert g.state == GraspState.WRAP
-    t = run(g, t, 3000)
+    t = run(g, t, 3000)  # the cable still moves: the arm is still closing
+    assert g.state == GraspState.WRAP and g.curl_n == c.grasp_wrap_n
+    t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=STALLED)  # closed: hold
     assert g.state == GraspState.HOLD and g.curl_n == c.grasp_wrap_n
 
 
 def test_requests_in_wrong_states() -> None:
     g, _ = machine()
     assert g.request_hold(0) == AckResult.REJECTED  # nothing to hold in IDLE
-    t = run(g, 0, 2000)
-    g.request_grasp(t)
+    t = start_reach(g)
     t = run(g, t, 10)
     assert g.request_grasp(t) == AckResult.REJECTED  # busy
     assert g.request_hold(t) == AckResult.ACCEPTED
@@ -107,14 +153,28 @@ def test_requests_in_wrong_states() -> None:
 
 def test_grasp_after_failure_repacks_first() -> None:
     g, _ = machine(grasp_reach_timeout_us=500_000)
-    t = run(g, 0, 2000)
-    g.request_grasp(t)
+    t = start_reach(g)
     t = run(g, t, 700)
     assert g.state == GraspState.FAILED
     assert g.request_grasp(t) == AckResult.ACCEPTED
     assert g.state == GraspState.IDLE and g.pending
-    t = run(g, t, 3000)
+    t = run(g, t, 3000, speed=STALLED)
     assert g.state in (GraspState.REACH, GraspState.FAILED)
+
+
+def test_a_new_target_side_repacks_from_zero() -> None:
+    g, c = machine()
+    t = run(g, 0, 2000, speed=STALLED)
+    assert g.curl_n == c.grasp_pack_n
+    g.request_grasp(t, math.pi / 2)
+    assert g.curl_n == 0.0 and g.direction_rad == math.pi / 2  # no jump of the full pack to another side
+
+
+def test_reach_floor_must_release_most_of_the_pack() -> None:
+    with pytest.raises(ConfigError, match="grasp_reach_n"):
+        FirmwareConfig(grasp_pack_n=18.0, grasp_reach_n=9.0)
+    with pytest.raises(ConfigError, match="grasp_contact_slow_ratio"):
+        FirmwareConfig(grasp_contact_slow_ratio=1.0)
 
 
 # --- through the firmware -------------------------------------------------------------------------
@@ -131,7 +191,8 @@ def test_left_lever_edges_trigger_grasp_and_release_in_grasp_mode() -> None:
     rig.set_rc(frame(right=Lever.UP, left=Lever.DOWN))
     rig.tick(30)
     rig.set_rc(frame(right=Lever.UP, left=Lever.UP))  # the edge
-    rig.until(lambda: rig.fw.grasp_state == GraspState.REACH, 100)
+    # the fake trio's overdamped spring still winds in: the reach waits until the cable is still
+    rig.until(lambda: rig.fw.grasp_state == GraspState.REACH, 8000)
     rig.set_rc(frame(right=Lever.UP, left=Lever.DOWN))
     rig.until(lambda: rig.fw.grasp_state == GraspState.RELEASE, 100)
     # leaving GRASP mode resets the machine
@@ -158,7 +219,7 @@ def test_host_grasp_command_acks_in_progress_then_result() -> None:
         seq,
     )
     # the fake trio's spring never stalls the cable like an object: the reach times out -> FAILED ack
-    rig.until(lambda: rig.fw.grasp_state == GraspState.FAILED, 5000)
+    rig.until(lambda: rig.fw.grasp_state == GraspState.FAILED, 12000)
     rig.tick(5)
     final = [m for m in rig.drain() if isinstance(m, CommandAck) and m.request_seq == seq]
     assert final[-1].result == AckResult.FAILED

@@ -34,9 +34,7 @@ def imported_top_levels(path: Path) -> set[str]:
 def test_package_imports_only_downward(package: str) -> None:
     files = sorted((ROOT / package).rglob("*.py"))
     assert files, f"package {package} has no sources"
-    offenders = {
-        str(f.relative_to(ROOT)): sorted(imported_top_levels(f) & FORBIDDEN[package]) for f in files
-    }
+    offenders = {str(f.relative_to(ROOT)): sorted(imported_top_levels(f) & FORBIDDEN[package]) for f in files}
     offenders = {k: v for k, v in offenders.items() if v}
     assert not offenders, f"{package} imports upward or forbidden modules: {offenders}"
 

@@ -402,3 +402,42 @@ def test_authors_design_runs() -> None:
     plant.apply_currents([amps(1.0), 0, 0])
     plant.run(100_000)
     assert plant.cable_tensions_n()[0] > 0
+
+
+def test_free_object_support_hold_release_throw_and_load() -> None:
+    plant = Plant(design=TWO_CABLE)
+    plant.add_object(ObjectConfig("can", radius_m=0.01, length_m=0.06, pos_m=(0.3, 0.0, 0.5), mass_kg=0.02))
+    assert not plant.object_held("can")
+    plant.hold_object("can", (0.3, 0.1, 0.6))
+    assert plant.object_held("can")
+    plant.run(200_000)
+    assert plant.object_pose("can").pos_m == pytest.approx([0.3, 0.1, 0.6], abs=1e-4)  # held still
+    plant.release_object("can")
+    plant.run(100_000)
+    z = float(plant.object_pose("can").pos_m[2])
+    assert z == pytest.approx(0.6 - 0.5 * 9.80665 * 0.1**2, abs=2e-3)  # free fall
+    plant.hold_object("can")  # where it is now
+    plant.run(50_000)
+    assert float(plant.object_pose("can").pos_m[2]) == pytest.approx(z, abs=1e-3)
+    plant.release_object("can")
+    x0 = float(plant.object_pose("can").pos_m[0])
+    plant.set_object_velocity("can", (1.0, 0.0, 0.0))
+    plant.run(10_000)
+    assert float(plant.object_pose("can").pos_m[0]) - x0 == pytest.approx(0.009, abs=0.002)  # ~1 m/s
+    plant.hold_object("can", (0.3, 0.0, 0.5))
+    plant.apply_object_force("can", (0.0, 0.0, 0.0))
+    plant.release_object("can")
+    plant.apply_object_force("can", (0.0, 0.0, 0.02 * 9.80665))  # cancels its weight
+    plant.run(100_000)
+    assert float(plant.object_pose("can").pos_m[2]) == pytest.approx(0.5, abs=1e-3)
+    with pytest.raises(KeyError):
+        plant.hold_object("nope")
+    plant.add_object(ObjectConfig("pole", radius_m=0.01, length_m=0.1, pos_m=(-0.3, 0.0, 0.5)))
+    assert plant.object_held("pole")  # fixed objects are always held
+    with pytest.raises(KeyError):
+        plant.release_object("pole")
+    with pytest.raises(ValueError, match="support"):
+        ModelConfig().with_objects(
+            ObjectConfig("a", radius_m=0.01, length_m=0.1, pos_m=(0, 0, 0), mass_kg=0.01),
+            ObjectConfig("a_support", radius_m=0.01, length_m=0.1, pos_m=(0, 0, 0)),
+        ).validate()

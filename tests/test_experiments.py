@@ -1,0 +1,93 @@
+"""The experiments of issue 8 (hil.experiments) at their tiny size, and `spirob-hil experiment`."""
+
+from __future__ import annotations
+
+import json
+import math
+import pickle
+from pathlib import Path
+
+import pytest
+
+from hil.cli import main
+from hil.experiments import (
+    EXPERIMENTS,
+    GraspSetup,
+    PackingResult,
+    StrategyResult,
+    WorkspaceResult,
+    grasp_trial,
+    run_experiment,
+)
+
+
+@pytest.mark.parametrize("name", list(EXPERIMENTS))
+def test_each_experiment_runs_tiny_reports_and_plots(name: str, tmp_path: Path) -> None:
+    calls: list[tuple[int, int]] = []
+    result = run_experiment(name, size="tiny", seed=3, progress=lambda d, t: calls.append((d, t)))
+    assert calls and calls[-1][0] == calls[-1][1]  # progress reached its total
+    again = pickle.loads(pickle.dumps(result))  # picklable: campaigns can fan out
+    assert again.as_dict()["seed"] == 3
+    d = result.as_dict()
+    json.dumps(d)  # JSON-ready (NaN allowed here; the CLI maps it to null)
+    exp = EXPERIMENTS[name]
+    rows = exp.rows(result)
+    assert rows and all(len(r) == 3 for r in rows)
+    assert exp.samples(result)
+    png = exp.plot(result, tmp_path)
+    assert png.exists() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_required_json_keys_through_the_cli(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    required = {
+        "packing": ("b_design", "b_fit"),
+        "workspace": ("inside_share",),
+        "strategy": ("success_on", "success_off"),
+    }
+    for name, keys in required.items():
+        assert (
+            main(["experiment", name, "--size", "tiny", "--json", "--jobs", "1", "--report", str(tmp_path)])
+            == 0
+        )
+        out = json.loads(capsys.readouterr().out)
+        for key in keys:
+            assert isinstance(out[key], float)
+        assert out["samples"] and Path(out["figure"]).exists()
+    assert main(["experiment", "packing", "--size", "tiny", "--jobs", "1"]) == 0
+    table = capsys.readouterr().out
+    assert "paper" in table and "b_fit" not in table and "fitted spiral b" in table
+
+
+def test_bad_arguments_are_usage_errors(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["experiment", "nope"]) == 2
+    assert main(["experiment", "packing", "--jobs", "0"]) == 2
+    assert "error" in capsys.readouterr().err
+
+
+def test_packing_fits_the_design_spiral_and_curls_from_the_tip() -> None:
+    r = run_experiment("packing", size="tiny")
+    assert isinstance(r, PackingResult)
+    assert r.packed
+    assert r.b_fit == pytest.approx(r.b_design, rel=0.03)
+    assert r.order_correlation < -0.8  # the tip closes first
+
+
+def test_workspace_samples_stay_inside_the_envelope() -> None:
+    r = run_experiment("workspace", size="tiny", seed=1)
+    assert isinstance(r, WorkspaceResult)
+    assert r.inside_share == pytest.approx(1.0)
+    assert 0.0 < r.runs[0].coverage < 1.0
+
+
+def test_strategy_on_grasps_the_reference_placement() -> None:
+    r = run_experiment("strategy", size="tiny")
+    assert isinstance(r, StrategyResult)
+    on = next(o for o in r.outcomes if o.setup.strategy_on)
+    assert on.state == "HOLD" and on.held and on.contact_s > 0
+    assert on.units_after >= 4
+    assert on.max_current_raw <= 3000
+
+
+def test_an_object_out_of_reach_is_a_failed_grasp() -> None:
+    out = grasp_trial(GraspSetup(0.20, -0.05, 0.02, strategy_on=True))
+    assert out.state == "FAILED" and not out.held and math.isnan(out.t_hold_s)
