@@ -71,7 +71,7 @@ def closed_loop(seconds: float, seed: int) -> tuple[float, np.ndarray]:
         host.before_tick(board.now_us)
         board.tick()
         host.after_tick(board.now_us)
-        applied[i] = board.plant.commanded_currents_raw()
+        applied[i] = board.bus.applied
     wall = time.perf_counter() - t0
     if len(host.telemetry) < ticks // 10 * 0.9:
         raise SystemExit(f"closed loop broken: only {len(host.telemetry)} telemetry frames in {ticks} ticks")

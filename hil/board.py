@@ -42,7 +42,7 @@ from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import Transport
-from protocol.messages import ClockKind
+from protocol.messages import ClockKind, SimPoses
 
 from . import recording
 from .errors import HilError
@@ -260,13 +260,12 @@ class VirtualBoard:
         if recorder is not None:
             recorder.write_json("/board/config", 0, cfg.describe())
 
-    def _poses(self) -> tuple[Any, Any]:
+    def _poses(self) -> SimPoses:
         poses = self.plant.body_poses()
         if self.recorder is not None:  # an input of the firmware like any other: replay needs it
-            self.recorder.write_raw(
-                recording.POSES, self.now_us, recording.pack_poses(poses.positions_m, poses.quats_wxyz)
-            )
-        return poses.positions_m, poses.quats_wxyz
+            data = recording.pack_poses(poses.positions_m, poses.quats_wxyz)
+            self.recorder.write_raw(recording.POSES, self.now_us, data)
+        return poses_message(self.now_us, poses.positions_m, poses.quats_wxyz)
 
     def tick(self, now_us: int | None = None) -> None:
         """One control period in lockstep order: physics, delivery, firmware, command delivery.
@@ -318,6 +317,15 @@ class VirtualBoard:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
+
+
+def poses_message(time_us: int, positions_m: Any, quats_wxyz: Any) -> SimPoses:
+    """A ``SimPoses`` from (n, 3) positions and (n, 4) quaternions, built without per-element conversions."""
+    return SimPoses(
+        time_us,
+        tuple(map(tuple, np.asarray(positions_m).tolist())),
+        tuple(map(tuple, np.asarray(quats_wxyz).tolist())),
+    )
 
 
 # --- real time ------------------------------------------------------------------------------------

@@ -22,7 +22,7 @@ from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from protocol.c610 import CURRENT_RAW_MAX
 
 from . import recording
-from .board import MemoryUart, WireEnd
+from .board import MemoryUart, WireEnd, poses_message
 from .errors import HilError
 from .recording import Record, read_metadata, read_records
 
@@ -146,7 +146,7 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
                 if later.topic == recording.TICK:
                     break
                 if later.topic == recording.POSES:
-                    poses.append(recording.unpack_poses(later.data))
+                    poses.append(poses_message(later.time_us, *recording.unpack_poses(later.data)))
             fw.run_due(t)
             produced.extend((t, recording.CAN_TX, frame) for frame in bus.sent)
             bus.sent.clear()

@@ -13,6 +13,7 @@ Every frame that crosses is recorded (raw CAN channels) when a recorder is attac
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Sequence
 from typing import ClassVar, Protocol
 
@@ -64,21 +65,26 @@ class SimMotorBus(MotorBus):
         self.recorder = recorder
         self._inbox: list[tuple[int, bytes]] = []
         self._command: bytes | None = None
+        self._applied: bytes | None = None
+        self.applied: tuple[int, int, int] = (0, 0, 0)
+        """The setpoints the ESCs hold now (raw)."""
         self.commands_applied = 0
 
     def deliver_feedback(self) -> None:
         """Queue the motors' current feedback frames for the firmware (after a plant step)."""
         t = self._now_us()
-        faults = self.faults
+        faults = self.faults if self.faults is not None and self.faults.faults else None
+        inbox = self._inbox
+        recorder = self.recorder
         for motor, fb in enumerate(self.motors.feedback(), start=1):
             frame: MotorFeedback | None = fb if faults is None else faults.feedback(t, motor, fb)
             if frame is None:
                 continue
             can_id = FEEDBACK_ID_BASE + motor
             data = frame.pack()
-            self._inbox.append((can_id, data))
-            if self.recorder is not None:
-                self.recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))
+            inbox.append((can_id, data))
+            if recorder is not None:
+                recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))
 
     def deliver_command(self) -> None:
         """Hand the last command frame, if a new one was sent, to the ESCs."""
@@ -86,8 +92,12 @@ class SimMotorBus(MotorBus):
         if data is None:
             return
         self._command = None
-        self.motors.apply_currents(_unpack_command(data))
         self.commands_applied += 1
+        if data == self._applied:  # the ESCs already hold these setpoints
+            return
+        self._applied = data
+        self.applied = _unpack_command(data)
+        self.motors.apply_currents(self.applied)
 
     def _send_frame(self, can_id: int, data: bytes) -> None:
         t = self._now_us()
@@ -106,7 +116,10 @@ class SimMotorBus(MotorBus):
         self.deliver_command()
 
 
+_COMMAND3 = struct.Struct(">hhh")
+
+
 def _unpack_command(data: bytes) -> tuple[int, int, int]:
-    """The three setpoints of a 0x200 frame (big-endian int16)."""
-    values = [int.from_bytes(data[i : i + 2], "big", signed=True) for i in (0, 2, 4)]
-    return values[0], values[1], values[2]
+    """The three setpoints of a 0x200 frame (big-endian int16; slot 4 is unused)."""
+    a, b, c = _COMMAND3.unpack_from(data)
+    return a, b, c
