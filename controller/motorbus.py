@@ -19,6 +19,7 @@ answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``). CAN bus at 1 Mbit/s
 from __future__ import annotations
 
 import importlib
+import struct
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from types import TracebackType
@@ -44,6 +45,8 @@ CAN_BITRATE = 1_000_000
 """C610s talk at 1 Mbit/s."""
 _RECV_BURST_MAX = 64
 """Most frames drained per ``read_feedback`` call (a flooded bus cannot stall the control tick)."""
+_COMMAND_FRAME = struct.Struct(">hhhh")
+"""The 0x200 frame's data: four big-endian int16 setpoints (``protocol.c610.current_command``'s layout)."""
 
 
 class MotorBus(ABC):
@@ -79,6 +82,7 @@ class MotorBus(ABC):
         self.frames_ignored = 0
         self.last_send_ok = False
         self._sent = [0] * motor_count
+        self._unused_slots = (0,) * (4 - motor_count)
         self._is_shutdown = False
 
     @property
@@ -123,9 +127,11 @@ class MotorBus(ABC):
             if type(v) is not int:
                 v = round(v)
             out[i] = lim if v > lim else -lim if v < -lim else v
-        can_id, data = current_command(out, COMMAND_ID_LOW)
+        # The clamp above leaves ints within ±10000, so the frame is packed here directly, without
+        # current_command's per-value validation (the same bytes; this runs every control tick).
+        data = _COMMAND_FRAME.pack(*out, *self._unused_slots)
         try:
-            self._send_frame(can_id, data)
+            self._send_frame(COMMAND_ID_LOW, data)
         except (BusError, OSError):
             self.can_errors += 1
             self.last_send_ok = False

@@ -102,9 +102,14 @@ class LinkWire:
 
     def to_board(self, t_us: int) -> None:
         """Host -> board."""
-        data = bytes(self.host.outbox)
-        self.host.outbox.clear()
-        if self.faults is not None:
+        outbox = self.host.outbox
+        faulty = self.faults is not None and bool(self.faults.faults)
+        if not outbox and not faulty:
+            return  # nothing written, nothing delayed in flight (only a fault delays bytes)
+        data = bytes(outbox)
+        outbox.clear()
+        if faulty:
+            assert self.faults is not None
             data = self.faults.link_bytes(t_us, data, "rx")
         if data:
             self.board.inbox += data
@@ -113,11 +118,16 @@ class LinkWire:
 
     def to_host(self, t_us: int) -> None:
         """Board -> host."""
-        data = bytes(self.board.outbox)
-        self.board.outbox.clear()
+        outbox = self.board.outbox
+        faulty = self.faults is not None and bool(self.faults.faults)
+        if not outbox and not faulty:
+            return  # nothing written, nothing delayed in flight (only a fault delays bytes)
+        data = bytes(outbox)
+        outbox.clear()
         if data and self.recorder is not None:
             self.recorder.write_raw(recording.LINK_TX, t_us, data)
-        if self.faults is not None:
+        if faulty:
+            assert self.faults is not None
             data = self.faults.link_bytes(t_us, data, "tx")
         if data:
             self.host.inbox += data

@@ -230,6 +230,10 @@ class Plant:
         self._spool_dadr_list = [int(a) for a in self._spool_dadr]
         self._spool_qadr_list = [int(a) for a in self._spool_qadr]
         self._inv_r_spool = 1.0 / motor.spool_radius_m
+        self._counts_per_m = self._gear * ANGLE_COUNTS / (2.0 * math.pi * self._r_spool)
+        self._rpm_per_m_s = self._gear * 60.0 / (2.0 * math.pi * self._r_spool)
+        self._noise_raw = motor.current_noise_raw
+        self._temperature_c = motor.temperature_c
         self._inv_no_load = 1.0 / motor.no_load_speed_rad_s
         self._stall_a = motor.stall_current_a
         self._arm_slice = slice(int(self._arm_dofs.min()), int(self._arm_dofs.max()) + 1)
@@ -474,33 +478,47 @@ class Plant:
         delivers (the torque-speed line can make it smaller than the setpoint), raw units, with the
         configured noise.
         """
+        return tuple(MotorFeedback(*fields) for fields in self._feedback_fields())
+
+    def feedback_payloads(self) -> list[bytes]:
+        """The 8 data bytes of each motor's feedback frame now: ``MotorFeedback.pack`` of :meth:`feedback`.
+
+        The fields are in range by construction (the angle is wrapped, speed and current are clamped to
+        int16 and the temperature is validated by the motor config), so the simulated bus packs them
+        without building the frame objects first (one call per millisecond).
+        """
+        pack = MotorFeedback.FORMAT.pack
+        return [pack(*fields) for fields in self._feedback_fields()]
+
+    def _feedback_fields(self) -> list[tuple[int, int, int, int]]:
+        """``(angle, speed_rpm, current, temperature)`` of each motor now (see :meth:`feedback`)."""
         d = self._d
-        motor = self._config.model.motor
         qpos, qvel = d.qpos, d.qvel
-        counts_per_m = self._gear * ANGLE_COUNTS / (2.0 * math.pi * self._r_spool)
-        rpm_per_m_s = self._gear * 60.0 / (2.0 * math.pi * self._r_spool)
+        counts_per_m = self._counts_per_m
+        rpm_per_m_s = self._rpm_per_m_s
+        temperature = self._temperature_c
         noise = (
-            self._rng.normal(0.0, motor.current_noise_raw, self._n_cables)
-            if motor.current_noise_raw > 0 and self._rng is not None
+            self._rng.normal(0.0, self._noise_raw, self._n_cables)
+            if self._noise_raw > 0 and self._rng is not None
             else None
         )
-        frames = []
+        offsets = self._angle_offset_list
+        applied = self._applied_a
+        out = []
         # Plain floats: this runs every millisecond for three motors.
-        for k in range(self._n_cables):
-            counts = round(float(qpos[self._spool_qadr_list[k]]) * counts_per_m) + self._angle_offset_list[k]
-            rpm = round(float(qvel[self._spool_dadr_list[k]]) * rpm_per_m_s)
-            current = float(self._applied_a[k]) * RAW_PER_AMP
+        for k, (qadr, dadr) in enumerate(zip(self._spool_qadr_list, self._spool_dadr_list, strict=True)):
+            counts = round(float(qpos[qadr]) * counts_per_m) + offsets[k]
+            rpm = round(float(qvel[dadr]) * rpm_per_m_s)
+            current_raw = float(applied[k]) * RAW_PER_AMP
             if noise is not None:
-                current += float(noise[k])
-            frames.append(
-                MotorFeedback(
-                    counts % ANGLE_COUNTS,
-                    max(-_INT16_MAX, min(_INT16_MAX, rpm)),
-                    max(-CURRENT_RAW_MAX, min(CURRENT_RAW_MAX, round(current))),
-                    motor.temperature_c,
-                )
-            )
-        return tuple(frames)
+                current_raw += float(noise[k])
+            current = round(current_raw)
+            if rpm > _INT16_MAX or rpm < -_INT16_MAX:
+                rpm = _INT16_MAX if rpm > 0 else -_INT16_MAX
+            if current > CURRENT_RAW_MAX or current < -CURRENT_RAW_MAX:
+                current = CURRENT_RAW_MAX if current > 0 else -CURRENT_RAW_MAX
+            out.append((counts % ANGLE_COUNTS, rpm, current, temperature))
+        return out
 
     # ------------------------------------------------------------------ named accessors
 

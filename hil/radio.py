@@ -70,6 +70,8 @@ class VirtualRadio:
 
     def read(self, t_us: int) -> bytes:
         """The bytes that finished arriving at the board's UART since the previous call."""
+        if self._sent >= len(self._burst) and self._next_slot_us > t_us:
+            return b""  # the common tick: the last burst is all in, the next slot not yet due
         out = bytearray()
         while True:
             if self._sent < len(self._burst):

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Sequence
-from typing import ClassVar, Protocol
+from typing import ClassVar, Protocol, runtime_checkable
 
 from controller.errors import BusError
 from controller.motorbus import MotorBus
@@ -34,6 +34,14 @@ class Motors(Protocol):
 
     def feedback(self) -> Sequence[MotorFeedback]:
         """The three motors' feedback now."""
+
+
+@runtime_checkable
+class PayloadMotors(Motors, Protocol):
+    """Motors that can also give their feedback as packed frame data (the plant: no frame objects)."""
+
+    def feedback_payloads(self) -> Sequence[bytes]:
+        """The 8 data bytes of each motor's feedback frame now, as ``MotorFeedback.pack`` gives them."""
 
 
 class SimMotorBus(MotorBus):
@@ -70,13 +78,33 @@ class SimMotorBus(MotorBus):
         """The setpoints the ESCs hold now (raw)."""
         self.commands_applied = 0
 
+    @property
+    def motors(self) -> Motors:
+        """The motors at the far end (replaceable, e.g. by a wrapper that adds a spare motor)."""
+        return self._motors
+
+    @motors.setter
+    def motors(self, motors: Motors) -> None:
+        self._motors = motors
+        # Resolved here, not per tick: a runtime Protocol check costs microseconds.
+        self._feedback_payloads = motors.feedback_payloads if isinstance(motors, PayloadMotors) else None
+
     def deliver_feedback(self) -> None:
         """Queue the motors' current feedback frames for the firmware (after a plant step)."""
         t = self._now_us()
         faults = self.faults if self.faults is not None and self.faults.faults else None
         inbox = self._inbox
         recorder = self.recorder
-        for motor, fb in enumerate(self.motors.feedback(), start=1):
+        payloads = self._feedback_payloads
+        if faults is None and payloads is not None:
+            # No fault can touch the frames: take them packed (the same bytes, without building and
+            # validating three MotorFeedback objects per millisecond).
+            for can_id, data in enumerate(payloads(), start=FEEDBACK_ID_BASE + 1):
+                inbox.append((can_id, data))
+                if recorder is not None:
+                    recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))
+            return
+        for motor, fb in enumerate(self._motors.feedback(), start=1):
             frame: MotorFeedback | None = fb if faults is None else faults.feedback(t, motor, fb)
             if frame is None:
                 continue
@@ -97,7 +125,7 @@ class SimMotorBus(MotorBus):
             return
         self._applied = data
         self.applied = _unpack_command(data)
-        self.motors.apply_currents(self.applied)
+        self._motors.apply_currents(self.applied)
 
     def _send_frame(self, can_id: int, data: bytes) -> None:
         t = self._now_us()

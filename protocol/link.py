@@ -205,6 +205,10 @@ class LinkParser:
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[LinkFrame]:
         """Add received bytes; return every frame they complete, in order."""
+        if not data:
+            # The buffer holds at most the start of one incomplete frame (each call consumes everything
+            # else), so no bytes cannot complete or reject anything: skip the scan (most polls are empty).
+            return []
         buf = self._buf
         buf += data
         out: list[LinkFrame] = []

@@ -13,7 +13,7 @@ import pytest
 from controller.errors import BusError, PortError
 from controller.fake_c610 import C610TrioServer, FakeC610Trio, SlcanAdapterEmulator
 from controller.motorbus import CanMotorBus, FakeMotorBus, MotorBus, make_bus, parse_can_spec, register_bus
-from protocol.c610 import MotorFeedback
+from protocol.c610 import MotorFeedback, current_command
 
 
 class RecordingBus(MotorBus):
@@ -46,6 +46,14 @@ def test_send_clamps_packs_and_returns_what_was_sent() -> None:
     assert bus.sent == [(0x200, bytes.fromhex("0bb8f448 04d2 0000".replace(" ", "")))]
     with pytest.raises(ValueError):
         bus.send_currents([1, 2])
+
+
+def test_send_packs_the_same_bytes_as_current_command() -> None:
+    for motors in (1, 2, 3, 4):
+        bus = RecordingBus(motor_count=motors)
+        for values in ([10000, -10000, 0, 1], [1, -2, 3, -4], [-1, 32, 9999, -9999]):
+            bus.send_currents(values[:motors])
+            assert bus.sent[-1] == current_command(values[:motors])
 
 
 def test_send_failure_is_counted_not_raised() -> None:

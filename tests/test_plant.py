@@ -83,6 +83,18 @@ def test_rng_is_the_only_randomness() -> None:
     assert [f.angle for f in quiet.feedback()] == [0, 0, 0]
 
 
+def test_feedback_payloads_are_the_packed_feedback() -> None:
+    noisy = PlantConfig(model=ModelConfig(motor=MotorConfig(current_noise_raw=5.0)))
+    a = Plant(config=noisy, rng=np.random.default_rng(4))
+    b = Plant(config=noisy, rng=np.random.default_rng(4))
+    for plant in (a, b):
+        plant.apply_currents([amps(2.0), amps(-1.0), amps(0.3)])
+    for _ in range(100):
+        a.step()
+        b.step()
+        assert a.feedback_payloads() == [fb.pack() for fb in b.feedback()]
+
+
 def test_apply_currents_clamps_and_checks() -> None:
     plant = Plant(config=PlantConfig(model=ModelConfig(motor=MotorConfig(current_limit_a=3.0))))
     assert plant.apply_currents([5000, -4000, np.int16(1200)]) == (3000, -3000, 1200)  # type: ignore[list-item]
