@@ -99,15 +99,27 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per run (default 10)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="alternating closed-loop/bare pairs (default 3)"
+    )
     parser.add_argument("--no-suite", action="store_true", help="skip timing the scenario suite")
     args = parser.parse_args()
 
-    loop_wall, applied = closed_loop(args.seconds, args.seed)
-    bare_wall = bare_plant(args.seed, applied)
+    # Alternate the two measurements and report the median pair: on a shared 2-core VM a single pair
+    # swings by +-15 % with whatever else runs.
+    pairs: list[tuple[float, float, int]] = []
+    for _ in range(args.repeats):
+        loop_wall, applied = closed_loop(args.seconds, args.seed)
+        bare_wall = bare_plant(args.seed, applied)
+        pairs.append((loop_wall, bare_wall, len(applied)))
+        loop_x, bare_x = args.seconds / loop_wall, args.seconds / bare_wall
+        ratio = bare_wall / loop_wall
+        print(f"  run: closed loop {loop_x:5.2f}x, bare plant {bare_x:5.2f}x, ratio {ratio:6.1%}")
+    loop_wall, bare_wall, ticks = sorted(pairs, key=lambda p: p[1] / p[0])[len(pairs) // 2]
     loop_rtf = args.seconds / loop_wall
     bare_rtf = args.seconds / bare_wall
-    overhead_us = (loop_wall - bare_wall) / len(applied) * 1e6
-    print(f"simulated per run: {args.seconds:g} s")
+    overhead_us = (loop_wall - bare_wall) / ticks * 1e6
+    print(f"simulated per run: {args.seconds:g} s; median of {args.repeats} alternating runs:")
     print(f"lockstep closed loop (firmware + plant + link): {loop_rtf:6.2f}x real time")
     print(f"bare plant, same currents, same run:            {bare_rtf:6.2f}x real time")
     print(f"closed loop / bare plant speed:                 {loop_rtf / bare_rtf:6.1%} (target >= 80%)")
