@@ -42,6 +42,7 @@ from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import Transport
+from protocol.dbus import RcFrame
 from protocol.messages import ClockKind, SimPoses
 
 from . import recording
@@ -382,6 +383,30 @@ def run_realtime(
 # --- a board in its own process -------------------------------------------------------------------
 
 
+def realtime_board(config: BoardConfig, listen: str | None = None) -> tuple[VirtualBoard, str]:
+    """A board for real time with its link endpoint open; returns it and the URL a host connects to.
+
+    Args:
+        config: the board; with ``rc="radio"`` the virtual radio holds both levers DOWN (SAFE).
+        listen: ``socket://HOST:PORT`` for TCP, or None for a pty.
+
+    Raises:
+        ValueError: ``listen`` is not ``socket://HOST:PORT``.
+        OSError: the endpoint cannot be opened (port in use, ...).
+    """
+    from .transports import PtyTransport, TcpServerTransport
+
+    transport: PtyTransport | TcpServerTransport
+    if listen is None:
+        transport = PtyTransport()
+    else:
+        host, port = parse_listen(listen)
+        transport = TcpServerTransport(host, port)
+    script = RadioScript([(0, RcFrame.neutral())]) if config.rc == "radio" else None
+    board = VirtualBoard(config, link=transport, radio_script=script, exec_timer_ns=monotonic_ns)
+    return board, transport.url
+
+
 def _child_main(
     conn: multiprocessing.connection.Connection,
     config: BoardConfig,
@@ -389,24 +414,16 @@ def _child_main(
     fifo: bool,
 ) -> None:
     """Entry of the board process: open the endpoint, report its URL, run until told to stop."""
-    from .transports import PtyTransport, TcpServerTransport
-
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        transport: PtyTransport | TcpServerTransport
-        if listen is None:
-            transport = PtyTransport()
-        else:
-            host, port = parse_listen(listen)
-            transport = TcpServerTransport(host, port)
-        board = VirtualBoard(config, link=transport, exec_timer_ns=monotonic_ns)
+        board, url = realtime_board(config, listen)
     except Exception as exc:  # reported to the parent as one line
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         conn.close()
         return
-    conn.send(("ok", transport.url))
+    conn.send(("ok", url))
 
     def watch_parent() -> None:
         with contextlib.suppress(EOFError, OSError):

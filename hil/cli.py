@@ -340,34 +340,21 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
 
 
 def _run_board(args: argparse.Namespace) -> int:
-    from controller.clock import RealTimeClock, monotonic_ns
-    from hil.board import BoardConfig, VirtualBoard, parse_listen, run_realtime
-    from hil.radio import RadioScript
-    from hil.transports import PtyTransport, TcpServerTransport
-    from protocol.dbus import RcFrame
+    from controller.clock import RealTimeClock
+    from hil.board import BoardConfig, realtime_board, run_realtime
 
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise ValueError(f"--duration must be > 0, got {args.duration}")
     design = design_from_args(args)
-    config = BoardConfig(design=design, rc=args.rc, seed=args.seed)
-    transport: PtyTransport | TcpServerTransport
-    if args.listen:
-        host, port = parse_listen(args.listen)
-        try:
-            transport = TcpServerTransport(host, port)
-        except OSError as exc:
-            raise UsageError(
-                f"cannot listen on {args.listen}: {exc.strerror or exc}", f"{PROG} board"
-            ) from exc
-    else:
-        transport = PtyTransport()
-    script = RadioScript([(0, RcFrame.neutral())]) if args.rc == "radio" else None
-    board = VirtualBoard(config, link=transport, radio_script=script, exec_timer_ns=monotonic_ns)
+    try:
+        board, url = realtime_board(BoardConfig(design=design, rc=args.rc, seed=args.seed), args.listen)
+    except OSError as exc:
+        raise UsageError(f"cannot listen on {args.listen}: {exc.strerror or exc}", f"{PROG} board") from exc
     print(
-        f"virtual board: {design.cables}-cable arm, {design.units} units; board link on {transport.url}",
+        f"virtual board: {design.cables}-cable arm, {design.units} units; board link on {url}",
         flush=True,
     )
-    print("connect with: spirob-host --port " + transport.url, flush=True)
+    print("connect with: spirob-host --port " + url, flush=True)
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:

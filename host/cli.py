@@ -510,10 +510,7 @@ class HostApp:
     def _start_drone_link(self) -> None:
         o = self.options
         assert o.mavlink is not None and self.client is not None
-        try:
-            from host import drone_link
-        except ImportError as exc:
-            raise HostError(f"--mavlink: the drone link is not available yet ({exc})") from exc
+        from host import drone_link
         try:
             cfg = drone_link.DroneLinkConfig(url=o.mavlink, sysid=o.mav_sysid, compid=o.mav_compid)
             ts_path = signing_timestamp_path(o)

@@ -378,43 +378,41 @@ def _series(label: str, stroke: str, dash: bool = False) -> dict[str, Any]:
     return s
 
 
+def _add_plot(server: viser.ViserServer, title: str, series: tuple[dict[str, Any], ...]) -> Any:
+    """One uPlot with an empty sample per series and an auto-scaled relative-time x axis."""
+    return server.gui.add_uplot(
+        data=tuple(np.zeros(1) for _ in series),
+        series=series,  # type: ignore[arg-type]
+        title=title,
+        scales={"x": {"time": False, "auto": True}, "y": {"auto": True}},
+        aspect=1.6,
+    )
+
+
 def build_plot_panel(server: viser.ViserServer) -> PlotHandles:
     """Build the shared Plots folder (x axis: seconds relative to the newest sample)."""
     x: dict[str, Any] = {"label": "t [s]"}
-    empty = np.zeros(1)
+    cables = tuple(enumerate(_CABLE_STROKES))
     with server.gui.add_folder("Plots", order=_ORDER_PLOTS):
-        tension_series = (
-            x,
-            *(_series(f"T{i + 1} target", c, dash=True) for i, c in enumerate(_CABLE_STROKES)),
-            *(_series(f"T{i + 1} est", c) for i, c in enumerate(_CABLE_STROKES)),
+        tensions = _add_plot(
+            server,
+            "Cable tension [N]",
+            (
+                x,
+                *(_series(f"T{i + 1} target", c, dash=True) for i, c in cables),
+                *(_series(f"T{i + 1} est", c) for i, c in cables),
+            ),
         )
-        tensions = server.gui.add_uplot(
-            data=tuple(empty for _ in tension_series),
-            series=tension_series,  # type: ignore[arg-type]
-            title="Cable tension [N]",
-            scales={"x": {"time": False, "auto": True}, "y": {"auto": True}},
-            aspect=1.6,
+        currents = _add_plot(
+            server,
+            "Motor current [A]",
+            (
+                x,
+                *(_series(f"I{i + 1} cmd", c, dash=True) for i, c in cables),
+                *(_series(f"I{i + 1} meas", c) for i, c in cables),
+            ),
         )
-        current_series = (
-            x,
-            *(_series(f"I{i + 1} cmd", c, dash=True) for i, c in enumerate(_CABLE_STROKES)),
-            *(_series(f"I{i + 1} meas", c) for i, c in enumerate(_CABLE_STROKES)),
-        )
-        currents = server.gui.add_uplot(
-            data=tuple(empty for _ in current_series),
-            series=current_series,  # type: ignore[arg-type]
-            title="Motor current [A]",
-            scales={"x": {"time": False, "auto": True}, "y": {"auto": True}},
-            aspect=1.6,
-        )
-        length_series = (x, *(_series(f"L{i + 1}", c) for i, c in enumerate(_CABLE_STROKES)))
-        lengths = server.gui.add_uplot(
-            data=tuple(empty for _ in length_series),
-            series=length_series,  # type: ignore[arg-type]
-            title="Cable paid in [mm]",
-            scales={"x": {"time": False, "auto": True}, "y": {"auto": True}},
-            aspect=1.6,
-        )
+        lengths = _add_plot(server, "Cable paid in [mm]", (x, *(_series(f"L{i + 1}", c) for i, c in cables)))
     return PlotHandles(tensions, currents, lengths)
 
 
