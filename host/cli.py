@@ -511,6 +511,7 @@ class HostApp:
         o = self.options
         assert o.mavlink is not None and self.client is not None
         from host import drone_link
+
         try:
             cfg = drone_link.DroneLinkConfig(url=o.mavlink, sysid=o.mav_sysid, compid=o.mav_compid)
             ts_path = signing_timestamp_path(o)
