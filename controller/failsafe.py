@@ -26,12 +26,19 @@ this module (the control task rejects and counts them).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.events import EventQueue
 from protocol.dbus import Lever
 from protocol.messages import EventKind, Phase
 
 __all__ = ["Failsafe"]
+
+# Members as module constants: the tick compares them by identity without a class lookup each time.
+_GATE, _OK, _ESTOP = Phase.GATE, Phase.OK, Phase.ESTOP
+_RC_LOST, _HOST_LOST, _MOTOR_FAULT = Phase.RC_LOST, Phase.HOST_LOST, Phase.MOTOR_FAULT
+_DOWN = Lever.DOWN
 
 _PHASE_TEXT = {
     Phase.GATE: "gate: waiting for valid RC with the right lever DOWN",
@@ -105,6 +112,14 @@ class Failsafe:
         self._fb_seen[index] = True
         self._last_fb_us[index] = now_us
 
+    def on_motor_frames(self, now_us: int, frames: Iterable[tuple[int, object]]) -> None:
+        """The motors in ``frames`` answered (``(motor 1..n, frame)`` pairs from ``read_feedback``)."""
+        seen = self._fb_seen
+        last = self._last_fb_us
+        for motor, _ in frames:
+            seen[motor - 1] = True
+            last[motor - 1] = now_us
+
     def on_heartbeat(self, now_us: int) -> None:
         """The host's heartbeat arrived."""
         self._hb_seen = True
@@ -142,48 +157,57 @@ class Failsafe:
     # --- the tick ---------------------------------------------------------------------------------
 
     def update(self, now_us: int) -> Phase:
-        """Apply the timeouts at ``now_us`` and return the phase for this tick."""
+        """Apply the timeouts at ``now_us`` and return the phase for this tick.
+
+        Runs every control tick: written as one decision chain with a single phase change at the end.
+        """
         rc_ok = self._rc_seen and now_us - self._last_rc_us <= self._rc_timeout_us
         self.rc_ok = rc_ok
         host_ok = self._hb_seen and now_us - self._last_hb_us <= self._host_timeout_us
         self.host_ok = host_ok
         mask = 0
         timeout = self._motor_timeout_us
+        seen = self._fb_seen
+        last = self._last_fb_us
         for i in range(MOTOR_COUNT):
-            if self._fb_seen[i] and now_us - self._last_fb_us[i] <= timeout:
+            if seen[i] and now_us - last[i] <= timeout:
                 mask |= 1 << i
         if mask != self.motors_online:
             self._motors_changed(now_us, self.motors_online, mask)
         motors_ok = mask == self._all_motors
-        lever_down = rc_ok and self._right_lever == Lever.DOWN
+        lever_down = rc_ok and self._right_lever == _DOWN
 
         if self.estop_latched:
-            return self._set(now_us, Phase.ESTOP)
-        if self._motor_fault:
-            if not (motors_ok and lever_down):
-                return self._set(now_us, Phase.MOTOR_FAULT)
-            self._motor_fault = False  # re-armed through SAFE: the gate below decides
-        host_fine = host_ok or not self.host_required
-        lost = self._lost
-        if lost is not None:
-            back = rc_ok if lost == Phase.RC_LOST else host_fine
-            if not (back and lever_down):
-                return self._set(now_us, lost)
-            self._lost = None  # re-armed through SAFE: the gate below decides
-        if not self._armed:
-            if rc_ok and lever_down and motors_ok and host_fine and not self.host_disarmed:
-                self._armed = True
-                return self._set(now_us, Phase.OK)
-            return self._set(now_us, Phase.GATE)
-        if not motors_ok:
-            self._motor_fault = True
-            self._armed = False
-            return self._set(now_us, Phase.MOTOR_FAULT)
-        if not rc_ok or not host_fine:
-            self._lost = Phase.RC_LOST if not rc_ok else Phase.HOST_LOST
-            self._armed = False
-            return self._set(now_us, self._lost)
-        return self._set(now_us, Phase.OK)
+            phase = _ESTOP
+        elif self._motor_fault and not (motors_ok and lever_down):
+            phase = _MOTOR_FAULT
+        else:
+            self._motor_fault = False  # (if it was set: re-armed through SAFE; the gate below decides)
+            host_fine = host_ok or not self.host_required
+            lost = self._lost
+            if lost is not None and not ((rc_ok if lost is _RC_LOST else host_fine) and lever_down):
+                phase = lost
+            else:
+                self._lost = None  # (if it was set: re-armed through SAFE; the gate below decides)
+                if not self._armed:
+                    if rc_ok and lever_down and motors_ok and host_fine and not self.host_disarmed:
+                        self._armed = True
+                        phase = _OK
+                    else:
+                        phase = _GATE
+                elif not motors_ok:
+                    self._motor_fault = True
+                    self._armed = False
+                    phase = _MOTOR_FAULT
+                elif not rc_ok or not host_fine:
+                    phase = self._lost = _RC_LOST if not rc_ok else _HOST_LOST
+                    self._armed = False
+                else:
+                    phase = _OK
+        if phase is not self.phase:
+            self.phase = phase
+            self._events.push(now_us, EventKind.PHASE, int(phase), 0.0, _PHASE_TEXT[phase])
+        return phase
 
     def _set(self, now_us: int, phase: Phase) -> Phase:
         if phase != self.phase:

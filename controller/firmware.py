@@ -84,6 +84,10 @@ _RAW_RC_QUEUE = 16  # DBUS frames held for RawRc between telemetry ticks (14 ms 
 _MAX_DT_US = 20_000  # a stalled loop never makes the slew limiter jump further than this
 _GRASP_STICK_MIN = 0.5  # right stick deflection (of full scale) that picks the grasp direction
 _ZERO_FRAME = (0, bytes(8))
+# Enum members the control tick compares by identity (no class attribute lookup per tick).
+_SAFE, _MANUAL, _DIRECT, _GRASP = Mode.SAFE, Mode.MANUAL, Mode.DIRECT, Mode.GRASP
+_PHASE_OK = Phase.OK
+_LEVER_MIDDLE, _LEVER_UP = Lever.MIDDLE, Lever.UP
 _ACK_TEXT_MAX = 48
 
 
@@ -149,7 +153,6 @@ class Firmware:
         self.commanded_currents: tuple[int, ...] = (0,) * MOTOR_COUNT
         self._raw = [0] * MOTOR_COUNT
         self._zero = (0,) * MOTOR_COUNT
-        self._last_fb: list[MotorFeedback | None] = [None] * MOTOR_COUNT
         self._last_control_us: int | None = None
         self._prev_left_lever = 0
         self._raw_rc: list[tuple[int, RcFrame]] = []
@@ -337,19 +340,13 @@ class Firmware:
             self._take_rc(now_us, frames)
         feedback = self.bus.read_feedback()
         if feedback:
-            motors = self.motors
-            last_fb = self._last_fb
-            for motor, fb in feedback:
-                i = motor - 1
-                motors.update(i, fb, now_us)
-                fs.on_motor_feedback(now_us, i)
-                last_fb[i] = fb
+            self.motors.update_frames(feedback, now_us)
+            fs.on_motor_frames(now_us, feedback)
 
         phase = fs.update(now_us)
         mode = self._select_mode(now_us, phase)
 
-        raw = self._raw
-        if mode == Mode.SAFE:
+        if mode is _SAFE:
             self.slew.reset()
             self.commanded_currents = self.bus.send_currents(self._zero)
             return
@@ -357,17 +354,14 @@ class Firmware:
         if rc is None:  # cannot happen: phase OK needs a valid frame
             self.commanded_currents = self.bus.send_currents(self._zero)
             return
-        if mode == Mode.MANUAL:
+        if mode is _MANUAL:
             targets = self.mapper.manual(rc.channels)
-        elif mode == Mode.DIRECT:
+        elif mode is _DIRECT:
             targets = self.mapper.direct(self.direct_tensions_n)
         else:
             targets = self._grasp_targets(now_us, dt, rc)
         tensions = self.slew.step(targets, dt)
-        model = self.motors
-        for i in range(MOTOR_COUNT):
-            raw[i] = model.tension_to_raw(i, tensions[i])
-        self.commanded_currents = self.bus.send_currents(raw)
+        self.commanded_currents = self.bus.send_currents(self.motors.tensions_to_raw(tensions, self._raw))
 
     def _take_rc(self, now_us: int, frames: list[RcFrame]) -> None:
         keep_raw = self.link is not None
@@ -386,20 +380,20 @@ class Firmware:
 
     def _select_mode(self, now_us: int, phase: Phase) -> Mode:
         rc = self.rc_frame
-        if phase != Phase.OK or rc is None:
-            mode = Mode.SAFE
+        if phase is not _PHASE_OK or rc is None:
+            mode = _SAFE
         else:
             lever = rc.right_lever
-            if lever == Lever.MIDDLE:
+            if lever == _LEVER_MIDDLE:
                 if self.direct_requested and not self.failsafe.host_ok:
                     self.direct_requested = False
                     self.events.push(now_us, EventKind.INFO, 0, 0.0, "DIRECT ended: no host heartbeat")
-                mode = Mode.DIRECT if self.direct_requested else Mode.MANUAL
-            elif lever == Lever.UP:
-                mode = Mode.GRASP
+                mode = _DIRECT if self.direct_requested else _MANUAL
+            elif lever == _LEVER_UP:
+                mode = _GRASP
             else:
-                mode = Mode.SAFE
-        if mode != self.mode:
+                mode = _SAFE
+        if mode is not self.mode:
             self._mode_changed(now_us, self.mode, mode)
         return mode
 
@@ -673,9 +667,15 @@ class Firmware:
         if link is None:
             return
         link.send(self.build_telemetry(now_us))
+        m = self.motors
         frames = tuple(
-            (FEEDBACK_ID_BASE + i + 1, fb.pack()) if fb is not None else _ZERO_FRAME
-            for i, fb in enumerate(self._last_fb)
+            (
+                FEEDBACK_ID_BASE + i + 1,
+                MotorFeedback(m.angle[i], m.speed_rpm[i], m.current[i], m.temperature[i]).pack(),
+            )
+            if m.seen[i]
+            else _ZERO_FRAME
+            for i in range(MOTOR_COUNT)
         )
         link.send(MotorFrames(now_us, (frames[0], frames[1], frames[2])))
         if self._raw_rc:

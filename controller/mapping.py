@@ -67,10 +67,13 @@ class CableMapper:
 
     def _shape(self, common_n: float, bend_n: float, direction_rad: float) -> list[float]:
         out = self.targets_n
-        base = self._pretension_n + common_n
+        lo = self._pretension_n
+        hi = self._tension_max_n
+        base = lo + common_n
         if bend_n <= 0.0:
+            v = lo if base < lo else hi if base > hi else base
             for i in range(MOTOR_COUNT):
-                out[i] = self._clamp(base)
+                out[i] = v
             return out
         a0, a1, a2 = self._angles_rad
         c0 = math.cos(direction_rad - a0)
@@ -78,9 +81,13 @@ class CableMapper:
         c2 = math.cos(direction_rad - a2)
         low = min(c0, c1, c2)
         scale = bend_n * self._k
-        out[0] = self._clamp(base + scale * (c0 - low))
-        out[1] = self._clamp(base + scale * (c1 - low))
-        out[2] = self._clamp(base + scale * (c2 - low))
+        # clamped to [pretension, tension_max] inline (:meth:`_clamp`): this runs every control tick
+        v = base + scale * (c0 - low)
+        out[0] = lo if v < lo else hi if v > hi else v
+        v = base + scale * (c1 - low)
+        out[1] = lo if v < lo else hi if v > hi else v
+        v = base + scale * (c2 - low)
+        out[2] = lo if v < lo else hi if v > hi else v
         return out
 
     def manual(self, channels: Sequence[int]) -> list[float]:

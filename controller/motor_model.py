@@ -13,6 +13,7 @@ tension) and the rotor angle increases while reeling in; ``-1`` mirrors a motor.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 
 from controller.config import MOTOR_COUNT, FirmwareConfig
 from protocol.c610 import ANGLE_COUNTS, RAW_PER_AMP, MotorFeedback
@@ -78,36 +79,66 @@ class MotorModel:
             raw = lim
         return raw if self._signs[index] > 0 else -raw
 
+    def tensions_to_raw(self, tensions_n: Sequence[float], out: list[int]) -> list[int]:
+        """:meth:`tension_to_raw` of every cable at once, written into ``out`` (the control tick's path)."""
+        raw_per_n = self._raw_per_n
+        lim = self._limit_raw
+        for i, sign in enumerate(self._signs):
+            tension_n = tensions_n[i]
+            if tension_n <= 0.0:
+                out[i] = 0
+                continue
+            raw = round(tension_n * raw_per_n)
+            if raw > lim:
+                raw = lim
+            out[i] = raw if sign > 0 else -raw
+        return out
+
     def raw_to_tension(self, index: int, raw: int) -> float:
         """Cable tension (N) that the raw current ``raw`` on motor ``index`` pulls with."""
         return self._signs[index] * raw * self._n_per_raw
 
     def update(self, index: int, fb: MotorFeedback, now_us: int) -> None:
         """Take one feedback frame of motor ``index`` (0-based) that arrived at ``now_us``."""
-        sign = self._signs[index]
-        if self.seen[index]:
-            d = fb.angle - self.angle[index]
-            # shortest way round: valid while the rotor turns < half a turn between frames
-            if d >= _HALF_TURN:
-                d -= ANGLE_COUNTS
-            elif d < -_HALF_TURN:
-                d += ANGLE_COUNTS
-            self.counts[index] += d
-            dt = now_us - self.last_feedback_us[index]
-            speed = sign * fb.speed_rpm * self._m_s_per_rpm
-            tau = self._tau_us
-            if tau <= 0 or dt <= 0:
-                self.cable_speed_m_s[index] = speed
+        self.update_frames(((index + 1, fb),), now_us)
+
+    def update_frames(self, frames: Iterable[tuple[int, MotorFeedback]], now_us: int) -> None:
+        """Take the feedback frames ``(motor 1..n, frame)`` that arrived at ``now_us``, in order.
+
+        One call per control tick for all motors (what ``MotorBus.read_feedback`` returns).
+        """
+        signs = self._signs
+        seen = self.seen
+        angles = self.angle
+        counts = self.counts
+        last_us = self.last_feedback_us
+        speeds = self.cable_speed_m_s
+        m_s_per_rpm = self._m_s_per_rpm
+        tau = self._tau_us
+        for motor, fb in frames:
+            i = motor - 1
+            sign = signs[i]
+            angle, speed_rpm, current, temperature = fb
+            speed = sign * speed_rpm * m_s_per_rpm
+            if seen[i]:
+                d = angle - angles[i]
+                # shortest way round: valid while the rotor turns < half a turn between frames
+                if d >= _HALF_TURN:
+                    d -= ANGLE_COUNTS
+                elif d < -_HALF_TURN:
+                    d += ANGLE_COUNTS
+                counts[i] += d
+                dt = now_us - last_us[i]
+                if tau > 0 and dt > 0:
+                    prev = speeds[i]
+                    speed = prev + (speed - prev) * (dt / (tau + dt))
             else:
-                prev = self.cable_speed_m_s[index]
-                self.cable_speed_m_s[index] = prev + (speed - prev) * (dt / (tau + dt))
-        else:
-            self.seen[index] = True
-            self.cable_speed_m_s[index] = sign * fb.speed_rpm * self._m_s_per_rpm
-        self.angle[index] = fb.angle
-        self.speed_rpm[index] = fb.speed_rpm
-        self.current[index] = fb.current
-        self.temperature[index] = fb.temperature
-        self.last_feedback_us[index] = now_us
-        self.cable_length_m[index] = sign * self.counts[index] * self._m_per_count
-        self.tension_est_n[index] = sign * fb.current * self._n_per_raw
+                seen[i] = True
+            speeds[i] = speed
+            angles[i] = angle
+            self.speed_rpm[i] = speed_rpm
+            self.current[i] = current
+            self.temperature[i] = temperature
+            last_us[i] = now_us
+            self.cable_length_m[i] = sign * counts[i] * self._m_per_count
+            self.tension_est_n[i] = sign * current * self._n_per_raw

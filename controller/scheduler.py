@@ -50,6 +50,7 @@ class Task:
         "_idx",
         "_late_ring",
         "_ring",
+        "_window",
         "exec_max_us",
         "exec_p99_us",
         "late",
@@ -91,6 +92,7 @@ class Task:
         self.lateness_p99_us = 0
         """Start lateness p99 (µs) over the recent window, as of the last :meth:`update_p99`."""
         window = max(64, min(1024, 1_000_000 // spec.period_us))  # about 1 s of samples
+        self._window = window
         self._ring = array("I", bytes(4 * window))
         self._late_ring = array("I", bytes(4 * window))
         self._idx = 0
@@ -106,14 +108,13 @@ class Task:
         if lateness_us > self.lateness_max_us:
             self.lateness_max_us = lateness_us
         self.lateness_hist[lateness_us if lateness_us < _HIST_BINS else _HIST_BINS] += 1
-        ring = self._ring
         idx = self._idx
-        ring[idx] = exec_us if exec_us < 0xFFFF_FFFF else 0xFFFF_FFFF
+        self._ring[idx] = exec_us if exec_us < 0xFFFF_FFFF else 0xFFFF_FFFF
         self._late_ring[idx] = lateness_us if lateness_us < 0xFFFF_FFFF else 0xFFFF_FFFF
-        self._idx += 1
-        if self._idx == len(ring):
-            self._idx = 0
-        if self._count < len(ring):
+        idx += 1
+        window = self._window
+        self._idx = 0 if idx == window else idx
+        if self._count < window:
             self._count += 1
 
     def update_p99(self) -> int:

@@ -287,8 +287,8 @@ class VirtualBoard:
         """
         self.plant.step()
         t = self.plant.time_us if now_us is None else now_us
-        delay = self.faults.tick_delay_us(t)
-        t += delay
+        if self.faults.faults:
+            t += self.faults.tick_delay_us(t)
         self.now_us = t
         rec = self.recorder
         if self.radio is not None and self.uart is not None:

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from hil.errors import PlantDivergedError
 from hil.mjcf import ModelConfig, ObjectConfig, build_mjcf, cable_layout, unit_geometry
 from hil.spiral import SpiralDesign
-from protocol.c610 import ANGLE_COUNTS, CURRENT_RAW_MAX, RAW_PER_AMP, MotorFeedback
+from protocol.c610 import ANGLE_COUNTS, CURRENT_RAW_MAX, FEEDBACK_FORMAT, RAW_PER_AMP, MotorFeedback
 
 __all__ = ["BodyPoses", "Contact", "Plant", "PlantConfig", "Pose"]
 
@@ -210,6 +210,8 @@ class Plant:
         }
         self._drone_body = bid("drone")
         self._drone_mocap = int(m.body_mocapid[self._drone_body])
+        self._pose_bodies = np.concatenate([[self._drone_body], self._unit_bodies])
+        self._pose_names = ("drone", *self._unit_names)
         self._tip_site = int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "tip"))
         arm_j = [jid(f"joint_{i:02d}") for i in range(1, n_units)]
         self._ball = n_cables == 3
@@ -487,37 +489,35 @@ class Plant:
         int16 and the temperature is validated by the motor config), so the simulated bus packs them
         without building the frame objects first (one call per millisecond).
         """
-        pack = MotorFeedback.FORMAT.pack
+        pack = FEEDBACK_FORMAT.pack
         return [pack(*fields) for fields in self._feedback_fields()]
 
     def _feedback_fields(self) -> list[tuple[int, int, int, int]]:
         """``(angle, speed_rpm, current, temperature)`` of each motor now (see :meth:`feedback`)."""
         d = self._d
-        qpos, qvel = d.qpos, d.qvel
+        # One gather per array, then plain floats: this runs every millisecond for three motors.
+        positions = d.qpos[self._spool_qadr].tolist()
+        speeds = d.qvel[self._spool_dadr].tolist()
+        currents = self._applied_a.tolist()
+        if self._noise_raw > 0 and self._rng is not None:
+            noise = self._rng.normal(0.0, self._noise_raw, self._n_cables).tolist()
+            currents = [a * RAW_PER_AMP + e for a, e in zip(currents, noise, strict=True)]
+        else:
+            currents = [a * RAW_PER_AMP for a in currents]
         counts_per_m = self._counts_per_m
         rpm_per_m_s = self._rpm_per_m_s
         temperature = self._temperature_c
-        noise = (
-            self._rng.normal(0.0, self._noise_raw, self._n_cables)
-            if self._noise_raw > 0 and self._rng is not None
-            else None
-        )
-        offsets = self._angle_offset_list
-        applied = self._applied_a
         out = []
-        # Plain floats: this runs every millisecond for three motors.
-        for k, (qadr, dadr) in enumerate(zip(self._spool_qadr_list, self._spool_dadr_list, strict=True)):
-            counts = round(float(qpos[qadr]) * counts_per_m) + offsets[k]
-            rpm = round(float(qvel[dadr]) * rpm_per_m_s)
-            current_raw = float(applied[k]) * RAW_PER_AMP
-            if noise is not None:
-                current_raw += float(noise[k])
+        for pos, vel, current_raw, offset in zip(
+            positions, speeds, currents, self._angle_offset_list, strict=True
+        ):
+            rpm = round(vel * rpm_per_m_s)
             current = round(current_raw)
             if rpm > _INT16_MAX or rpm < -_INT16_MAX:
                 rpm = _INT16_MAX if rpm > 0 else -_INT16_MAX
             if current > CURRENT_RAW_MAX or current < -CURRENT_RAW_MAX:
                 current = CURRENT_RAW_MAX if current > 0 else -CURRENT_RAW_MAX
-            out.append((counts % ANGLE_COUNTS, rpm, current, temperature))
+            out.append(((round(pos * counts_per_m) + offset) % ANGLE_COUNTS, rpm, current, temperature))
         return out
 
     # ------------------------------------------------------------------ named accessors
@@ -595,8 +595,8 @@ class Plant:
     def body_poses(self) -> BodyPoses:
         """Drone and unit frames in one batch (for the UI's batched meshes)."""
         d = self._d
-        ids = np.concatenate([[self._drone_body], self._unit_bodies])
-        return BodyPoses(("drone", *self._unit_names), d.xpos[ids].copy(), d.xquat[ids].copy())
+        ids = self._pose_bodies
+        return BodyPoses(self._pose_names, d.xpos[ids], d.xquat[ids])  # fancy indexing copies
 
     def unit_dimensions_m(self) -> tuple[tuple[float, float, float], ...]:
         """``(length, base-side width, tip-side width)`` of each unit, base first [m]."""

@@ -25,6 +25,9 @@ from . import recording
 from .faults import FaultSet
 from .recording import Recorder
 
+_FEEDBACK_IDS = range(FEEDBACK_ID_BASE + 1, FEEDBACK_ID_BASE + 9)
+"""Feedback CAN ids of motors 1..8, in order."""
+
 
 class Motors(Protocol):
     """What the bus needs of the plant: C610-shaped commands in, C610-shaped feedback out."""
@@ -99,10 +102,12 @@ class SimMotorBus(MotorBus):
         if faults is None and payloads is not None:
             # No fault can touch the frames: take them packed (the same bytes, without building and
             # validating three MotorFeedback objects per millisecond).
-            for can_id, data in enumerate(payloads(), start=FEEDBACK_ID_BASE + 1):
+            if recorder is None:
+                inbox.extend(zip(_FEEDBACK_IDS, payloads(), strict=False))
+                return
+            for can_id, data in zip(_FEEDBACK_IDS, payloads(), strict=False):
                 inbox.append((can_id, data))
-                if recorder is not None:
-                    recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))
+                recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))
             return
         for motor, fb in enumerate(self._motors.feedback(), start=1):
             frame: MotorFeedback | None = fb if faults is None else faults.feedback(t, motor, fb)
@@ -128,13 +133,13 @@ class SimMotorBus(MotorBus):
         self._motors.apply_currents(self.applied)
 
     def _send_frame(self, can_id: int, data: bytes) -> None:
-        t = self._now_us()
-        if self.faults is not None and self.faults.bus_off(t):
+        faults = self.faults
+        if faults is not None and faults.faults and faults.bus_off(self._now_us()):
             raise BusError("CAN bus off")
         if can_id == COMMAND_ID_LOW:
             self._command = data
         if self.recorder is not None:
-            self.recorder.write_raw(recording.CAN_TX, t, recording.pack_can(can_id, data))
+            self.recorder.write_raw(recording.CAN_TX, self._now_us(), recording.pack_can(can_id, data))
 
     def _recv_frames(self) -> list[tuple[int, bytes]]:
         frames, self._inbox = self._inbox, []

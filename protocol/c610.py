@@ -16,9 +16,8 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Sequence
-from dataclasses import dataclass
 from operator import index
-from typing import ClassVar
+from typing import NamedTuple
 
 from protocol.errors import DecodeError
 
@@ -27,6 +26,7 @@ __all__ = [
     "COMMAND_ID_HIGH",
     "COMMAND_ID_LOW",
     "CURRENT_RAW_MAX",
+    "FEEDBACK_FORMAT",
     "FEEDBACK_ID_BASE",
     "FRAME_LEN",
     "M2006_GEAR_RATIO",
@@ -63,6 +63,7 @@ M2006_GEAR_RATIO = 36
 
 _COMMAND = struct.Struct(">hhhh")
 _ZEROS = (0, 0, 0, 0)
+_new_tuple = tuple.__new__  # builds a named tuple from a ready tuple without re-checking its arity
 
 
 def _as_current(value: object, slot: int) -> int:
@@ -117,9 +118,15 @@ def feedback_id(motor: int) -> int:
     return FEEDBACK_ID_BASE + motor
 
 
-@dataclass(frozen=True, slots=True)
-class MotorFeedback:
+FEEDBACK_FORMAT = struct.Struct(">HhhBx")
+"""Layout of a feedback frame's 8 data bytes: angle u16, speed int16, current int16, temperature u8, pad."""
+
+
+class MotorFeedback(NamedTuple):
     """One C610 feedback frame (CAN id 0x200 + motor number).
+
+    A named tuple, not a dataclass: the firmware decodes three of these every millisecond, and a tuple
+    is built about five times faster than a frozen dataclass.
 
     Attributes:
         angle: rotor angle in encoder counts, 0..8191 (one rotor turn; wraps).
@@ -127,8 +134,6 @@ class MotorFeedback:
         current: measured torque current in command units (1000 per amp), int16.
         temperature: motor temperature in °C, 0..255 (byte 6; may be 0 on a C610).
     """
-
-    FORMAT: ClassVar[struct.Struct] = struct.Struct(">HhhBx")
 
     angle: int
     speed_rpm: int
@@ -144,10 +149,10 @@ class MotorFeedback:
         """
         if len(data) != FRAME_LEN:
             raise DecodeError(f"a C610 feedback frame is {FRAME_LEN} bytes, got {len(data)}")
-        angle, speed_rpm, current, temperature = cls.FORMAT.unpack(data)
-        if angle >= ANGLE_COUNTS:
-            raise DecodeError(f"rotor angle {angle} outside 0..{ANGLE_COUNTS - 1}")
-        return cls(angle, speed_rpm, current, temperature)
+        fields = FEEDBACK_FORMAT.unpack(data)
+        if fields[0] >= ANGLE_COUNTS:
+            raise DecodeError(f"rotor angle {fields[0]} outside 0..{ANGLE_COUNTS - 1}")
+        return _new_tuple(cls, fields)
 
     def pack(self) -> bytes:
         """Encode to the 8 data bytes (byte 7 = 0).
@@ -160,7 +165,7 @@ class MotorFeedback:
         if not 0 <= self.temperature <= 0xFF:
             raise ValueError(f"temperature = {self.temperature} outside 0..255")
         try:
-            return self.FORMAT.pack(self.angle, self.speed_rpm, self.current, self.temperature)
+            return FEEDBACK_FORMAT.pack(self.angle, self.speed_rpm, self.current, self.temperature)
         except struct.error as exc:
             raise ValueError(f"speed_rpm/current must be int16: {exc}") from exc
 

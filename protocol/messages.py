@@ -16,7 +16,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag, StrEnum
-from typing import ClassVar, Self, TypeVar
+from typing import ClassVar, Self, TypeVar, cast
 
 from protocol.dbus import FRAME_LEN as DBUS_FRAME_LEN
 from protocol.dbus import RcFrame
@@ -218,10 +218,12 @@ _E = TypeVar("_E", bound=IntEnum)
 
 
 def _enum(enum_cls: type[_E], value: int, field: str) -> _E:
-    try:
-        return enum_cls(value)
-    except ValueError:
-        raise DecodeError(f"{field}: {value} is not a {enum_cls.__name__}") from None
+    # The value-to-member map directly: a dict lookup instead of EnumType.__call__, about ten times
+    # cheaper (every Telemetry frame decodes three of these). Our enums are plain IntEnums, no flags.
+    member = enum_cls._value2member_map_.get(value)
+    if member is None:
+        raise DecodeError(f"{field}: {value} is not a {enum_cls.__name__}")
+    return cast(_E, member)
 
 
 def _check_len(payload: bytes, size: int, name: str) -> None:
