@@ -62,13 +62,46 @@ def stick_script(seconds: float) -> RadioScript:
 
 
 class ClosedLoop:
-    """The virtual board in lockstep with a scripted host, advanced chunk by chunk."""
+    """The virtual board in lockstep with a scripted host, advanced chunk by chunk.
 
-    def __init__(self, seconds: float, seed: int) -> None:
+    Args:
+        seconds: length of the radio script.
+        seed: the board's seed.
+        stand_in: diagnostics (``--bounds``): replace the firmware's tick by a stand-in that only drains
+            the CAN feedback and sends these currents (one row per tick): what the harness around the
+            firmware costs by itself.
+        time_firmware: diagnostics: add up the wall time of the firmware's ticks in :attr:`firmware_s`.
+    """
+
+    def __init__(
+        self, seconds: float, seed: int, *, stand_in: np.ndarray | None = None, time_firmware: bool = False
+    ) -> None:
         self.board = VirtualBoard(BoardConfig(seed=seed), radio_script=stick_script(seconds))
         assert self.board.wire is not None
         self.host = ScriptedHost(self.board.wire.host, self.board.faults)
         self.ticks = 0
+        self.firmware_s = 0.0
+        firmware = self.board.firmware
+        bus = self.board.bus
+        if stand_in is not None:
+            rows = iter(stand_in.tolist())
+
+            def stand_in_tick(now_us: int) -> int:
+                bus.read_feedback()
+                bus.send_currents(next(rows))
+                return 1
+
+            firmware.run_due = stand_in_tick  # type: ignore[method-assign]
+        elif time_firmware:
+            run_due = firmware.run_due
+
+            def timed_tick(now_us: int) -> int:
+                t0 = time.perf_counter()
+                ran = run_due(now_us)
+                self.firmware_s += time.perf_counter() - t0
+                return ran
+
+            firmware.run_due = timed_tick  # type: ignore[method-assign]
 
     def run(self, ticks: int) -> tuple[float, np.ndarray]:
         """Wall time of ``ticks`` ticks and the currents the ESCs received in each."""
@@ -121,14 +154,16 @@ class BarePlant:
         return wall
 
 
-def paired_run(seconds: float, seed: int, chunk_s: float) -> tuple[float, float, int]:
+def paired_run(
+    seconds: float, seed: int, chunk_s: float, loop: ClosedLoop | None = None
+) -> tuple[float, float, int]:
     """Closed loop and bare plant interleaved chunk by chunk over the same motion.
 
     Each ``chunk_s`` of closed loop is followed at once by the bare plant stepping through the same
     chunk, so both halves of a pair see the same state of this shared VM (its speed drifts by +-15 %
     over seconds). Returns the total wall times of both and the tick count.
     """
-    loop = ClosedLoop(seconds, seed)
+    loop = loop if loop is not None else ClosedLoop(seconds, seed)
     bare = BarePlant(seed)
     ticks = round(seconds * 1e6 / loop.board.period_us)
     chunk = max(1, round(chunk_s * 1e6 / loop.board.period_us))
@@ -144,6 +179,38 @@ def paired_run(seconds: float, seed: int, chunk_s: float) -> tuple[float, float,
     return loop_wall, bare_wall, ticks
 
 
+def bounds(seconds: float, seed: int, chunk_s: float, repeats: int) -> None:
+    """Where the closed loop's overhead goes (``--bounds``).
+
+    1. The firmware's tick timed inside the loop, where it runs right after each MuJoCo step.
+    2. The same loop with the firmware replaced by a stand-in that only drains the feedback and sends the
+       currents the firmware sent: the harness alone (plant feedback, radio, link, scripted host). The
+       ratio it reaches is the ceiling for any firmware in this loop.
+    """
+    timed = ClosedLoop(seconds, seed, time_firmware=True)
+    loop_wall, bare_wall, ticks = paired_run(seconds, seed, chunk_s, timed)
+    firmware_us = timed.firmware_s / ticks * 1e6
+    reference = ClosedLoop(seconds, seed)
+    _, currents = reference.run(ticks)
+    reference.board.close()
+    floors = []
+    for _ in range(repeats):
+        stand_in = ClosedLoop(seconds, seed, stand_in=currents)
+        stand_in.ticks = -(10**9)  # its firmware sends no telemetry: skip the loop-health check
+        floors.append(paired_run(seconds, seed, chunk_s, stand_in))
+    floor_loop, floor_bare, _ = sorted(floors, key=lambda p: p[1] / p[0])[len(floors) // 2]
+    print("where the overhead goes (--bounds):")
+    print(
+        f"  firmware's tick inside the loop:                {firmware_us:6.1f} us per tick "
+        f"(overhead of that run {(loop_wall - bare_wall) / ticks * 1e6:5.1f} us)"
+    )
+    print(
+        f"  harness alone (firmware stand-in):              {floor_bare / floor_loop:6.1%} of the bare plant,"
+        " "
+        f"overhead {(floor_loop - floor_bare) / ticks * 1e6:5.1f} us per tick (the ceiling for any firmware)"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per run (default 10)")
@@ -155,6 +222,12 @@ def main() -> None:
         "--chunk", type=float, default=0.5, help="simulated seconds per closed-loop/bare chunk (default 0.5)"
     )
     parser.add_argument("--no-suite", action="store_true", help="skip timing the scenario suite")
+    parser.add_argument(
+        "--bounds",
+        action="store_true",
+        help="also measure where the overhead goes: the harness with a do-nothing firmware stand-in, and "
+        "the firmware's own time per tick inside the loop",
+    )
     args = parser.parse_args()
 
     # Interleave the two measurements chunk by chunk and report the median run: on a shared 2-core VM
@@ -178,6 +251,9 @@ def main() -> None:
     print(f"bare plant, same currents, same run:            {bare_rtf:6.2f}x real time")
     print(f"closed loop / bare plant speed:                 {loop_rtf / bare_rtf:6.1%} (target >= 80%)")
     print(f"closed-loop overhead per 1 ms tick:             {overhead_us:6.1f} us")
+
+    if args.bounds:
+        bounds(args.seconds, args.seed, args.chunk, args.repeats)
 
     if not args.no_suite:
         t0 = time.perf_counter()
