@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 # Run as a script, this file's directory comes first on sys.path, where bench/protocol.py would shadow
@@ -137,8 +138,8 @@ class BarePlant:
         self.plant = Plant(None, None, plant_rng)
         self._previous: tuple[int, int, int] | None = None
 
-    def run(self, applied: np.ndarray) -> float:
-        """Wall time of one step per row of ``applied``."""
+    def run(self, applied: np.ndarray, after_step: Callable[[], object] | None = None) -> float:
+        """Wall time of one step per row of ``applied`` (and of ``after_step`` after each, if given)."""
         plant = self.plant
         previous = self._previous
         rows = applied.tolist()
@@ -149,6 +150,8 @@ class BarePlant:
             if currents != previous:
                 plant.apply_currents(currents)
                 previous = currents
+            if after_step is not None:
+                after_step()
         wall = time.perf_counter() - t0
         self._previous = previous
         return wall
@@ -179,6 +182,37 @@ def paired_run(
     return loop_wall, bare_wall, ticks
 
 
+def _busy(n: int) -> int:
+    x = 0
+    for i in range(n):
+        x += i
+    return x
+
+
+def busy_loop_cost(seed: int, currents: np.ndarray, target_us: float) -> tuple[float, float]:
+    """A tiny-footprint busy loop of about ``target_us`` between plant steps: its own cost and what it adds.
+
+    Returns the loop's warm cost and the time it adds per plant step (bare plant with the loop after
+    every step, minus the bare plant alone, interleaved in chunks of 500 steps).
+    """
+    n = 1000
+    t0 = time.perf_counter()
+    _busy(n * 100)
+    per_iter_us = (time.perf_counter() - t0) / (n * 100) * 1e6
+    iters = max(1, round(target_us / per_iter_us))
+    t0 = time.perf_counter()
+    for _ in range(200):
+        _busy(iters)
+    warm_us = (time.perf_counter() - t0) / 200 * 1e6
+    alone, with_busy = BarePlant(seed), BarePlant(seed)
+    plain_s = busy_s = 0.0
+    for start in range(0, len(currents), 500):
+        chunk = currents[start : start + 500]
+        plain_s += alone.run(chunk)
+        busy_s += with_busy.run(chunk, after_step=lambda: _busy(iters))
+    return warm_us, (busy_s - plain_s) / len(currents) * 1e6
+
+
 def bounds(seconds: float, seed: int, chunk_s: float, repeats: int) -> None:
     """Where the closed loop's overhead goes (``--bounds``).
 
@@ -199,6 +233,7 @@ def bounds(seconds: float, seed: int, chunk_s: float, repeats: int) -> None:
         stand_in.ticks = -(10**9)  # its firmware sends no telemetry: skip the loop-health check
         floors.append(paired_run(seconds, seed, chunk_s, stand_in))
     floor_loop, floor_bare, _ = sorted(floors, key=lambda p: p[1] / p[0])[len(floors) // 2]
+    burn_warm_us, burn_added_us = busy_loop_cost(seed, currents, firmware_us)
     print("where the overhead goes (--bounds):")
     print(
         f"  firmware's tick inside the loop:                {firmware_us:6.1f} us per tick "
@@ -208,6 +243,10 @@ def bounds(seconds: float, seed: int, chunk_s: float, repeats: int) -> None:
         f"  harness alone (firmware stand-in):              {floor_bare / floor_loop:6.1%} of the bare plant,"
         " "
         f"overhead {(floor_loop - floor_bare) / ticks * 1e6:5.1f} us per tick (the ceiling for any firmware)"
+    )
+    print(
+        f"  tiny-footprint busy loop between plant steps:   costs {burn_warm_us:5.1f} us warm, adds "
+        f"{burn_added_us:5.1f} us per step (the firmware's cost in the loop is its footprint, not its code)"
     )
 
 
