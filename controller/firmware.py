@@ -39,7 +39,7 @@ from controller.motorbus import MotorBus
 from controller.rc import LinkRcSource, RcSource
 from controller.scheduler import Scheduler, TaskSpec
 from controller.transport import Transport
-from protocol.c610 import FEEDBACK_ID_BASE, MotorFeedback
+from protocol.c610 import FEEDBACK_FORMAT, FEEDBACK_ID_BASE
 from protocol.dbus import Lever, RcFrame
 from protocol.errors import DecodeError
 from protocol.link import LinkFrame
@@ -88,6 +88,17 @@ _ZERO_FRAME = (0, bytes(8))
 _SAFE, _MANUAL, _DIRECT, _GRASP = Mode.SAFE, Mode.MANUAL, Mode.DIRECT, Mode.GRASP
 _PHASE_OK = Phase.OK
 _LEVER_MIDDLE, _LEVER_UP = Lever.MIDDLE, Lever.UP
+_FLAG_ARMED, _FLAG_HOST_REQUIRED, _FLAG_HOST_OK, _FLAG_RC_OK, _FLAG_SIM = (
+    int(TelemetryFlags.ARMED),
+    int(TelemetryFlags.HOST_REQUIRED),
+    int(TelemetryFlags.HOST_OK),
+    int(TelemetryFlags.RC_OK),
+    int(TelemetryFlags.SIM),
+)
+_TELEMETRY_FLAGS = tuple(TelemetryFlags(bits) for bits in range(1 << 5))
+"""Every combination of the five flags, by value (building an IntFlag per frame is slow)."""
+
+
 _ACK_TEXT_MAX = 48
 
 
@@ -165,6 +176,7 @@ class Firmware:
         self.config = config
         self._apply_config(config)
         self.scheduler = Scheduler(self._task_table(), exec_timer_ns or monotonic_ns)
+        self._control_task = self.scheduler["control"]
 
     # --- the task table ---------------------------------------------------------------------------
 
@@ -613,19 +625,17 @@ class Firmware:
         """The ``Telemetry`` message for the present state (also usable without a link)."""
         fs = self.failsafe
         m = self.motors
-        flags = TelemetryFlags.NONE
-        if fs.armed:
-            flags |= TelemetryFlags.ARMED
-        if fs.host_required:
-            flags |= TelemetryFlags.HOST_REQUIRED
-        if fs.host_ok:
-            flags |= TelemetryFlags.HOST_OK
-        if fs.rc_ok:
-            flags |= TelemetryFlags.RC_OK
-        if self.bus.simulated:
-            flags |= TelemetryFlags.SIM
+        # Straight-line code (no enum arithmetic, no generator expressions): this runs every 10 ms,
+        # always with cold caches right after a plant step in a lockstep simulation.
+        flags = (
+            (_FLAG_ARMED if fs.phase is _PHASE_OK else 0)
+            | (_FLAG_HOST_REQUIRED if fs.host_required else 0)
+            | (_FLAG_HOST_OK if fs.host_ok else 0)
+            | (_FLAG_RC_OK if fs.rc_ok else 0)
+            | (_FLAG_SIM if self.bus.simulated else 0)
+        )
         rc = self.rc_frame
-        ctl = self.scheduler["control"]
+        ctl = self._control_task
         link = self.link
         t = self.slew.tensions_n
         est = m.tension_est_n
@@ -636,7 +646,7 @@ class Firmware:
             self.mode,
             fs.phase,
             self.grasp.state,
-            flags,
+            _TELEMETRY_FLAGS[flags],
             fs.motors_online,
             rc.channels if rc else (0, 0, 0, 0),
             rc.right_lever if rc else 0,
@@ -657,7 +667,7 @@ class Firmware:
             self.rc.bytes_dropped & u32,
             (link.parser.frames_ok if link else 0) & u32,
             (link.crc_errors if link else 0) & u32,
-            self.failsafe.motor_offline_events & u32,
+            fs.motor_offline_events & u32,
             self.bus.can_errors & u32,
             ctl.lateness_p99_us,  # cached like exec_p99_us: refreshed with BoardStatus, not per tick
         )
@@ -668,20 +678,19 @@ class Firmware:
             return
         link.send(self.build_telemetry(now_us))
         m = self.motors
-        frames = tuple(
-            (
-                FEEDBACK_ID_BASE + i + 1,
-                MotorFeedback(m.angle[i], m.speed_rpm[i], m.current[i], m.temperature[i]).pack(),
-            )
-            if m.seen[i]
-            else _ZERO_FRAME
-            for i in range(MOTOR_COUNT)
-        )
+        pack = FEEDBACK_FORMAT.pack
+        seen = m.seen
+        angle, speed, current, temperature = m.angle, m.speed_rpm, m.current, m.temperature
+        frames = [_ZERO_FRAME, _ZERO_FRAME, _ZERO_FRAME]
+        for i in range(MOTOR_COUNT):
+            if seen[i]:
+                frames[i] = (FEEDBACK_ID_BASE + 1 + i, pack(angle[i], speed[i], current[i], temperature[i]))
         link.send(MotorFrames(now_us, (frames[0], frames[1], frames[2])))
-        if self._raw_rc:
-            for t_us, frame in self._raw_rc:
-                link.send(RawRc(t_us, frame.pack()))
-            self._raw_rc.clear()
+        raw_rc = self._raw_rc
+        if raw_rc:
+            for t_us, frame in raw_rc:
+                link.send(RawRc(t_us, frame.pack()))  # the received bytes, kept by RcFrame.unpack
+            raw_rc.clear()
         if len(self.events):
             for event in self.events.pop_all():
                 link.send(event)

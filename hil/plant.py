@@ -254,6 +254,10 @@ class Plant:
         self._current_raw_list = [0] * n_cables
         self._applied_a = np.zeros(n_cables)
         self._drone_accel = np.zeros(3)
+        # Plain buffer views of this MjData's state for the 1 kHz feedback (valid while it lives).
+        self._qpos_mv = memoryview(self._d.qpos)
+        self._qvel_mv = memoryview(self._d.qvel)
+        self._applied_mv = memoryview(self._applied_a)
 
     # ------------------------------------------------------------------ properties
 
@@ -478,46 +482,47 @@ class Plant:
         Angle: rotor position, 0..8191 per *rotor* turn (the output turns 36x slower), with an arbitrary
         zero drawn from the rng at :meth:`reset`. Speed: rotor rpm. Current: the current the drive actually
         delivers (the torque-speed line can make it smaller than the setpoint), raw units, with the
-        configured noise.
+        configured noise. (Decoded from :meth:`feedback_payloads`: one computation for both.)
         """
-        return tuple(MotorFeedback(*fields) for fields in self._feedback_fields())
+        unpack = MotorFeedback.unpack
+        return tuple(unpack(data) for data in self.feedback_payloads())
 
     def feedback_payloads(self) -> list[bytes]:
-        """The 8 data bytes of each motor's feedback frame now: ``MotorFeedback.pack`` of :meth:`feedback`.
+        """The 8 data bytes of each motor's feedback frame now (see :meth:`feedback` for the fields).
 
-        The fields are in range by construction (the angle is wrapped, speed and current are clamped to
-        int16 and the temperature is validated by the motor config), so the simulated bus packs them
-        without building the frame objects first (one call per millisecond).
+        The simulated bus calls this every millisecond, right after a MuJoCo step has evicted most of
+        Python's working set from the caches; so it is straight-line code over locals, memoryviews of the
+        state instead of numpy indexing, and no comprehensions or temporary tuples (measured: half the
+        time of the same arithmetic written with gathers and comprehensions). The fields are in range by
+        construction: the angle is wrapped, speed and current are clamped to int16 and ±10000, and the
+        temperature is validated by the motor config.
         """
-        pack = FEEDBACK_FORMAT.pack
-        return [pack(*fields) for fields in self._feedback_fields()]
-
-    def _feedback_fields(self) -> list[tuple[int, int, int, int]]:
-        """``(angle, speed_rpm, current, temperature)`` of each motor now (see :meth:`feedback`)."""
-        d = self._d
-        # One gather per array, then plain floats: this runs every millisecond for three motors.
-        positions = d.qpos[self._spool_qadr].tolist()
-        speeds = d.qvel[self._spool_dadr].tolist()
-        currents = self._applied_a.tolist()
-        if self._noise_raw > 0 and self._rng is not None:
-            noise = self._rng.normal(0.0, self._noise_raw, self._n_cables).tolist()
-            currents = [a * RAW_PER_AMP + e for a, e in zip(currents, noise, strict=True)]
-        else:
-            currents = [a * RAW_PER_AMP for a in currents]
+        qpos = self._qpos_mv
+        qvel = self._qvel_mv
+        applied = self._applied_mv
+        qadr = self._spool_qadr_list
+        dadr = self._spool_dadr_list
+        offsets = self._angle_offset_list
         counts_per_m = self._counts_per_m
         rpm_per_m_s = self._rpm_per_m_s
         temperature = self._temperature_c
+        noise = None
+        if self._noise_raw > 0 and self._rng is not None:
+            noise = self._rng.normal(0.0, self._noise_raw, self._n_cables).tolist()
+        pack = FEEDBACK_FORMAT.pack
         out = []
-        for pos, vel, current_raw, offset in zip(
-            positions, speeds, currents, self._angle_offset_list, strict=True
-        ):
-            rpm = round(vel * rpm_per_m_s)
-            current = round(current_raw)
+        for k in range(self._n_cables):
+            rpm = round(qvel[dadr[k]] * rpm_per_m_s)
             if rpm > _INT16_MAX or rpm < -_INT16_MAX:
                 rpm = _INT16_MAX if rpm > 0 else -_INT16_MAX
+            current_raw = applied[k] * RAW_PER_AMP
+            if noise is not None:
+                current_raw += noise[k]
+            current = round(current_raw)
             if current > CURRENT_RAW_MAX or current < -CURRENT_RAW_MAX:
                 current = CURRENT_RAW_MAX if current > 0 else -CURRENT_RAW_MAX
-            out.append(((round(pos * counts_per_m) + offset) % ANGLE_COUNTS, rpm, current, temperature))
+            angle = (round(qpos[qadr[k]] * counts_per_m) + offsets[k]) % ANGLE_COUNTS
+            out.append(pack(angle, rpm, current, temperature))
         return out
 
     # ------------------------------------------------------------------ named accessors

@@ -16,7 +16,7 @@ Facts (DJI ``RoboMaster/Development-Board-C-Examples``, ``remote_control.c``; Ro
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum, IntFlag
 from typing import ClassVar
 
@@ -153,6 +153,8 @@ class RcFrame:
     mouse_right: int = 0
     keys: int = 0
     wheel: int = 0
+    _wire: bytes | None = field(default=None, init=False, repr=False, compare=False)
+    """The 18 bytes this frame was decoded from or last encoded to (``pack`` returns them again)."""
 
     @classmethod
     def unpack(cls, data: bytes | bytearray | memoryview) -> RcFrame:
@@ -165,7 +167,7 @@ class RcFrame:
             raise DecodeError(f"a DBUS frame is {FRAME_LEN} bytes, got {len(data)}")
         lo, hi, mx, my, mz, ml, mr, keys, wheel = cls.FORMAT.unpack(data)
         word = lo | (hi << 32)
-        return cls(
+        frame = cls(
             (
                 (word & _CH_MASK) - CH_OFFSET,
                 ((word >> 11) & _CH_MASK) - CH_OFFSET,
@@ -182,13 +184,18 @@ class RcFrame:
             keys,
             wheel - WHEEL_OFFSET,
         )
+        # unpack(b).pack() == b: keep b, so that re-sending a received frame (RawRc) costs nothing
+        object.__setattr__(frame, "_wire", bytes(data))
+        return frame
 
     def pack(self) -> bytes:
-        """Encode to the 18 wire bytes.
+        """Encode to the 18 wire bytes (computed once per frame object, then returned again).
 
         Raises:
             ValueError: a field is outside what the wire can carry (see the attribute ranges).
         """
+        if self._wire is not None:
+            return self._wire
         if len(self.channels) != 4:
             raise ValueError(f"channels must hold 4 values, got {len(self.channels)}")
         word = 0
@@ -206,7 +213,7 @@ class RcFrame:
         _check_range("mouse_right", self.mouse_right, 0, 0xFF)
         _check_range("keys", int(self.keys), 0, 0xFFFF)
         _check_range("wheel", self.wheel, _INT16_MIN - WHEEL_OFFSET, _INT16_MAX - WHEEL_OFFSET)
-        return self.FORMAT.pack(
+        wire = self.FORMAT.pack(
             word & 0xFFFF_FFFF,
             word >> 32,
             self.mouse_x,
@@ -217,6 +224,8 @@ class RcFrame:
             int(self.keys),
             self.wheel + WHEEL_OFFSET,
         )
+        object.__setattr__(self, "_wire", wire)  # a frozen frame always packs to the same bytes
+        return wire
 
     def is_valid(self) -> bool:
         """True when the frame may be acted on: every |channel| <= 660 and neither lever is 0.

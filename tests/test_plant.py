@@ -83,16 +83,23 @@ def test_rng_is_the_only_randomness() -> None:
     assert [f.angle for f in quiet.feedback()] == [0, 0, 0]
 
 
-def test_feedback_payloads_are_the_packed_feedback() -> None:
-    noisy = PlantConfig(model=ModelConfig(motor=MotorConfig(current_noise_raw=5.0)))
-    a = Plant(config=noisy, rng=np.random.default_rng(4))
-    b = Plant(config=noisy, rng=np.random.default_rng(4))
-    for plant in (a, b):
-        plant.apply_currents([amps(2.0), amps(-1.0), amps(0.3)])
+def test_feedback_frames_follow_the_spool_state() -> None:
+    """Each frame against the documented formulas, computed here from the MuJoCo state with numpy."""
+    plant = Plant(rng=np.random.default_rng(4))
+    plant.apply_currents([amps(2.0), amps(-1.0), amps(0.3)])
+    r, gear = plant._r_spool, plant._gear
     for _ in range(100):
-        a.step()
-        b.step()
-        assert a.feedback_payloads() == [fb.pack() for fb in b.feedback()]
+        plant.step()
+        pos = plant._d.qpos[plant._spool_qadr]
+        vel = plant._d.qvel[plant._spool_dadr]
+        angle = (np.rint(pos * gear * 8192 / (2 * np.pi * r)).astype(int) + plant._angle_offset_list) % 8192
+        rpm = np.rint(vel * gear * 60 / (2 * np.pi * r)).astype(int)
+        current = np.rint(plant.applied_currents_a() * 1000).astype(int)
+        frames = plant.feedback()
+        assert [f.angle for f in frames] == angle.tolist()
+        assert [f.speed_rpm for f in frames] == rpm.tolist()
+        assert [f.current for f in frames] == current.tolist()
+        assert plant.feedback_payloads() == [f.pack() for f in frames]
 
 
 def test_apply_currents_clamps_and_checks() -> None:
