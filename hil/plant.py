@@ -250,14 +250,13 @@ class Plant:
             for o in cfg.objects
             if o.mass_kg is not None
         }
-        self._current_raw = np.zeros(n_cables, dtype=np.int64)
         self._current_raw_list = [0] * n_cables
         self._applied_a = np.zeros(n_cables)
         self._drone_accel = np.zeros(3)
         # Plain buffer views of this MjData's state for the 1 kHz feedback (valid while it lives).
-        self._qpos_mv = memoryview(self._d.qpos)
-        self._qvel_mv = memoryview(self._d.qvel)
-        self._applied_mv = memoryview(self._applied_a)
+        self._qpos_mv = self._d.qpos.data
+        self._qvel_mv = self._d.qvel.data
+        self._applied_mv = self._applied_a.data
 
     # ------------------------------------------------------------------ properties
 
@@ -327,7 +326,6 @@ class Plant:
         d.mocap_quat[self._drone_mocap] = _unit_quat(drone.quat_wxyz)
         m.opt.gravity[:] = _GRAVITY
         self._drone_accel[:] = 0.0
-        self._current_raw[:] = 0
         self._current_raw_list = [0] * self._n_cables
         self._applied_a[:] = 0.0
         self._time_us = 0
@@ -466,13 +464,15 @@ class Plant:
         """
         if not self._n_cables <= len(currents_raw) <= 4:
             raise ValueError(f"expected {self._n_cables} currents (at most 4), got {len(currents_raw)}")
+        lim = self._limit_raw
         out = []
         for i, value in enumerate(currents_raw):
-            if isinstance(value, bool) or not isinstance(value, int | np.integer):
-                raise ValueError(f"current[{i}] must be an int, got {type(value).__name__}")
-            out.append(max(-self._limit_raw, min(self._limit_raw, int(value))))
+            if type(value) is not int:  # the bus always passes plain ints: one test for them
+                if isinstance(value, bool) or not isinstance(value, int | np.integer):
+                    raise ValueError(f"current[{i}] must be an int, got {type(value).__name__}")
+                value = int(value)
+            out.append(lim if value > lim else -lim if value < -lim else value)
         del out[self._n_cables :]
-        self._current_raw[:] = out
         self._current_raw_list = out
         return tuple(out)
 
@@ -529,7 +529,7 @@ class Plant:
 
     def commanded_currents_raw(self) -> tuple[int, ...]:
         """The setpoints last applied (after clamping), raw units."""
-        return tuple(int(c) for c in self._current_raw)
+        return tuple(self._current_raw_list)
 
     def applied_currents_a(self) -> FloatArray:
         """Current each drive delivered in the last period (after the torque-speed line) [A]."""
@@ -805,7 +805,7 @@ class Plant:
         eq_active = old_d.eq_active.copy()
         keep = (
             self._time_us,
-            self._current_raw.copy(),
+            list(self._current_raw_list),
             self._applied_a.copy(),
             list(self._angle_offset_list),
             self._drone_accel.copy(),
@@ -830,11 +830,10 @@ class Plant:
                 d.qpos[qa : qa + 3] = o.pos_m
                 d.qpos[qa + 3 : qa + 7] = (1.0, 0.0, 0.0, 0.0)
         self._time_us, cur, app, off, acc, d.time = keep
-        self._current_raw[:] = cur
         self._applied_a[:] = app
         self._angle_offset_list = off
         self._drone_accel[:] = acc
-        self._current_raw_list = [int(c) for c in cur]
+        self._current_raw_list = cur
         m.opt.gravity[:] = _GRAVITY - acc
         self._bad_qacc = 0
         mujoco.mj_forward(m, d)
