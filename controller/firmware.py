@@ -121,7 +121,7 @@ class Firmware:
         link: the host link transport, or None to run without a host.
         poses: optional pose provider for ``SimPoses`` (default: the bus's ``poses`` method if any).
         exec_timer_ns: timer for execution-time statistics (default CLOCK_MONOTONIC; a lockstep run
-            that wants bit-identical telemetry passes ``lambda: 0``).
+            that wants bit-identical telemetry passes :func:`controller.clock.zero_ns`).
 
     Read-only state for observers: :attr:`mode`, :attr:`phase`, :attr:`grasp_state`,
     :attr:`commanded_currents`, :attr:`tensions_n`, :attr:`stats`, :attr:`counters`, :attr:`rc_frame`,

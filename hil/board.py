@@ -37,7 +37,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from controller.clock import Clock, RealTimeClock, monotonic_ns
+from controller.clock import Clock, RealTimeClock, monotonic_ns, zero_ns
 from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
@@ -217,7 +217,7 @@ class VirtualBoard:
         radio_script: RadioScript | None = None,
         link: Transport | None = None,
         recorder: Recorder | None = None,
-        exec_timer_ns: Callable[[], int] = lambda: 0,
+        exec_timer_ns: Callable[[], int] = zero_ns,
     ) -> None:
         self.config = cfg = config if config is not None else BoardConfig()
         rng = np.random.default_rng(cfg.seed)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
+from controller.clock import zero_ns
 from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.motorbus import MotorBus
@@ -119,7 +120,7 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
         rc,
         link,
         poses=lambda: poses.pop(0) if poses else None,
-        exec_timer_ns=lambda: 0,
+        exec_timer_ns=zero_ns,
     )
 
     produced: list[tuple[int, str, bytes]] = []
