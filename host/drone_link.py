@@ -1105,7 +1105,10 @@ class DroneLink:
 
     def _send_params(self) -> None:
         for _ in range(min(_PARAMS_PER_CYCLE, len(self._param_tx))):
-            self._send_param_value(self._param_tx.popleft())
+            name = self._param_tx.popleft()
+            if name in self._param_pending:
+                continue  # a set the board has not confirmed yet: its confirmation (or timeout) answers
+            self._send_param_value(name)
 
     def _send_param_value(self, name: str) -> None:
         entry = self._params.get(name)

@@ -35,6 +35,8 @@ class FakeBoard:
         outcome: How the next grasp ends: "hold", "fail" or "stall" (never finishes).
         ticks_per_phase: Telemetry ticks spent in REACH, WRAP and RELEASE.
         answer_param_set: False = ignore ``ParamSet`` (a board that never confirms).
+        defer_param_set: True = take ``ParamSet`` values but confirm them only on
+            :meth:`confirm_param_sets` (a slow board).
         received: Every message the link sent to the board, in order.
     """
 
@@ -45,6 +47,7 @@ class FakeBoard:
     outcome: str = "hold"
     ticks_per_phase: int = 5
     answer_param_set: bool = True
+    defer_param_set: bool = False
     period_s: float = 0.01
     params: dict[str, float] = field(default_factory=lambda: dict(PARAMS))
     received: list[bm.Message] = field(default_factory=list)
@@ -54,6 +57,7 @@ class FakeBoard:
     _thread: threading.Thread | None = None
     _ticks_left: int = 0
     _time_us: int = 0
+    _deferred: list[str] = field(default_factory=list)
 
     # ---- wiring -----------------------------------------------------------------------------------
 
@@ -80,6 +84,14 @@ class FakeBoard:
                 setattr(self, k, v)
             if "grasp_state" in state:
                 self._ticks_left = self.ticks_per_phase
+
+    def confirm_param_sets(self) -> None:
+        """Confirm the deferred ``ParamSet`` values now (``defer_param_set``)."""
+        with self._lock:
+            replies = [self._pv(name) for name in self._deferred]
+            self._deferred.clear()
+        for r in replies:
+            self._emit(r)
 
     def commands(self) -> list[bm.Command]:
         """The ``Command`` messages received so far."""
@@ -109,6 +121,9 @@ class FakeBoard:
                 return []
             if msg.value >= 0.0:  # the firmware validates; a rejected value is answered with the old one
                 self.params[msg.name] = msg.value
+            if self.defer_param_set:
+                self._deferred.append(msg.name)
+                return []
             return [self._pv(msg.name)]
         if isinstance(msg, bm.Command):
             return [self._command(msg)]

@@ -374,6 +374,31 @@ def test_param_set_answers_with_what_the_board_took(make_rig: Callable[..., Rig]
     assert m.param_value == 20.0
 
 
+def test_param_read_right_after_a_set_waits_for_the_board(make_rig: Callable[..., Rig]) -> None:
+    """A read of a parameter whose set the board has not confirmed yet gets the confirmed value."""
+    rig = make_rig()
+    rig.board.set(defer_param_set=True)
+    rig.ready()
+    rig.peer.conn.mav.param_request_read_send(1, 25, b"CURRENT_LIMIT_A", -1)  # past the start-up mirror
+    rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "CURRENT_LIMIT_A")
+    start = len(rig.peer.seen)
+    rig.peer.conn.mav.param_set_send(1, 25, b"GRASP_WRAP_N", 12.0, mav.ParamType.REAL32)
+    rig.peer.conn.mav.param_request_read_send(1, 25, b"GRASP_WRAP_N", -1)
+    rig.peer.conn.mav.param_request_read_send(1, 25, b"", 4)  # the same parameter by index
+    rig.peer.conn.mav.param_request_list_send(1, 25)
+    rig.peer.conn.mav.param_request_read_send(1, 25, b"PRETENSION_N", -1)  # a marker
+    rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "PRETENSION_N")
+    rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "SPOOL_RADIUS_M")  # the list went out
+    rig.peer.conn.mav.param_request_read_send(1, 25, b"TENSION_MAX_N", -1)  # a second marker
+    rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "TENSION_MAX_N")
+    assert not [
+        m for m in rig.peer.seen[start:] if m.get_type() == "PARAM_VALUE" and m.param_id == "GRASP_WRAP_N"
+    ]
+    rig.board.confirm_param_sets()
+    m = rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "GRASP_WRAP_N")
+    assert m.param_value == 12.0
+
+
 def test_param_set_the_board_never_confirms_gets_the_value_in_force(make_rig: Callable[..., Rig]) -> None:
     rig = make_rig(param_confirm_timeout_us=200_000)
     rig.board.set(answer_param_set=False)
