@@ -177,6 +177,7 @@ class Firmware:
         self._apply_config(config)
         self.scheduler = Scheduler(self._task_table(), exec_timer_ns or monotonic_ns)
         self._control_task = self.scheduler["control"]
+        self._booted = False
 
     # --- the task table ---------------------------------------------------------------------------
 
@@ -214,7 +215,7 @@ class Firmware:
         Returns:
             The number of tasks that ran.
         """
-        if not self.scheduler.started:
+        if not self._booted:
             self.start(now_us)
         return self.scheduler.run_due(now_us)
 
@@ -227,6 +228,7 @@ class Firmware:
         """
         self.events.push(first_deadline_us, EventKind.BOOT, 0, 0.0, FIRMWARE_VERSION)
         self.scheduler.start(first_deadline_us)
+        self._booted = True
 
     def run(
         self,

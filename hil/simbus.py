@@ -94,17 +94,17 @@ class SimMotorBus(MotorBus):
 
     def deliver_feedback(self) -> None:
         """Queue the motors' current feedback frames for the firmware (after a plant step)."""
-        t = self._now_us()
         faults = self.faults if self.faults is not None and self.faults.faults else None
         inbox = self._inbox
         recorder = self.recorder
         payloads = self._feedback_payloads
-        if faults is None and payloads is not None:
-            # No fault can touch the frames: take them packed (the same bytes, without building and
-            # validating three MotorFeedback objects per millisecond).
-            if recorder is None:
-                inbox.extend(zip(_FEEDBACK_IDS, payloads(), strict=False))
-                return
+        if faults is None and payloads is not None and recorder is None:
+            # No fault can touch the frames and none is recorded: take them packed (the same bytes,
+            # without building and validating three MotorFeedback objects per millisecond).
+            inbox.extend(zip(_FEEDBACK_IDS, payloads(), strict=False))
+            return
+        t = self._now_us()
+        if faults is None and payloads is not None and recorder is not None:
             for can_id, data in zip(_FEEDBACK_IDS, payloads(), strict=False):
                 inbox.append((can_id, data))
                 recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag, StrEnum
-from typing import ClassVar, Self, TypeVar, cast
+from typing import ClassVar, Self, TypeVar
 
 from protocol.dbus import FRAME_LEN as DBUS_FRAME_LEN
 from protocol.dbus import RcFrame
@@ -223,7 +223,7 @@ def _enum(enum_cls: type[_E], value: int, field: str) -> _E:
     member = enum_cls._value2member_map_.get(value)
     if member is None:
         raise DecodeError(f"{field}: {value} is not a {enum_cls.__name__}")
-    return cast(_E, member)
+    return member  # type: ignore[return-value]  # the map holds enum_cls's members
 
 
 def _check_len(payload: bytes, size: int, name: str) -> None:
