@@ -405,7 +405,8 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--record",
         metavar="PATH",
-        help="MCAP recording of every byte in and out of the board (a directory when several scenarios run)",
+        help="MCAP recording of every byte in and out of the board; with --port, of the link as the host "
+        "sees it (a directory when several scenarios run)",
     )
     p.add_argument("--report", metavar="DIR", help="write PNG plots of each run there")
     p.add_argument(
@@ -443,9 +444,9 @@ def _run_run(args: argparse.Namespace) -> int:
         from hil.errors import HilError
         from hil.realtime import check_port_run, port_scenario_names, run_scenario_on_port
 
-        if args.record or args.report:
+        if args.report:
             raise UsageError(
-                "--record and --report work in lockstep runs only, not with --port", f"{PROG} run"
+                "--report plots the simulated plant: lockstep runs only, not with --port", f"{PROG} run"
             )
         if args.all:
             names = port_scenario_names()
@@ -454,7 +455,9 @@ def _run_run(args: argparse.Namespace) -> int:
                 check_port_run(name, faults)
             for name in names:
                 with console.status(f"running {name} on {args.port} in real time ..."):
-                    result = run_scenario_on_port(name, args.port, seed=args.seed, faults=faults)
+                    result = run_scenario_on_port(
+                        name, args.port, seed=args.seed, faults=faults, record=record_paths.get(name)
+                    )
                 console.print(f"{name}: {'passed' if result.passed else 'FAILED'}")
                 results.append(result)
         except HilError as exc:

@@ -53,6 +53,7 @@ import select
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Final
 
 import numpy as np
@@ -86,11 +87,13 @@ from protocol.messages import (
     encode,
 )
 
+from . import recording
 from .errors import HilError
 from .faults import Fault, FaultKind, FaultSet
 from .harness import HEARTBEAT_PERIOD_US
 from .radio import RadioScript
-from .scenarios import MS, SCENARIOS, TICK_US, Check, Plan, ScenarioResult
+from .recording import Recorder
+from .scenarios import MS, SCENARIOS, TICK_US, Check, Plan, ScenarioResult, telemetry_json
 
 __all__ = [
     "BOARD_ONLY_FAULTS",
@@ -823,9 +826,12 @@ class _Host:
     board times.
     """
 
-    def __init__(self, port: str, clock: RealTimeClock) -> None:
+    def __init__(self, port: str, clock: RealTimeClock, recorder: Recorder | None = None) -> None:
         self.port = port
         self.clock = clock
+        self.recorder = recorder
+        """Records the bytes on the link (board's view: ``link_rx`` what reached it after the emulated
+        faults, ``link_tx`` what it sent before them) and the decoded telemetry, on the host's clock."""
         self.transport: SerialTransport | None = _open(port)
         self._reader: _Reader | None = _Reader(self.transport, clock)
         self.parser = LinkParser()
@@ -886,6 +892,8 @@ class _Host:
     def _write(self, data: bytes) -> None:
         if self.transport is not None and data:
             self.transport.write(data)
+            if self.recorder is not None:
+                self.recorder.write_raw(recording.LINK_RX, self.clock.now_us(), data)
 
     # --- receiving --------------------------------------------------------------------------------
 
@@ -901,6 +909,8 @@ class _Host:
             raise HilError(f"the board closed the link on {self.port}")
         faults = self.faults
         for t_us, data in chunks:
+            if self.recorder is not None:
+                self.recorder.write_raw(recording.LINK_TX, t_us, data)
             if faults is not None:
                 self._watch_board(data)
                 data = faults.link_bytes(t_us - self.t0_us, data, "tx")
@@ -931,6 +941,8 @@ class _Host:
                 continue
             if isinstance(msg, Telemetry):
                 self.telemetry.append(msg)
+                if self.recorder is not None:
+                    self.recorder.write_json(recording.TELEMETRY, now_us, telemetry_json(msg))
                 lag = now_us - msg.time_us
                 if self.offset_us is None or lag < self.offset_us:
                     self.offset_us = lag
@@ -1367,6 +1379,7 @@ def run_scenario_on_port(
     seed: int = 0,
     faults: Sequence[Fault] = (),
     progress: Callable[[int, int], None] | None = None,
+    record: str | Path | None = None,
 ) -> ScenarioResult:
     """Run one scenario against the board on ``port`` in real time and measure its checks.
 
@@ -1381,6 +1394,8 @@ def run_scenario_on_port(
         seed: seed of the run's random choices (link noise, garbage frames, out-of-range channels).
         faults: faults added to the scenario's own (the host-side kinds only).
         progress: called as ``progress(ms_done, ms_total)`` every 100 ms of the scenario.
+        record: write an MCAP recording of the run there: the link's bytes both ways and the decoded
+            telemetry, on the host's clock (what a host can see of a board; it cannot be replayed).
 
     Returns:
         The result, with the same shape as a lockstep run's (checks, counters).
@@ -1400,16 +1415,30 @@ def run_scenario_on_port(
     originals: list[tuple[str, float]] = []
     # Everything inside: the reader thread inherits the loop's priority, so it is never preempted by
     # ordinary processes while it holds the GIL the loop waits for.
+    recorder = None
+    if record is not None:
+        meta = {
+            "kind": recording.KIND_PORT,
+            "scenario": name,
+            "port": port,
+            "seed": str(seed),
+            "faults": ";".join(repr(f) for f in plan.faults),
+        }
+        recorder = Recorder(record, metadata=meta)
     with clock.running():
-        host = _Host(port, clock)
         try:
+            host = _Host(port, clock, recorder)
             try:
-                config = _prepare(host, plan, originals)
-                t0 = _play(host, plan, fault_set, duration, progress)
+                try:
+                    config = _prepare(host, plan, originals)
+                    t0 = _play(host, plan, fault_set, duration, progress)
+                finally:
+                    _finish(host, originals)
             finally:
-                _finish(host, originals)
+                host.close()
         finally:
-            host.close()
+            if recorder is not None:
+                recorder.close()
     run = _record(host, plan, config, t0, duration)
     checks = [*PORT_CHECKS[name](run), _rc_gap_check(run)]
     return ScenarioResult(name, seed, tuple(checks), duration, _counters(host, run, fault_set))

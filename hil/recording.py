@@ -9,7 +9,8 @@ process killed mid-run leaves a file whose complete chunks :func:`read_records` 
 tail is where reading stops, never an error.
 
 Timestamps: ``log_time`` is the board's clock in nanoseconds (``time_us * 1000``): simulated time in
-lockstep runs, the monotonic clock in real-time runs.
+lockstep runs, the monotonic clock in real-time runs; the host's monotonic clock in a recording of a run
+against a port (metadata ``kind`` = :data:`KIND_PORT`).
 """
 
 from __future__ import annotations
@@ -55,6 +56,11 @@ TELEMETRY: Final = "/telemetry"
 EVENTS: Final = "/events"
 PLANT: Final = "/plant"
 """Plant ground truth in simulation: tip position, cable tensions and lengths."""
+
+KIND_PORT: Final = "port"
+"""Metadata ``kind`` of a recording of a run against a port (``spirob-hil run --port --record``): the
+link's bytes as the host saw them (``/board/link_rx``, ``/board/link_tx``) and the decoded telemetry, on
+the host's monotonic clock. It has none of the board's other inputs, so it cannot be replayed."""
 
 _CAN_HEADER = struct.Struct("<H")
 _JSON_SCHEMA: Final = json.dumps({"type": "object"}).encode()

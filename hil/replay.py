@@ -25,7 +25,7 @@ from protocol.c610 import CURRENT_RAW_MAX
 from . import recording
 from .board import MemoryUart, WireEnd, poses_message
 from .errors import HilError
-from .recording import Record, read_metadata, read_records
+from .recording import KIND_PORT, Record, read_metadata, read_records
 
 _INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
 _OUTPUTS = frozenset({recording.CAN_TX, recording.LINK_TX})
@@ -103,6 +103,11 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
         HilError: the file is not a lockstep recording of a virtual board.
     """
     meta = read_metadata(path)
+    if meta.get("kind") == KIND_PORT:
+        raise HilError(
+            f"{path} records a run against a port (the link as the host saw it): only a lockstep "
+            "recording can be replayed (spirob-hil run ... --record without --port)"
+        )
     config, rc_kind = _firmware_from(meta)
     bus = ReplayBus(config.current_limit_raw)
     link = WireEnd()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,9 +26,12 @@ from hil.realtime import (
     port_scenario_names,
     run_scenario_on_port,
 )
+from hil.recording import KIND_PORT, LINK_RX, LINK_TX, TELEMETRY, read_metadata, read_records
+from hil.replay import replay
 from hil.scenarios import MS, SCENARIOS, ScenarioResult
 from protocol.dbus import Lever, RcFrame
-from protocol.messages import Event, EventKind, Phase
+from protocol.link import LinkParser
+from protocol.messages import Command, Event, EventKind, Heartbeat, Phase, Telemetry, VirtualRc
 
 
 def _failed(result: ScenarioResult) -> list[str]:
@@ -85,11 +89,14 @@ def test_a_pty_board_runs_and_a_busy_port_is_refused() -> None:
     assert result.passed, _failed(result)
 
 
-def test_cli_runs_a_scenario_on_a_port_as_json(capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_runs_a_scenario_on_a_port_as_json_and_records_the_link(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path = tmp_path / "port.mcap"
     with VirtualBoardProcess(listen="socket://127.0.0.1:0") as board:
         url = board.start(timeout_s=60)
         for _ in range(3):
-            status = main(["run", "rc-loss", "--port", url, "--json"])
+            status = main(["run", "rc-loss", "--port", url, "--json", "--record", str(path)])
             out = json.loads(capsys.readouterr().out)
             if status == 0 or not any(
                 c["name"].startswith(RC_GAP_CHECK) and not c["passed"] for c in out["checks"]
@@ -101,6 +108,26 @@ def test_cli_runs_a_scenario_on_a_port_as_json(capsys: pytest.CaptureFixture[str
         c["name"] for c in out["checks"]
     }
     assert all({"value", "bound", "op", "passed"} <= set(c) for c in out["checks"])
+
+    # The recording: the link's bytes both ways, as the host saw them, and the decoded telemetry.
+    meta = read_metadata(path)
+    assert (meta["kind"], meta["scenario"], meta["port"]) == (KIND_PORT, "rc-loss", url)
+    records = list(read_records(path))
+    by_topic: dict[str, list[bytes]] = {}
+    for r in records:
+        by_topic.setdefault(r.topic, []).append(r.data)
+    sent = LinkParser().feed(b"".join(by_topic[LINK_RX]))
+    received = LinkParser().feed(b"".join(by_topic[LINK_TX]))
+    assert {f.cmd_id for f in sent} >= {VirtualRc.CMD_ID, Heartbeat.CMD_ID, Command.CMD_ID}
+    board_telemetry = [Telemetry.unpack(f.payload) for f in received if f.cmd_id == Telemetry.CMD_ID]
+    decoded = [json.loads(d) for d in by_topic[TELEMETRY]]
+    assert len(board_telemetry) == len(decoded) > 100  # no link faults in rc-loss: every frame decoded
+    assert [t.time_us for t in board_telemetry] == [d["time_us"] for d in decoded]
+    assert {d["phase"] for d in decoded} >= {Phase.OK, Phase.RC_LOST}
+    with pytest.raises(HilError, match="against a port"):
+        replay(path)
+    assert main(["replay", str(path)]) == 2
+    assert "only a lockstep recording can be replayed" in capsys.readouterr().err
 
 
 def test_a_missing_port_is_a_one_line_hil_error() -> None:
@@ -142,6 +169,9 @@ def test_cli_reports_a_missing_port_in_one_line(capsys: pytest.CaptureFixture[st
     assert main(["run", "rc-loss", "--port", "/dev/no-such-board"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot open link port" in err[0]
+    assert main(["run", "rc-loss", "--port", "/dev/no-such-board", "--report", "plots"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--report plots the simulated plant" in err[0]
 
 
 # --- the checks themselves, on synthetic telemetry (they must be able to fail) -----------------------
