@@ -496,7 +496,7 @@ def _run_run(args: argparse.Namespace) -> int:
         for r in results:
             print(json.dumps(r.as_dict()))
     else:
-        print_results(results, Console())
+        print_results(results, Console(), "the board's clock, real time" if args.port else "simulated time")
         for name, path in record_paths.items():
             print(f"recorded {name} to {path}")
         if args.report:

@@ -105,7 +105,7 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
     meta = read_metadata(path)
     if meta.get("kind") == KIND_PORT:
         raise HilError(
-            f"{path} records a run against a port (the link as the host saw it): only a lockstep "
+            "this records a run against a port (the link as the host saw it): only a lockstep "
             "recording can be replayed (spirob-hil run ... --record without --port)"
         )
     config, rc_kind = _firmware_from(meta)

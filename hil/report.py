@@ -14,9 +14,9 @@ from .harness import Probe
 from .scenarios import ScenarioResult
 
 
-def results_table(results: Sequence[ScenarioResult]) -> Table:
+def results_table(results: Sequence[ScenarioResult], clock: str = "simulated time") -> Table:
     """One row per check: scenario, check, measured value, bound, verdict."""
-    table = Table(title="scenario checks (simulated time)", show_lines=False)
+    table = Table(title=f"scenario checks ({clock})", show_lines=False)
     for col, justify in (
         ("scenario", "left"),
         ("check", "left"),
@@ -38,9 +38,9 @@ def results_table(results: Sequence[ScenarioResult]) -> Table:
     return table
 
 
-def print_results(results: Sequence[ScenarioResult], console: Console) -> None:
-    """The table, then one summary line."""
-    console.print(results_table(results))
+def print_results(results: Sequence[ScenarioResult], console: Console, clock: str = "simulated time") -> None:
+    """The table (its title names the clock the checks were measured on), then one summary line."""
+    console.print(results_table(results, clock))
     failed = [r.name for r in results if not r.passed]
     if failed:
         console.print(
