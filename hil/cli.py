@@ -39,6 +39,8 @@ __all__ = [
 PROG = "spirob-hil"
 EXIT_OK = 0
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+"""Ctrl-C, as a shell reports a process killed by SIGINT (128 + 2)."""
 
 
 class UsageError(Exception):
@@ -595,6 +597,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         _error_line(exc.prog, str(exc))
     except ValueError as exc:
         _error_line(PROG, str(exc))
+    except KeyboardInterrupt:  # Ctrl-C: recordings in progress are closed on the way out
+        _error_line(PROG, "interrupted")
+        return EXIT_INTERRUPTED
     return EXIT_USAGE
 
 

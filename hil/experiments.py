@@ -35,6 +35,7 @@ import dataclasses
 import itertools
 import json
 import math
+import signal
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -249,12 +250,22 @@ def _map(
             if progress is not None:
                 progress(done0 + i + 1, total)
         return out
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_ignore_ctrl_c)
+    try:
         for i, r in enumerate(pool.map(fn, items)):
             out.append(r)
             if progress is not None:
                 progress(done0 + i + 1, total)
+    except BaseException:  # Ctrl-C or a failed item: drop what has not started, do not wait for it
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
     return out
+
+
+def _ignore_ctrl_c() -> None:
+    """Pool workers leave Ctrl-C to the parent (a terminal sends it to the whole process group)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _world(x_m: float, z_m: float) -> tuple[float, float, float]:

@@ -34,6 +34,7 @@ import multiprocessing.connection as mpc
 import os
 import queue
 import select
+import signal
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -281,6 +282,9 @@ def _link_main(
     url: str, cfg: BoardClientConfig, shared: _Shared, conn: mpc.Connection, events: Any, reconnect: bool
 ) -> None:
     """Body of the link process (module level so the spawn start method can import it)."""
+    # A terminal's Ctrl-C reaches the whole process group. The host shuts this process down in order
+    # (a last SAFE frame, then the port closed); dying of KeyboardInterrupt here would skip that.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         _LinkWorker(url, cfg, shared, conn, events, reconnect).run()
     except Exception as exc:  # report, never a silent death

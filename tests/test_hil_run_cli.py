@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -97,3 +100,33 @@ def test_board_command_serves_and_stops(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr
     assert "board link on socket://127.0.0.1:" in proc.stdout
     assert "zero current sent" in proc.stdout
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["run", "--all"], ["experiment", "workspace", "--jobs", "2"]],
+    ids=["scenarios", "experiment-with-workers"],
+)
+def test_ctrl_c_stops_with_one_line_and_no_traceback(argv: list[str]) -> None:
+    """A terminal's Ctrl-C reaches the whole process group (the CLI and any pool workers)."""
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli", *argv],
+        cwd=root,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        time.sleep(4.0)  # well into the work: the scenario suite and the experiment both take longer
+        assert proc.poll() is None
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+    assert proc.returncode == 130
+    assert err.strip().splitlines()[-1] == "spirob-hil: error: interrupted"
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err

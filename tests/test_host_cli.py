@@ -7,7 +7,11 @@ real virtual board (``hil.board``) when it can be imported.
 from __future__ import annotations
 
 import importlib.util
+import os
+import signal
 import socket
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -337,3 +341,35 @@ def test_the_virtual_boards_objects_are_drawn() -> None:
         assert [o.name for o in app.objects] == ["branch"]
         assert app.panel is not None and len(app.panel.scene.handles.objects) == 1
         assert app.shadow is None  # the embedded virtual board sends its own poses
+
+
+def test_ctrl_c_in_a_terminal_stops_everything_without_a_traceback() -> None:
+    """A terminal's Ctrl-C reaches the whole process group: the host and its board-link process."""
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "host.cli", "--headless", "--virtual-rc", "safe"],
+        cwd=root,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,  # its own process group, as a shell gives a foreground job
+    )
+    try:
+        assert proc.stdout is not None
+        lines = []
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            lines.append(line)
+            if "board link" in line or not line:
+                break
+        assert any("board link" in line for line in lines), lines
+        time.sleep(1.0)  # the link process is up and sending RC
+        os.killpg(proc.pid, signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+    assert proc.returncode == 0, out
+    assert "Traceback" not in out and "KeyboardInterrupt" not in out, out
