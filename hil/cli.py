@@ -187,6 +187,17 @@ _ROWS: tuple[tuple[str, str, str], ...] = (
 )
 
 
+def seed_arg(text: str) -> int:
+    """A ``--seed``: a whole number >= 0 (numpy's seeds)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
+    return value
+
+
 def _human(value: float, unit: str) -> str:
     if unit == "rad":
         return f"  ({math.degrees(value):.4g} deg)"
@@ -338,7 +349,7 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
         help="RC source: the host's virtual RC over the link (default), or a virtual radio holding SAFE",
     )
     p.add_argument("--no-fifo", action="store_true", help="do not ask for SCHED_FIFO real-time priority")
-    p.add_argument("--seed", type=int, default=0, help="seed of the plant's random choices (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the plant's random choices (default 0)")
 
 
 def _run_board(args: argparse.Namespace) -> int:
@@ -402,7 +413,7 @@ def _run_list(args: argparse.Namespace) -> int:
 def _configure_run(p: argparse.ArgumentParser) -> None:
     p.add_argument("names", nargs="*", metavar="NAME", help="scenarios to run (see 'spirob-hil list')")
     p.add_argument("--all", action="store_true", help="run every scenario")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object per scenario")
     p.add_argument(
         "--record",

@@ -1984,12 +1984,12 @@ def run_experiment(
 
 def configure_experiment(p: argparse.ArgumentParser) -> None:
     """Arguments of ``spirob-hil experiment``."""
-    from hil.cli import add_design_arguments
+    from hil.cli import add_design_arguments, seed_arg
 
     p.add_argument("name", choices=list(EXPERIMENTS), metavar="NAME", help=", ".join(EXPERIMENTS))
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.add_argument("--report", type=Path, metavar="DIR", help="write the experiment's PNG figure into DIR")
-    p.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0)")
+    p.add_argument("--seed", type=seed_arg, default=0, help="seed of every random choice (default 0)")
     p.add_argument(
         "--size",
         choices=SIZES,

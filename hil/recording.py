@@ -182,6 +182,16 @@ class Recorder:
         self.close()
 
 
+MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
+"""The first bytes of every MCAP file."""
+
+
+def is_mcap(path: str | Path) -> bool:
+    """The file starts with MCAP's magic bytes (a cheap check before reading it as a recording)."""
+    with open(path, "rb") as f:
+        return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+
+
 def read_metadata(path: str | Path) -> dict[str, str]:
     """The ``spirob`` metadata record of a recording (empty if none)."""
     with open(path, "rb") as f:

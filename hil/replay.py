@@ -25,7 +25,7 @@ from protocol.c610 import CURRENT_RAW_MAX
 from . import recording
 from .board import MemoryUart, WireEnd, poses_message
 from .errors import HilError
-from .recording import KIND_PORT, Record, read_metadata, read_records
+from .recording import KIND_PORT, Record, is_mcap, read_metadata, read_records
 
 _INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
 _OUTPUTS = frozenset({recording.CAN_TX, recording.LINK_TX})
@@ -102,7 +102,11 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
     Raises:
         HilError: the file is not a lockstep recording of a virtual board.
     """
+    if not is_mcap(path):
+        raise HilError("not an MCAP file")
     meta = read_metadata(path)
+    if not meta:
+        raise HilError("no spirob metadata: not a recording made by 'spirob-hil run --record'")
     if meta.get("kind") == KIND_PORT:
         raise HilError(
             "this records a run against a port (the link as the host saw it): only a lockstep "

@@ -214,6 +214,10 @@ class HostOptions:
                 raise HostError("--virtual-rc needs a board; it cannot be used with --replay")
             if not ns.replay.is_file():
                 raise HostError(f"no such recording: {ns.replay}")
+            from hil.recording import is_mcap
+
+            if not is_mcap(ns.replay):
+                raise HostError(f"{ns.replay} is not an MCAP recording")
         if ns.record is not None and not ns.record.parent.exists():
             raise HostError(f"cannot record to {ns.record}: directory {ns.record.parent} does not exist")
         if ns.mav_signing_key is not None and ns.mavlink is None:
@@ -638,7 +642,12 @@ class HostApp:
                 if delay > 0 and self._stop.wait(delay):
                     break
                 self.model.on_board_message(msg)
-        _log.info("replay finished: %d messages", len(messages))
+        if messages:
+            _log.info("replay finished: %d messages", len(messages))
+        else:
+            _log.warning(
+                "%s holds no board-link messages (/board/link_tx): nothing to replay", self.options.replay
+            )
         self.replay_done.set()
 
     def run(self, duration_s: float | None = None, stop: threading.Event | None = None) -> int:

@@ -69,6 +69,8 @@ def test_run_fails_with_nonzero_status_when_a_check_fails(capsys: pytest.Capture
         (["replay", "/no/such/file.mcap"], "no such recording"),
         (["board", "--listen", "tcp://1.2.3.4:5"], "socket://HOST:PORT"),
         (["run", "rc-loss", "--record", "/no/such/dir/x.mcap"], "cannot record"),
+        (["run", "rc-loss", "--seed", "-1"], "--seed: must be a whole number >= 0"),
+        (["experiment", "packing", "--seed", "x"], "--seed: must be a whole number >= 0"),
     ],
 )
 def test_user_mistakes_are_one_line_and_status_2(

@@ -121,6 +121,15 @@ def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.Ca
     assert needle in one_error_line(capsys.readouterr().err)
 
 
+def test_replay_of_a_file_that_is_not_a_recording_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    notes = tmp_path / "notes.mcap"
+    notes.write_text("not a recording\n")
+    assert main(["--replay", str(notes), "--headless"]) == 2
+    assert "is not an MCAP recording" in one_error_line(capsys.readouterr().err)
+
+
 # ---------------------------------------------------------------------- port errors
 
 

@@ -65,3 +65,12 @@ def test_replay_refuses_a_foreign_file(tmp_path: Path) -> None:
         rec.write_raw(recording.LINK_TX, 0, b"x")
     with pytest.raises(HilError, match="not a lockstep board recording"):
         replay(other)
+    bare = tmp_path / "bare.mcap"
+    with Recorder(bare) as rec:  # an MCAP file without our metadata
+        rec.write_raw(recording.LINK_TX, 0, b"x")
+    with pytest.raises(HilError, match="no spirob metadata"):
+        replay(bare)
+    text = tmp_path / "notes.mcap"
+    text.write_text("not a recording\n")
+    with pytest.raises(HilError, match="not an MCAP file"):
+        replay(text)
