@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
+from terminal import ctrl_c, start_in_own_group
 
 from hil.cli import main
 from hil.scenarios import SCENARIOS
@@ -111,24 +110,10 @@ def test_board_command_serves_and_stops(tmp_path: Path) -> None:
 )
 def test_ctrl_c_stops_with_one_line_and_no_traceback(argv: list[str]) -> None:
     """A terminal's Ctrl-C reaches the whole process group (the CLI and any pool workers)."""
-    root = Path(__file__).resolve().parents[1]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "hil.cli", *argv],
-        cwd=root,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    try:
-        time.sleep(4.0)  # well into the work: the scenario suite and the experiment both take longer
-        assert proc.poll() is None
-        os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=10)
+    proc = start_in_own_group("hil.cli", *argv)
+    time.sleep(4.0)  # well into the work: the scenario suite and the experiment both take longer
+    assert proc.poll() is None
+    _, err = ctrl_c(proc)
     assert proc.returncode == 130
     assert err.strip().splitlines()[-1] == "spirob-hil: error: interrupted"
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err

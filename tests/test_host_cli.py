@@ -7,17 +7,14 @@ real virtual board (``hil.board``) when it can be imported.
 from __future__ import annotations
 
 import importlib.util
-import os
-import signal
 import socket
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from link_peer import LinkPeer
+from terminal import ctrl_c, start_in_own_group
 
 from host.cli import HostApp, HostOptions, build_parser, main
 from protocol.dbus import Lever
@@ -354,31 +351,17 @@ def test_the_virtual_boards_objects_are_drawn() -> None:
 
 def test_ctrl_c_in_a_terminal_stops_everything_without_a_traceback() -> None:
     """A terminal's Ctrl-C reaches the whole process group: the host and its board-link process."""
-    root = Path(__file__).resolve().parents[1]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "host.cli", "--headless", "--virtual-rc", "safe"],
-        cwd=root,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        start_new_session=True,  # its own process group, as a shell gives a foreground job
-    )
-    try:
-        assert proc.stdout is not None
-        lines = []
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            lines.append(line)
-            if "board link" in line or not line:
-                break
-        assert any("board link" in line for line in lines), lines
-        time.sleep(1.0)  # the link process is up and sending RC
-        os.killpg(proc.pid, signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=10)
+    proc = start_in_own_group("host.cli", "--headless", "--virtual-rc", "safe", merge_stderr=True)
+    assert proc.stdout is not None
+    lines = []
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        lines.append(line)
+        if "board link" in line or not line:
+            break
+    time.sleep(1.0)  # the link process is up and sending RC
+    out, _ = ctrl_c(proc, timeout_s=30)
+    assert any("board link" in line for line in lines), lines
     assert proc.returncode == 0, out
     assert "Traceback" not in out and "KeyboardInterrupt" not in out, out

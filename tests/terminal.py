@@ -1,0 +1,35 @@
+"""Ctrl-C as a terminal sends it: SIGINT to the whole foreground process group."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def start_in_own_group(module: str, *args: str, merge_stderr: bool = False) -> subprocess.Popen[str]:
+    """``python -m module args`` from the repository, in a process group of its own (a foreground job)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", module, *args],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT if merge_stderr else subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def ctrl_c(proc: subprocess.Popen[str], timeout_s: float = 60.0) -> tuple[str, str]:
+    """Press Ctrl-C: SIGINT to ``proc``'s group; its output once it ended (killed if it does not end)."""
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+        out, err = proc.communicate(timeout=timeout_s)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+    return out or "", err or ""
