@@ -35,15 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
+from chromium import CHROMIUM, CHROMIUM_ARGS  # noqa: E402  (tests/ holds the shared launch settings)
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -155,7 +147,7 @@ def main() -> int:
         tmp = stack.enter_context(tempfile.TemporaryDirectory())
         ctx = pw.chromium.launch_persistent_context(
             tmp,
-            executable_path="/usr/bin/chromium",
+            executable_path=CHROMIUM,
             headless=True,
             args=CHROMIUM_ARGS,
             viewport={"width": 1280, "height": 860},

@@ -577,6 +577,16 @@ def _host_gone_common(run: PortRun, kind: FaultKind) -> tuple[int, int, float, l
     return start, end, rearm if rearm is not None else math.nan, checks
 
 
+def _rearmed(run: PortRun) -> Check:
+    return Check(
+        "|current| after re-arming through SAFE",
+        run.max_current(_rearm_pull_us(run.plan) + _AFTER_REARM_US),
+        1,
+        ">=",
+        "raw",
+    )
+
+
 def _host_loss(run: PortRun) -> list[Check]:
     start, end, rearm, checks = _host_gone_common(run, FaultKind.HOST_LOSS)
     acted = run.config.host_timeout_us + TICK_US + LINK_ALLOWANCE_US + TICK_LATENESS_US
@@ -604,13 +614,7 @@ def _host_loss(run: PortRun) -> list[Check]:
             "<=",
             "raw",
         ),
-        Check(
-            "|current| after re-arming through SAFE",
-            run.max_current(_rearm_pull_us(run.plan) + _AFTER_REARM_US),
-            1,
-            ">=",
-            "raw",
-        ),
+        _rearmed(run),
         Check(
             "telemetry frames while heartbeats are missing", float(run.count(start, end)), 80, ">=", "frames"
         ),
@@ -640,13 +644,7 @@ def _link_disconnect(run: PortRun) -> list[Check]:
             "<=",
             "frames",
         ),
-        Check(
-            "|current| after re-arming through SAFE",
-            run.max_current(_rearm_pull_us(run.plan) + _AFTER_REARM_US),
-            1,
-            ">=",
-            "raw",
-        ),
+        _rearmed(run),
         Check(
             "telemetry frames after reconnecting",
             float(run.count(end + 100 * MS)),

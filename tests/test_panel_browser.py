@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from chromium import CHROMIUM, CHROMIUM_ARGS
 
 from host.cli import HostApp, HostOptions
 from host.panel import PanelConfig
@@ -29,16 +30,6 @@ from protocol.messages import Phase
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
 # Slow panel rates: the viser client renders on demand, so fewer scene updates = less software
 # rendering competing for the 2 cores with everything else under test.
 TOKEN = "t0ken-for-test"

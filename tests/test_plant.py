@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from hil.errors import HilError, PlantDivergedError
+from hil.experiments import fit_log_spiral
 from hil.mjcf import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
 from hil.plant import Plant, PlantConfig
 from hil.spiral import PAPER_PROTOTYPE, SpiralDesign
@@ -20,21 +21,6 @@ MOTOR = MotorConfig()
 
 def amps(a: float) -> int:
     return round(a * 1000)
-
-
-def fit_log_spiral(points: np.ndarray) -> tuple[float, complex, float]:
-    """Fit a discrete logarithmic spiral to planar points (complex numbers), base first.
-
-    Consecutive points of a log spiral are related by one similarity z' = s·z + t; its fixed point is the
-    pole. Then log ρ is regressed on the unwrapped polar angle. Returns ``(b, pole, turn per point)``.
-    """
-    a = np.stack([points[:-1], np.ones(len(points) - 1)], axis=1)
-    s, t = np.linalg.lstsq(a, points[1:], rcond=None)[0]
-    pole = t / (1 - s)
-    w = points - pole
-    angle = np.unwrap(np.angle(w))
-    slope = np.polyfit(angle, np.log(np.abs(w)), 1)[0]
-    return abs(float(slope)), complex(pole), float(np.angle(s))
 
 
 def joint_points_xz(plant: Plant) -> np.ndarray:
