@@ -107,11 +107,6 @@ class Failsafe:
         self._last_rc_us = now_us
         self._right_lever = right_lever
 
-    def on_motor_feedback(self, now_us: int, index: int) -> None:
-        """Motor ``index`` (0-based) answered."""
-        self._fb_seen[index] = True
-        self._last_fb_us[index] = now_us
-
     def on_motor_frames(self, now_us: int, frames: Iterable[tuple[int, object]]) -> None:
         """The motors in ``frames`` answered (``(motor 1..n, frame)`` pairs from ``read_feedback``)."""
         seen = self._fb_seen
@@ -204,13 +199,10 @@ class Failsafe:
                     self._armed = False
                 else:
                     phase = _OK
-        if phase is not self.phase:
-            self.phase = phase
-            self._events.push(now_us, EventKind.PHASE, int(phase), 0.0, _PHASE_TEXT[phase])
-        return phase
+        return self._set(now_us, phase)
 
     def _set(self, now_us: int, phase: Phase) -> Phase:
-        if phase != self.phase:
+        if phase is not self.phase:
             self.phase = phase
             self._events.push(now_us, EventKind.PHASE, int(phase), 0.0, _PHASE_TEXT[phase])
         return phase

@@ -84,6 +84,7 @@ _RAW_RC_QUEUE = 16  # DBUS frames held for RawRc between telemetry ticks (14 ms 
 _MAX_DT_US = 20_000  # a stalled loop never makes the slew limiter jump further than this
 _GRASP_STICK_MIN = 0.5  # right stick deflection (of full scale) that picks the grasp direction
 _ZERO_FRAME = (0, bytes(8))
+_ACK_TEXT_MAX = 48
 # Enum members the control tick compares by identity (no class attribute lookup per tick).
 _SAFE, _MANUAL, _DIRECT, _GRASP = Mode.SAFE, Mode.MANUAL, Mode.DIRECT, Mode.GRASP
 _PHASE_OK = Phase.OK
@@ -97,9 +98,6 @@ _FLAG_ARMED, _FLAG_HOST_REQUIRED, _FLAG_HOST_OK, _FLAG_RC_OK, _FLAG_SIM = (
 )
 _TELEMETRY_FLAGS = tuple(TelemetryFlags(bits) for bits in range(1 << 5))
 """Every combination of the five flags, by value (building an IntFlag per frame is slow)."""
-
-
-_ACK_TEXT_MAX = 48
 
 
 def _is_set(stop: threading.Event | Callable[[], bool] | None) -> bool:

@@ -98,17 +98,19 @@ class SimMotorBus(MotorBus):
         inbox = self._inbox
         recorder = self.recorder
         payloads = self._feedback_payloads
-        if faults is None and payloads is not None and recorder is None:
-            # No fault can touch the frames and none is recorded: take them packed (the same bytes,
-            # without building and validating three MotorFeedback objects per millisecond).
-            inbox.extend(zip(_FEEDBACK_IDS, payloads(), strict=False))
-            return
-        t = self._now_us()
-        if faults is None and payloads is not None and recorder is not None:
-            for can_id, data in zip(_FEEDBACK_IDS, payloads(), strict=False):
+        if faults is None and payloads is not None:
+            # No fault can touch the frames: take them packed (the same bytes, without building and
+            # validating three MotorFeedback objects per millisecond).
+            frames = zip(_FEEDBACK_IDS, payloads(), strict=False)
+            if recorder is None:
+                inbox.extend(frames)
+                return
+            t = self._now_us()
+            for can_id, data in frames:
                 inbox.append((can_id, data))
                 recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))
             return
+        t = self._now_us()
         for motor, fb in enumerate(self._motors.feedback(), start=1):
             frame: MotorFeedback | None = fb if faults is None else faults.feedback(t, motor, fb)
             if frame is None:

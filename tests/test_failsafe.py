@@ -283,8 +283,7 @@ def test_arm_refused_during_estop() -> None:
 def test_phase_events_carry_board_time() -> None:
     events = EventQueue(16)
     fs = Failsafe(FirmwareConfig(), events)
-    for i in range(3):
-        fs.on_motor_feedback(5_000, i)
+    fs.on_motor_frames(5_000, [(1, None), (2, None), (3, None)])
     fs.on_rc_frame(5_000, Lever.DOWN)
     assert fs.update(5_000) == Phase.OK
     assert fs.update(40_000) == Phase.MOTOR_FAULT  # motors silent first (priority over RC)
