@@ -95,6 +95,9 @@ class LinkWire:
         self.board = WireEnd()
         self.faults = faults
         self.recorder = recorder
+        self.tx_tap: bytearray | None = None
+        """When set, collects every byte the board sends, before any link fault (the run record reads the
+        board's own messages from it)."""
 
     def carry(self, t_us: int) -> None:
         """Deliver everything written so far (subject to faults)."""
@@ -125,8 +128,11 @@ class LinkWire:
             return  # nothing written, nothing delayed in flight (only a fault delays bytes)
         data = bytes(outbox)
         outbox.clear()
-        if data and self.recorder is not None:
-            self.recorder.write_raw(recording.LINK_TX, t_us, data)
+        if data:
+            if self.recorder is not None:
+                self.recorder.write_raw(recording.LINK_TX, t_us, data)
+            if self.tx_tap is not None:
+                self.tx_tap += data
         if faulty:
             assert self.faults is not None
             data = self.faults.link_bytes(t_us, data, "tx")

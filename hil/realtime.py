@@ -45,19 +45,16 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import itertools
 import logging
 import math
 import queue
 import select
 import threading
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
 
 import numpy as np
-import numpy.typing as npt
 
 from controller.clock import RealTimeClock
 from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig
@@ -72,10 +69,8 @@ from protocol.messages import (
     CommandAck,
     CommandCode,
     Event,
-    EventKind,
     Heartbeat,
     Message,
-    Mode,
     ParamRequest,
     ParamSet,
     ParamValue,
@@ -92,18 +87,16 @@ from .errors import HilError
 from .faults import Fault, FaultKind, FaultSet
 from .harness import HEARTBEAT_PERIOD_US
 from .radio import RadioScript
-from .recording import Recorder
-from .scenarios import MS, SCENARIOS, TICK_US, Check, Plan, ScenarioResult, telemetry_json
+from .record import RunRecord, Samples, ScenarioResult
+from .recording import Recorder, telemetry_json
+from .scenarios import SCENARIOS, Plan, judge
 
 __all__ = [
     "BOARD_ONLY_FAULTS",
     "LINK_ALLOWANCE_US",
-    "PORT_CHECKS",
-    "RC_GAP_CHECK",
     "SETTLE_US",
     "TELEMETRY_PERIOD_US",
     "TICK_LATENESS_US",
-    "PortRun",
     "check_port_run",
     "port_scenario_names",
     "run_scenario_on_port",
@@ -151,538 +144,6 @@ _EOF_READS = 200  # readable but empty this many times in a row (>= 1 ms apart):
 _READER_POLL_S = 0.01  # the reader thread checks for a stop this often
 _HOST_FIFO_PRIORITY = 30  # below the virtual board's 50: a board on the same machine keeps its deadlines
 _MARKER_CH2 = 321  # left horizontal stick: no mode reads it; seeing it in telemetry proves our RC rules
-_SETTLED_N = 1e-4  # float32 telemetry: tensions equal to this are the same set-point
-_AFTER_REARM_US = 200 * MS  # lockstep checks "current after re-arming" 200 ms after the pull resumes
-_STEP_TAIL_US = 500 * MS  # manual-teleop: judge each stick step over its last 0.5 s (slew done)
-
-
-# --- the run's record and its check helpers -------------------------------------------------------
-
-
-@dataclass
-class PortRun:
-    """Everything a real-time check may look at, on the board's clock in µs since the scenario started.
-
-    Attributes:
-        plan: the scenario's plan.
-        config: the firmware configuration in force: the plan's, with the values the board reported for
-            its runtime parameters (calibration such as the spool radius is the board's own).
-        duration_us: the scenario's duration.
-        t_us: board time of each telemetry sample in ``[0, duration_us)``.
-        current_raw: commanded currents (raw C610 units), shape (n, 3).
-        target_n: tension targets, shape (n, 3).
-        phase: failsafe phase per sample.
-        mode: mode per sample.
-        rc_frames_ok: the board's count of valid RC frames per sample.
-        rc_rejected: the board's count of rejected RC frames per sample.
-        link_crc_errors: the board's count of link CRC errors per sample.
-        rc: every RC frame the board reported receiving (``RawRc``), as (board time, frame).
-        events: board events, as (board time, event).
-        sent: what the host sent (before link faults), as (estimated board time, message).
-        rc_sent_us: estimated board times of the host's ``VirtualRc`` frames.
-        reconnects_us: estimated board times at which the port was reopened after a disconnect.
-        decode_errors: intact frames the host could not decode.
-        telemetry: the telemetry messages behind the arrays.
-        board_telemetry_us: board times of the telemetry frames as the board sent them, before the
-            host-side link faults (only while a scenario runs).
-        board_rc_us: board receive times of the valid RC frames, from the ``RawRc`` the board sent,
-            before the host-side link faults (only while a scenario runs).
-    """
-
-    plan: Plan
-    config: FirmwareConfig
-    duration_us: int
-    t_us: npt.NDArray[np.int64]
-    current_raw: npt.NDArray[np.int64]
-    target_n: npt.NDArray[np.float64]
-    phase: npt.NDArray[np.int64]
-    mode: npt.NDArray[np.int64]
-    rc_frames_ok: npt.NDArray[np.int64]
-    rc_rejected: npt.NDArray[np.int64]
-    link_crc_errors: npt.NDArray[np.int64]
-    rc: list[tuple[int, RcFrame]] = field(default_factory=list)
-    events: list[tuple[int, Event]] = field(default_factory=list)
-    sent: list[tuple[int, Message]] = field(default_factory=list)
-    rc_sent_us: list[int] = field(default_factory=list)
-    reconnects_us: list[int] = field(default_factory=list)
-    decode_errors: int = 0
-    telemetry: list[Telemetry] = field(default_factory=list)
-    board_telemetry_us: list[int] = field(default_factory=list)
-    board_rc_us: list[int] = field(default_factory=list)
-
-    @property
-    def n(self) -> int:
-        """Number of telemetry samples."""
-        return int(self.t_us.size)
-
-    @property
-    def limit_raw(self) -> int:
-        """The current limit in raw units."""
-        return self.config.current_limit_raw
-
-    def window(self, start_us: float, end_us: float | None = None) -> npt.NDArray[np.bool_]:
-        """Mask of the samples with ``start_us <= t < end_us``."""
-        mask = self.t_us >= start_us
-        if end_us is not None:
-            mask &= self.t_us < end_us
-        return mask
-
-    def abs_current(self) -> npt.NDArray[np.int64]:
-        """Largest |commanded current| over the three motors, per sample."""
-        out: npt.NDArray[np.int64] = np.abs(self.current_raw).max(axis=1) if self.n else np.zeros(0, np.int64)
-        return out
-
-    def max_current(self, start_us: float, end_us: float | None = None) -> float:
-        """Largest |commanded current| on ``start_us <= t < end_us`` (NaN, never passing, if no sample)."""
-        cur = self.abs_current()[self.window(start_us, end_us)]
-        return float(cur.max()) if cur.size else math.nan
-
-    def zero_after(self, t_us: float) -> float:
-        """Time from ``t_us`` to the first sample at or after it with zero current on every motor.
-
-        The current became zero at a tick after the previous sample, so this overstates the true time
-        by less than :data:`TELEMETRY_PERIOD_US`.
-        """
-        if math.isnan(t_us):
-            return math.nan
-        idx = np.flatnonzero(self.window(t_us) & (self.abs_current() == 0))
-        return float(self.t_us[idx[0]] - t_us) if idx.size else math.nan
-
-    def count(self, start_us: float, end_us: float | None = None) -> int:
-        """Telemetry samples received on ``start_us <= t < end_us``."""
-        return int(np.count_nonzero(self.window(start_us, end_us)))
-
-    def last_valid_rc_before(self, t_us: float) -> float:
-        """Board time at which the last valid RC frame before ``t_us`` was received (NaN if none).
-
-        From ``RawRc`` (exact); when the board sent none, from the telemetry's ``rc_frames_ok``: then the
-        time of the sample before the last increase (the earliest the frame can have come).
-        """
-        times = [t for t, f in self.rc if t < t_us and f.is_valid()]
-        if times:
-            return float(max(times))
-        mask = self.t_us < t_us
-        ok = self.rc_frames_ok[mask]
-        inc = np.flatnonzero(np.diff(ok) > 0)
-        return float(self.t_us[mask][inc[-1]]) if inc.size else math.nan
-
-    def first_rc_at_or_after(self, t_us: float, right_lever: int) -> float | None:
-        """Board time of the first valid RC frame at or after ``t_us`` with that right lever."""
-        times = [t for t, f in self.rc if t >= t_us and f.is_valid() and f.right_lever == right_lever]
-        return float(min(times)) if times else None
-
-    def event_after(self, t_us: float, kind: EventKind, code: int) -> float:
-        """Time from ``t_us`` to the first board event of that kind and code at or after it (NaN if none)."""
-        times = [t for t, e in self.events if t >= t_us and e.kind == kind and e.code == code]
-        return float(min(times) - t_us) if times and not math.isnan(t_us) else math.nan
-
-    def last_sent_before(self, kind: type[Message], t_us: float) -> float:
-        """Estimated board time of the last message of that type the host sent before ``t_us``."""
-        times = [t for t, m in self.sent if isinstance(m, kind) and t < t_us]
-        return float(max(times)) if times else math.nan
-
-
-def _fault_window(plan: Plan, kind: FaultKind) -> tuple[int, int]:
-    for f in plan.faults:
-        if f.kind is kind:
-            return f.start_us, f.end_us if f.end_us is not None else 1 << 62
-    raise HilError(f"the plan has no {kind} fault")  # a catalogue change the port checks do not know
-
-
-def _rearm_pull_us(plan: Plan) -> int:
-    """When the stick pull resumes after re-arming (the radio script's last step)."""
-    return plan.radio[-1][0]
-
-
-RC_GAP_CHECK: Final = "largest unplanned gap between the RC frames the board received"
-"""Name prefix of every run's validity check (see :func:`_rc_gap_check`)."""
-
-_RC_CUTS = (FaultKind.RC_SILENCE, FaultKind.RC_GARBAGE, FaultKind.RC_OUT_OF_RANGE, FaultKind.LINK_DISCONNECT)
-
-
-def _rc_gap_check(run: PortRun) -> Check:
-    """The run's own validity: the RC stream reached the board without a gap the scenario did not plan.
-
-    A longer gap than the RC timeout makes the board declare RC lost (and latch it), rightly: then the
-    host or the link stalled (a pty's delivery waits for a normal-priority kernel worker), and the run
-    says nothing about the checks that follow. Measured on the board's own receive times (``RawRc``, as
-    the board sent them, before any emulated noise); from the host's send times when it sends none.
-    """
-    cuts = [
-        (f.start_us, f.end_us if f.end_us is not None else 1 << 62)
-        for f in run.plan.faults
-        if f.kind in _RC_CUTS
-    ]
-    times = run.board_rc_us or run.rc_sent_us
-    seen = [t for t in times if 0 <= t < run.duration_us]
-    gaps = [b - a for a, b in itertools.pairwise(seen) if not any(a < e and b > s for s, e in cuts)]
-    bound = run.config.rc_timeout_us if run.board_rc_us else run.config.rc_timeout_us - LINK_ALLOWANCE_US
-    return Check(
-        f"{RC_GAP_CHECK} (longer: the host or the link stalled; the run is void)",
-        float(max(gaps, default=0)),
-        bound,
-        "<=",
-        "us",
-    )
-
-
-def _rc_acted_us(run: PortRun) -> int:
-    """Latest board time after the last valid frame at which the board must have cut the current."""
-    return run.config.rc_timeout_us + TICK_US + TICK_LATENESS_US
-
-
-def _rc_zero_checks(run: PortRun, last: float) -> list[Check]:
-    return [
-        Check(
-            "zero current after the last valid frame",
-            run.zero_after(last),
-            _rc_acted_us(run) + TELEMETRY_PERIOD_US,
-            "<=",
-            "us",
-        ),
-        Check(
-            "RC_LOST reported after the last valid frame (board event)",
-            run.event_after(last, EventKind.PHASE, Phase.RC_LOST),
-            _rc_acted_us(run),
-            "<=",
-            "us",
-        ),
-    ]
-
-
-# --- the checks of each scenario on a port --------------------------------------------------------
-
-
-def _startup_gate(run: PortRun) -> list[Check]:
-    # "Before the lever was seen DOWN": up to the board time of the first DOWN frame it received.
-    down = run.first_rc_at_or_after(0, Lever.DOWN)
-    end = down if down is not None else 600 * MS
-    armed_from = max((t for t, f in run.plan.radio if f.right_lever == Lever.MIDDLE), default=0)
-    return [
-        Check("max |current| before the lever was seen DOWN", run.max_current(0, end), 0, "<=", "raw"),
-        Check(
-            "phase OK before the lever was seen DOWN",
-            float(np.any(run.phase[run.window(0, end)] == Phase.OK)),
-            0,
-            "==",
-        ),
-        Check(
-            "max |current| once armed (stick up)",
-            run.max_current(armed_from + _AFTER_REARM_US),
-            1,
-            ">=",
-            "raw",
-        ),
-    ]
-
-
-def _manual_teleop(run: PortRun) -> list[Check]:
-    cfg = run.config
-    angles = np.radians(np.asarray(cfg.cable_angles_deg, dtype=np.float64))
-    unit = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    steps = list(run.plan.radio)
-    checks: list[Check] = []
-    curl: tuple[int, int] | None = None
-    for i, (start, frame) in enumerate(steps):
-        end = steps[i + 1][0] if i + 1 < len(steps) else run.duration_us
-        ch0, ch1, _, ch3 = frame.channels
-        if frame.right_lever != Lever.MIDDLE:
-            continue
-        if ch3 > 0:
-            curl = (end - _STEP_TAIL_US, end)
-        if not (ch0 or ch1):
-            continue
-        label = ", ".join(f"{k}={v:+d}" for k, v in (("ch0", ch0), ("ch1", ch1)) if v)
-        mask = run.window(max(start, end - _STEP_TAIL_US), end)
-        # The cables' moments: the sum of tension x cable direction; a common tension cancels out.
-        resultant = (run.target_n[mask] @ unit).mean(axis=0) if mask.any() else np.full(2, np.nan)
-        moved = float(np.hypot(*resultant))
-        want = math.atan2(ch1, ch0)
-        err = abs(math.remainder(math.atan2(resultant[1], resultant[0]) - want, 2 * math.pi))
-        deflection = (math.hypot(ch0, ch1) - cfg.stick_deadband) / (660 - cfg.stick_deadband)
-        asked = cfg.bend_max_n * min(1.0, deflection)
-        checks.append(Check(f"bending tension with {label}", moved, asked / 2, ">=", "N"))
-        checks.append(
-            Check(f"bending tension direction error with {label}", math.degrees(err), 5, "<=", "deg")
-        )
-    if curl is not None:
-        during = run.target_n[run.window(*curl)]
-        checks.append(
-            Check(
-                "least target tension with the curl stick up",
-                float(during.min()) if during.size else math.nan,
-                2.0,
-                ">=",
-                "N",
-            )
-        )
-    checks.append(
-        Check(
-            "largest target tension",
-            float(run.target_n.max()) if run.n else math.nan,
-            cfg.tension_max_n + _SETTLED_N,
-            "<=",
-            "N",
-        )
-    )
-    checks.append(Check("largest |current|", run.max_current(0), run.limit_raw, "<=", "raw"))
-    return checks
-
-
-def _rc_loss(run: PortRun) -> list[Check]:
-    start, end = _fault_window(run.plan, FaultKind.RC_SILENCE)
-    last = run.last_valid_rc_before(end)  # no valid frame arrives during the silence
-    rearm = run.first_rc_at_or_after(end, Lever.DOWN)
-    return [
-        Check("|current| before the loss", run.max_current(start - 500 * MS, start), 1, ">=", "raw"),
-        *_rc_zero_checks(run, last),
-        Check(
-            "max |current| from 30 ms after the loss to re-arming",
-            run.max_current(last + _rc_acted_us(run), rearm if rearm is not None else math.nan),
-            0,
-            "<=",
-            "raw",
-        ),
-        Check(
-            "|current| after re-arming",
-            run.max_current(_rearm_pull_us(run.plan) + _AFTER_REARM_US),
-            1,
-            ">=",
-            "raw",
-        ),
-    ]
-
-
-def _rc_garbage(run: PortRun) -> list[Check]:
-    start, end = _fault_window(run.plan, FaultKind.RC_GARBAGE)
-    last = run.last_valid_rc_before(end)
-    during = run.window(start, end)
-    telemetry_changes = int(np.count_nonzero(np.diff(run.mode[during]) != 0))
-    event_changes = sum(1 for t, e in run.events if start <= t < end and e.kind == EventKind.MODE)
-    return [
-        Check(
-            "garbage frames rejected and counted",
-            _counter_rise(run, run.rc_rejected, start, end),
-            50,
-            ">=",
-            "frames",
-        ),
-        *_rc_zero_checks(run, last),
-        Check(
-            "max |current| while garbage arrives",
-            run.max_current(last + _rc_acted_us(run), end),
-            0,
-            "<=",
-            "raw",
-        ),
-        Check("mode changes during the garbage", float(max(telemetry_changes, event_changes)), 1, "<="),
-    ]
-
-
-def _rc_out_of_range(run: PortRun) -> list[Check]:
-    start, end = _fault_window(run.plan, FaultKind.RC_OUT_OF_RANGE)
-    before = run.window(start - 500 * MS, start)
-    during = run.window(start, end)
-    last = run.last_valid_rc_before(end)
-    rise = (
-        float(run.target_n[during].max() - run.target_n[before].max())
-        if during.any() and before.any()
-        else math.nan
-    )
-    return [
-        Check(
-            "out-of-range frames rejected and counted",
-            _counter_rise(run, run.rc_rejected, start, end),
-            60,
-            ">=",
-            "frames",
-        ),
-        Check(
-            "largest target tension while they arrive (never above the last valid command)",
-            rise,
-            0.0,
-            "<=",
-            "N",
-        ),
-        *_rc_zero_checks(run, last),
-    ]
-
-
-def _counter_rise(run: PortRun, counter: npt.NDArray[np.int64], start_us: int, end_us: int) -> float:
-    """How much a board counter rose from before ``start_us`` to shortly after ``end_us``."""
-    before = counter[run.window(0, start_us)]
-    after = counter[run.window(0, end_us + TELEMETRY_PERIOD_US)]
-    if not before.size or not after.size:
-        return math.nan
-    return float(after.max() - before.max())
-
-
-def _link_noise(run: PortRun) -> list[Check]:
-    cfg = run.config
-    lo, hi = cfg.pretension_n, cfg.tension_max_n
-    sent = [
-        tuple(min(hi, max(lo, v)) for v in m.args)
-        for _, m in run.sent
-        if isinstance(m, Command) and m.code == CommandCode.SET_TENSIONS
-    ]
-    sent.append((lo, lo, lo))  # the board's set-point before any SET_TENSIONS
-    # A DIRECT sample whose targets did not move since the previous sample has finished slewing: its
-    # targets are the set-point in force (float32 on the wire).
-    applied: list[tuple[float, ...]] = []
-    direct = run.mode == Mode.DIRECT
-    for k in range(1, run.n):
-        if direct[k] and direct[k - 1] and np.array_equal(run.target_n[k], run.target_n[k - 1]):
-            point = tuple(float(x) for x in run.target_n[k])
-            if not any(np.allclose(point, p, atol=_SETTLED_N, rtol=0) for p in applied):
-                applied.append(point)
-    foreign = [p for p in applied if not any(np.allclose(p, s, atol=_SETTLED_N, rtol=0) for s in sent)]
-    # The lockstep counts what survives the noise in each 0.5 s; here the noise is drawn anew on every
-    # run (the byte stream's timing is not repeatable), so the per-window minimum of a 27 % survival
-    # rate would fail about one run in 75 for no fault of the board's. What the board sent is counted
-    # per window, what got through on average.
-    half_s = 500 * MS
-    windows = range(0, run.duration_us, half_s)
-    sent_t = np.asarray(run.board_telemetry_us, dtype=np.int64)
-    per_window = [int(np.count_nonzero((sent_t >= t) & (sent_t < t + half_s))) for t in windows]
-    delivered = run.count(0, run.duration_us) / max(1, len(windows))
-    crc = run.link_crc_errors
-    return [
-        Check("direct-mode tension sets applied", float(len(applied)), 2, ">=", "sets"),
-        Check("applied tension sets that the host never sent", float(len(foreign)), 0, "<=", "sets"),
-        Check(
-            "corrupted frames the board dropped (counted)",
-            float(crc.max() - crc.min()) if crc.size else math.nan,
-            1,
-            ">=",
-            "frames",
-        ),
-        Check(
-            "fewest telemetry frames the board sent in any 0.5 s",
-            float(min(per_window, default=0)),
-            40,
-            ">=",
-            "frames",
-        ),
-        Check("telemetry frames delivered per 0.5 s through the noise", delivered, 5, ">=", "frames"),
-        Check("host decode errors on delivered frames", float(run.decode_errors), 0, "<=", "frames"),
-    ]
-
-
-def _host_gone_common(run: PortRun, kind: FaultKind) -> tuple[int, int, float, list[Check]]:
-    start, end = _fault_window(run.plan, kind)
-    rearm = run.first_rc_at_or_after(end, Lever.DOWN)
-    checks = [
-        Check("|current| before the loss", run.max_current(start - 500 * MS, start), 1, ">=", "raw"),
-    ]
-    return start, end, rearm if rearm is not None else math.nan, checks
-
-
-def _rearmed(run: PortRun) -> Check:
-    return Check(
-        "|current| after re-arming through SAFE",
-        run.max_current(_rearm_pull_us(run.plan) + _AFTER_REARM_US),
-        1,
-        ">=",
-        "raw",
-    )
-
-
-def _host_loss(run: PortRun) -> list[Check]:
-    start, end, rearm, checks = _host_gone_common(run, FaultKind.HOST_LOSS)
-    acted = run.config.host_timeout_us + TICK_US + LINK_ALLOWANCE_US + TICK_LATENESS_US
-    last_hb = run.last_sent_before(Heartbeat, start)
-    lost = np.count_nonzero(run.phase[run.window(start, end)] == Phase.HOST_LOST)
-    checks += [
-        Check(
-            "zero current after the last heartbeat",
-            run.zero_after(last_hb),
-            acted + TELEMETRY_PERIOD_US,
-            "<=",
-            "us",
-        ),
-        Check(
-            "HOST_LOST reported after the last heartbeat (board event)",
-            run.event_after(last_hb, EventKind.PHASE, Phase.HOST_LOST),
-            acted,
-            "<=",
-            "us",
-        ),
-        Check(
-            "max |current| from the timeout to re-arming (latched)",
-            run.max_current(last_hb + acted, rearm),
-            0,
-            "<=",
-            "raw",
-        ),
-        _rearmed(run),
-        Check(
-            "telemetry frames while heartbeats are missing", float(run.count(start, end)), 80, ">=", "frames"
-        ),
-        Check("telemetry frames reporting HOST_LOST", float(lost), 1, ">=", "frames"),
-    ]
-    return checks
-
-
-def _link_disconnect(run: PortRun) -> list[Check]:
-    # Nothing crosses an unplugged link, so the board cannot be watched while it is down: the checks
-    # are what it reports once the link is back (still latched) and after re-arming.
-    start, end, rearm, checks = _host_gone_common(run, FaultKind.LINK_DISCONNECT)
-    back = next((t for t in run.reconnects_us if t >= start), math.nan)
-    latched = run.window(back, rearm) if not math.isnan(back) and not math.isnan(rearm) else run.window(0, 0)
-    checks += [
-        Check(
-            "max |current| after reconnecting, before re-arming (latched)",
-            run.max_current(back, rearm),
-            0,
-            "<=",
-            "raw",
-        ),
-        Check(
-            "telemetry frames reporting OK after reconnecting, before re-arming",
-            float(np.count_nonzero(run.phase[latched] == Phase.OK)) if latched.any() else math.nan,
-            0,
-            "<=",
-            "frames",
-        ),
-        _rearmed(run),
-        Check(
-            "telemetry frames after reconnecting",
-            float(run.count(end + 100 * MS)),
-            100,
-            ">=",
-            "frames",
-        ),
-    ]
-    return checks
-
-
-def _overcurrent(run: PortRun) -> list[Check]:
-    cfg = run.config
-    asked = cfg.common_max_n * cfg.spool_radius_m / cfg.torque_constant_nm_per_a * 1000
-    return [
-        Check("current the mapping asks for", asked, run.limit_raw, ">=", "raw"),
-        Check("largest |current| sent", run.max_current(0), run.limit_raw, "<=", "raw"),
-        Check("the clamp engaged (largest |current| sent)", run.max_current(0), run.limit_raw, ">=", "raw"),
-    ]
-
-
-PORT_CHECKS: dict[str, Callable[[PortRun], list[Check]]] = {
-    "startup-gate": _startup_gate,
-    "manual-teleop": _manual_teleop,
-    "rc-loss": _rc_loss,
-    "rc-garbage": _rc_garbage,
-    "rc-out-of-range": _rc_out_of_range,
-    "link-noise": _link_noise,
-    "link-disconnect": _link_disconnect,
-    "host-loss": _host_loss,
-    "overcurrent": _overcurrent,
-}
-"""The telemetry-based checks of every scenario that runs on a port (the rest are lockstep-only)."""
-
-
-def port_scenario_names() -> list[str]:
-    """The scenarios that can run on a port, in the order of the catalogue."""
-    return [n for n in SCENARIOS if n in PORT_CHECKS and _lockstep_only_reason(n, ()) is None]
 
 
 # --- what can run on a port -----------------------------------------------------------------------
@@ -700,7 +161,7 @@ def _plan_params(plan: Plan) -> dict[str, float]:
 
 def _lockstep_only_reason(name: str, faults: Sequence[Fault]) -> str | None:
     scenario = SCENARIOS[name]
-    plan = scenario.plan()
+    plan = scenario().plan()
     for f in plan.faults:
         if f.kind in BOARD_ONLY_FAULTS:
             return (
@@ -710,11 +171,8 @@ def _lockstep_only_reason(name: str, faults: Sequence[Fault]) -> str | None:
     for f in faults:
         if f.kind in BOARD_ONLY_FAULTS:
             return f"fault {f.kind} can only be injected in a lockstep run (the board side injects it)"
-    if name not in PORT_CHECKS or plan.objects or plan.start_packed:
-        return (
-            f"scenario {name!r} has no real-time checks (its checks need the simulated plant); "
-            "run it without --port"
-        )
+    if scenario.needs_plant or plan.objects or plan.start_packed:
+        return f"scenario {name!r} needs the simulated plant (its scene or its checks); run it without --port"
     default = FirmwareConfig()
     settable = set(PARAM_FIELDS.values())
     for cfg_field in dataclasses.fields(FirmwareConfig):
@@ -722,6 +180,11 @@ def _lockstep_only_reason(name: str, faults: Sequence[Fault]) -> str | None:
         if key not in settable and getattr(plan.firmware, key) != getattr(default, key):
             return f"scenario {name!r} changes {key}, which a board takes only at start-up; use lockstep"
     return None
+
+
+def port_scenario_names() -> list[str]:
+    """The scenarios that can run on a port, in the order of the catalogue."""
+    return [n for n in SCENARIOS if _lockstep_only_reason(n, ()) is None]
 
 
 def check_port_run(name: str, faults: Sequence[Fault] = ()) -> None:
@@ -835,7 +298,8 @@ class _Host:
         self.parser = LinkParser()
         self._clean_parser = LinkParser()
         self.board_telemetry_us: list[int] = []
-        self.board_rc_us: list[int] = []
+        self.board_rc: list[tuple[int, RcFrame]] = []
+        self.board_events: list[Event] = []
         self.faults: FaultSet | None = None
         self.t0_us = 0
         self.rc_at: Callable[[int], bytes | None] = lambda slot_us: None
@@ -920,15 +384,21 @@ class _Host:
                 self._dispatch(now_us, self.parser.feed(held))
 
     def _watch_board(self, data: bytes) -> None:
-        """What the board sent, before the emulated noise: did it keep sending, what RC did it get?"""
+        """What the board sent, before the emulated noise: its telemetry times, the RC it received (with
+        its receive times) and its events."""
         for frame in self._clean_parser.feed(data):
-            with contextlib.suppress(ValueError):
-                if frame.cmd_id == Telemetry.CMD_ID:
-                    self.board_telemetry_us.append(Telemetry.unpack(frame.payload).time_us)
-                elif frame.cmd_id == RawRc.CMD_ID:
-                    raw = RawRc.unpack(frame.payload)
-                    if raw.frame.is_valid():
-                        self.board_rc_us.append(raw.time_us)
+            if frame.cmd_id not in (Telemetry.CMD_ID, RawRc.CMD_ID, Event.CMD_ID):
+                continue
+            try:
+                msg = decode(frame)
+            except ValueError:
+                continue  # counted by the dispatch of the same bytes, when no fault hides them
+            if isinstance(msg, Telemetry):
+                self.board_telemetry_us.append(msg.time_us)
+            elif isinstance(msg, RawRc):
+                self.board_rc.append((msg.time_us, msg.frame))
+            elif isinstance(msg, Event):
+                self.board_events.append(msg)
 
     def _dispatch(self, now_us: int, frames: list[LinkFrame]) -> None:
         for frame in frames:
@@ -1265,7 +735,7 @@ def _radio(host: _Host, plan: Plan, faults: FaultSet, t0_us: int) -> Callable[[i
     return at
 
 
-def _record(host: _Host, plan: Plan, config: FirmwareConfig, t0_us: int, duration_us: int) -> PortRun:
+def _record(host: _Host, plan: Plan, config: FirmwareConfig, t0_us: int, duration_us: int) -> RunRecord:
     """The run as the checks see it: board times relative to the scenario's start."""
     if host.offset_us is None:
         raise HilError(f"no telemetry from {host.port} during the run")
@@ -1274,42 +744,30 @@ def _record(host: _Host, plan: Plan, config: FirmwareConfig, t0_us: int, duratio
     def rel(t_us: int) -> int:
         return t_us - board_t0
 
-    tel = [m for m in host.telemetry if 0 <= rel(m.time_us) < duration_us]
-    tel.sort(key=lambda m: m.time_us)
-    n = len(tel)
-
-    def ints(get: Callable[[Telemetry], Any], width: int = 0) -> npt.NDArray[np.int64]:
-        shape = (n, width) if width else (n,)
-        return np.array([get(m) for m in tel], dtype=np.int64).reshape(shape)
-
-    return PortRun(
-        plan=plan,
+    tel = sorted((m for m in host.telemetry if 0 <= rel(m.time_us) < duration_us), key=lambda m: m.time_us)
+    return RunRecord(
         config=config,
         duration_us=duration_us,
-        t_us=ints(lambda m: rel(m.time_us)),
-        current_raw=ints(lambda m: m.commanded_current, 3),
-        target_n=np.array([m.tension_target_n for m in tel], dtype=np.float64).reshape(n, 3),
-        phase=ints(lambda m: int(m.phase)),
-        mode=ints(lambda m: int(m.mode)),
-        rc_frames_ok=ints(lambda m: m.rc_frames_ok),
-        rc_rejected=ints(lambda m: m.rc_rejected),
-        link_crc_errors=ints(lambda m: m.link_crc_errors),
-        rc=[(rel(m.time_us), m.frame) for m in host.raw_rc if 0 <= rel(m.time_us) < duration_us],
-        events=[(rel(e.time_us), e) for e in host.events],
+        samples=Samples.from_telemetry(tel, board_t0),
+        resolution_us=TELEMETRY_PERIOD_US,
+        lateness_us=TICK_LATENESS_US,
+        link_delay_us=LINK_ALLOWANCE_US,
+        samples_through_link=True,
+        rc=[(rel(t), frame) for t, frame in host.board_rc if 0 <= rel(t) < duration_us],
+        events=[(rel(e.time_us), e) for e in host.board_events],
+        telemetry_sent_us=[rel(t) for t in host.board_telemetry_us],
+        telemetry_received_us=[rel(m.time_us) for m in tel],
         sent=[(t - t0_us, m) for t, m in host.sent if t >= t0_us],
         rc_sent_us=[t - t0_us for t in host.rc_sent_us if t >= t0_us],
         reconnects_us=[t - t0_us for t in host.reconnects_us if t >= t0_us],
         decode_errors=host.decode_errors,
-        telemetry=tel,
-        board_telemetry_us=[rel(t) for t in host.board_telemetry_us],
-        board_rc_us=[rel(t) for t in host.board_rc_us],
     )
 
 
-def _counters(host: _Host, run: PortRun, faults: FaultSet) -> dict[str, int]:
+def _counters(host: _Host, run: RunRecord, faults: FaultSet) -> dict[str, int]:
     out: dict[str, int] = {}
-    if run.telemetry:
-        last = run.telemetry[-1]
+    if host.telemetry:
+        last = host.telemetry[-1]
         for name in (
             "rc_frames_ok",
             "rc_rejected",
@@ -1321,7 +779,7 @@ def _counters(host: _Host, run: PortRun, faults: FaultSet) -> dict[str, int]:
             "control_late",
         ):
             out[name] = int(getattr(last, name))
-        out["control_late_during_run"] = int(last.control_late - run.telemetry[0].control_late)
+        out["control_late_during_run"] = int(last.control_late - host.telemetry[0].control_late)
     parser = host.parser
     rc_sent = sum(1 for t in run.rc_sent_us if t < run.duration_us)
     out.update(
@@ -1387,7 +845,7 @@ def run_scenario_on_port(
     second to prepare the board and to leave it in SAFE with its parameters restored.
 
     Args:
-        name: a name from :data:`hil.scenarios.SCENARIOS` that is in :data:`PORT_CHECKS`.
+        name: a name from :data:`hil.scenarios.SCENARIOS` that can run on a port (:func:`check_port_run`).
         port: a device path, pty path or pyserial URL (``socket://127.0.0.1:PORT``, ...).
         seed: seed of the run's random choices (link noise, garbage frames, out-of-range channels).
         faults: faults added to the scenario's own (the host-side kinds only).
@@ -1404,7 +862,7 @@ def run_scenario_on_port(
             busy), or the board does not answer as a SpiRob board (one-line message).
     """
     check_port_run(name, faults)
-    scenario = SCENARIOS[name]
+    scenario = SCENARIOS[name]()
     plan = scenario.plan()
     plan = dataclasses.replace(plan, faults=(*plan.faults, *faults))
     fault_set = FaultSet(plan.faults, np.random.default_rng(seed))
@@ -1438,5 +896,4 @@ def run_scenario_on_port(
             if recorder is not None:
                 recorder.close()
     run = _record(host, plan, config, t0, duration)
-    checks = [*PORT_CHECKS[name](run), _rc_gap_check(run)]
-    return ScenarioResult(name, seed, tuple(checks), duration, _counters(host, run, fault_set))
+    return ScenarioResult(name, seed, judge(scenario, run, plan), duration, _counters(host, run, fault_set))

@@ -15,6 +15,8 @@ against a port (metadata ``kind`` = :data:`KIND_PORT`).
 
 from __future__ import annotations
 
+import dataclasses
+import enum
 import json
 import struct
 from collections.abc import Iterator, Mapping
@@ -30,6 +32,8 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
+
+from protocol.messages import Telemetry
 
 PROFILE: Final = "spirob"
 RAW_ENCODING: Final = "spirob.raw"
@@ -223,3 +227,17 @@ def read_records(path: str | Path, topics: frozenset[str] | set[str] | None = No
                     channels[rec.id] = rec.topic
         except (McapError, EOFError, struct.error, ValueError):
             return
+
+
+def telemetry_json(msg: Telemetry) -> dict[str, Any]:
+    """A telemetry message as plain JSON numbers (enums as their values, so plotting tools plot them)."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(msg):
+        v = getattr(msg, f.name)
+        if isinstance(v, enum.Enum):
+            out[f.name] = int(v.value)
+        elif isinstance(v, tuple):
+            out[f.name] = list(v)
+        else:
+            out[f.name] = v
+    return out

@@ -10,8 +10,7 @@ from rich.table import Table
 
 from protocol.messages import Mode, Phase
 
-from .harness import Probe
-from .scenarios import ScenarioResult
+from .record import RunRecord, ScenarioResult
 
 
 def results_table(results: Sequence[ScenarioResult], clock: str = "simulated time") -> Table:
@@ -50,8 +49,10 @@ def print_results(results: Sequence[ScenarioResult], console: Console, clock: st
         console.print(f"[green]all {len(results)} scenarios passed[/green]")
 
 
-def plot_run(probe: Probe, out_dir: str | Path, name: str) -> Path:
+def plot_run(run: RunRecord, out_dir: str | Path, name: str) -> Path:
     """Tensions, currents, cable lengths, failsafe phase and tip trajectory of one run, as one PNG.
+
+    The plant's curves (true tensions, cable lengths, tip) appear when the run has a plant (lockstep).
 
     Returns:
         The PNG's path (``out_dir/name.png``).
@@ -63,44 +64,46 @@ def plot_run(probe: Probe, out_dir: str | Path, name: str) -> Path:
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    n = probe.n
-    t = probe.t_us[:n] / 1e6
-    fig, axes = plt.subplots(5, 1, figsize=(9, 13), sharex=False)
+    s, plant = run.samples, run.plant
+    t = s.t_us / 1e6
+    fig, axes = plt.subplots(5 if plant is not None else 3, 1, figsize=(9, 13), sharex=False)
     colors = ("tab:red", "tab:green", "tab:blue")
     ax = axes[0]
     for k in range(3):
-        ax.plot(t, probe.tension_n[:n, k], color=colors[k], label=f"cable {k + 1} (plant)")
-        ax.plot(t, probe.target_n[:n, k], color=colors[k], ls="--", lw=0.8, label=f"cable {k + 1} target")
+        if plant is not None:
+            ax.plot(t, plant.tension_n[:, k], color=colors[k], label=f"cable {k + 1} (plant)")
+        ax.plot(t, s.target_n[:, k], color=colors[k], ls="--", lw=0.8, label=f"cable {k + 1} target")
     ax.set_ylabel("tension [N]")
     ax.legend(ncol=3, fontsize=7)
     ax = axes[1]
     for k in range(3):
-        ax.plot(t, probe.current_raw[:n, k] / 1000.0, color=colors[k], label=f"motor {k + 1}")
+        ax.plot(t, s.current_raw[:, k] / 1000.0, color=colors[k], label=f"motor {k + 1}")
     ax.set_ylabel("current to ESC [A]")
     ax.legend(ncol=3, fontsize=7)
     ax = axes[2]
-    for k in range(3):
-        ax.plot(
-            t, (probe.cable_m[:n, k] - probe.cable_m[0, k]) * 1000, color=colors[k], label=f"cable {k + 1}"
-        )
-    ax.set_ylabel("cable length change [mm]")
-    ax.legend(ncol=3, fontsize=7)
-    ax = axes[3]
-    ax.step(t, probe.phase[:n], where="post", color="tab:blue")
+    ax.step(t, s.phase, where="post", color="tab:blue")
     ax.set_yticks([int(p) for p in Phase], [p.name for p in Phase], fontsize=7)
     ax.set_ylabel("failsafe phase", color="tab:blue")
     mode_ax = ax.twinx()
-    mode_ax.step(t, probe.mode[:n], where="post", color="tab:orange", alpha=0.8)
+    mode_ax.step(t, s.mode, where="post", color="tab:orange", alpha=0.8)
     mode_ax.set_yticks([int(m) for m in Mode], [m.name for m in Mode], fontsize=7)
     mode_ax.set_ylabel("mode", color="tab:orange")
     ax.set_xlabel("time [s]")
-    ax = axes[4]
-    tip = probe.tip_m[:n]
-    sc = ax.scatter(tip[:, 0] * 1000, tip[:, 2] * 1000, c=t, s=2, cmap="viridis")
-    ax.set_xlabel("tip x [mm]")
-    ax.set_ylabel("tip z [mm]")
-    ax.set_aspect("equal", adjustable="datalim")
-    fig.colorbar(sc, ax=ax, label="time [s]")
+    if plant is not None and plant.cable_m.size:
+        ax = axes[3]
+        for k in range(3):
+            ax.plot(
+                t, (plant.cable_m[:, k] - plant.cable_m[0, k]) * 1000, color=colors[k], label=f"cable {k + 1}"
+            )
+        ax.set_ylabel("cable length change [mm]")
+        ax.legend(ncol=3, fontsize=7)
+        ax = axes[4]
+        tip = plant.tip_m
+        sc = ax.scatter(tip[:, 0] * 1000, tip[:, 2] * 1000, c=t, s=2, cmap="viridis")
+        ax.set_xlabel("tip x [mm]")
+        ax.set_ylabel("tip z [mm]")
+        ax.set_aspect("equal", adjustable="datalim")
+        fig.colorbar(sc, ax=ax, label="time [s]")
     fig.suptitle(name)
     fig.tight_layout()
     path = out / f"{name}.png"

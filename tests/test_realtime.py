@@ -19,16 +19,18 @@ from hil.cli import main
 from hil.errors import HilError
 from hil.faults import Fault
 from hil.realtime import (
-    PORT_CHECKS,
-    RC_GAP_CHECK,
-    PortRun,
+    LINK_ALLOWANCE_US,
+    TELEMETRY_PERIOD_US,
+    TICK_LATENESS_US,
     check_port_run,
     port_scenario_names,
     run_scenario_on_port,
 )
+from hil.record import Check, RunRecord, Samples
 from hil.recording import KIND_PORT, LINK_RX, LINK_TX, TELEMETRY, read_metadata, read_records
 from hil.replay import replay
-from hil.scenarios import MS, SCENARIOS, ScenarioResult
+from hil.scenarios import MS, RC_GAP_CHECK, SCENARIOS, Plan, ScenarioResult, judge, run_scenario
+from hil.scenarios.rc_loss import RcLoss
 from protocol.dbus import Lever, RcFrame
 from protocol.link import LinkParser
 from protocol.messages import Command, Event, EventKind, Heartbeat, Phase, Telemetry, VirtualRc
@@ -67,7 +69,12 @@ def test_scenarios_pass_against_the_realtime_virtual_board_over_tcp() -> None:
     zero = checks["rc-loss"]["zero current after the last valid frame"]
     assert zero.bound == 30 * MS + 1 * MS + 10 * MS + 2 * MS  # timeout + tick + telemetry + lateness
     assert checks["rc-loss"]["RC_LOST reported after the last valid frame (board event)"].value > 30 * MS
-    assert checks["host-loss"]["telemetry frames reporting HOST_LOST"].value >= 1
+    assert checks["host-loss"]["samples reporting HOST_LOST"].value >= 1
+    # One set of checks: a port run measures every check the lockstep run does, but for the plant's own.
+    plant_only = {"tip moved", "tip direction error", "least cable tension", "largest current a drive"}
+    for name, result in results.items():
+        lockstep = [c.name for c in run_scenario(name).checks if not any(p in c.name for p in plant_only)]
+        assert [c.name for c in result.checks] == lockstep, name
     noise = results["link-noise"].counters
     assert noise["injected_link_bytes_lost"] > 0 and noise["injected_link_bits_flipped"] > 0
     assert noise["link_crc_errors"] > 0
@@ -177,10 +184,10 @@ def test_cli_reports_a_missing_port_in_one_line(capsys: pytest.CaptureFixture[st
 # --- the checks themselves, on synthetic telemetry (they must be able to fail) -----------------------
 
 
-def _rc_loss_run(cut_us: int | None) -> PortRun:
+def _rc_loss_run(cut_us: int | None) -> tuple[RunRecord, Plan]:
     """rc-loss as a board would report it; ``cut_us`` after the last valid frame it zeroes the current."""
-    plan = SCENARIOS["rc-loss"].plan()
-    duration = SCENARIOS["rc-loss"].duration_us
+    plan = RcLoss().plan()
+    duration = RcLoss.duration_us
     pull = RcFrame((300, 0, 0, 400), Lever.MIDDLE, Lever.DOWN)
     safe = RcFrame.neutral()
     rc: list[tuple[int, RcFrame]] = []
@@ -195,31 +202,37 @@ def _rc_loss_run(cut_us: int | None) -> PortRun:
         on &= ~((t_us >= last + cut_us) & (t_us < 3300 * MS))
     current = np.where(on, 400, 0).astype(np.int64)
     events = [(last + cut_us, Event(0, EventKind.PHASE, int(Phase.RC_LOST)))] if cut_us is not None else []
-    n = t_us.size
-    return PortRun(
-        plan=plan,
+    samples = Samples(t_us.size)
+    samples.n = t_us.size
+    samples.t_us[:] = t_us
+    samples.current_raw[:] = current[:, None]
+    samples.phase[:] = np.where(on, int(Phase.OK), int(Phase.RC_LOST))
+    run = RunRecord(
         config=plan.firmware,
         duration_us=duration,
-        t_us=t_us,
-        current_raw=np.repeat(current[:, None], 3, axis=1),
-        target_n=np.zeros((n, 3)),
-        phase=np.where(on, int(Phase.OK), int(Phase.RC_LOST)).astype(np.int64),
-        mode=np.zeros(n, np.int64),
-        rc_frames_ok=np.zeros(n, np.int64),
-        rc_rejected=np.zeros(n, np.int64),
-        link_crc_errors=np.zeros(n, np.int64),
+        samples=samples,
+        resolution_us=TELEMETRY_PERIOD_US,
+        lateness_us=TICK_LATENESS_US,
+        link_delay_us=LINK_ALLOWANCE_US,
+        samples_through_link=True,
         rc=rc,
         events=events,
         rc_sent_us=[t for t, _ in rc],
     )
+    return run, plan
+
+
+def _judge(cut_us: int | None) -> dict[str, Check]:
+    run, plan = _rc_loss_run(cut_us)
+    return {c.name: c for c in judge(RcLoss(), run, plan)}
 
 
 def test_rc_loss_checks_pass_a_board_that_cuts_in_time_and_fail_one_that_does_not() -> None:
-    good = {c.name: c for c in PORT_CHECKS["rc-loss"](_rc_loss_run(31 * MS))}
+    good = _judge(31 * MS)
     assert all(c.passed for c in good.values()), [c for c in good.values() if not c.passed]
-    late = {c.name: c for c in PORT_CHECKS["rc-loss"](_rc_loss_run(60 * MS))}
+    late = _judge(60 * MS)
     assert not late["zero current after the last valid frame"].passed
     assert not late["RC_LOST reported after the last valid frame (board event)"].passed
-    never = {c.name: c for c in PORT_CHECKS["rc-loss"](_rc_loss_run(None))}
+    never = _judge(None)
     assert math.isnan(never["RC_LOST reported after the last valid frame (board event)"].value)
     assert not never["max |current| from 30 ms after the loss to re-arming"].passed

@@ -11,6 +11,7 @@ from controller.config import FirmwareConfig
 from hil import scenarios
 from hil.faults import Fault, FaultKind
 from hil.scenarios import SCENARIOS, Check, run_scenario
+from hil.scenarios.rc_loss import RcLoss
 
 
 @pytest.mark.parametrize("name", sorted(SCENARIOS))
@@ -23,13 +24,11 @@ def test_scenario_passes(name: str) -> None:
 
 def test_a_slower_rc_timeout_fails_rc_loss(monkeypatch: pytest.MonkeyPatch) -> None:
     # The same scenario against a firmware that waits 60 ms before declaring RC lost must fail.
-    original = scenarios.SCENARIOS["rc-loss"]
+    class SlowRcLoss(RcLoss):
+        def plan(self) -> scenarios.Plan:
+            return dataclasses.replace(super().plan(), firmware=FirmwareConfig(rc_timeout_us=60_000))
 
-    def slow_plan() -> scenarios.Plan:
-        plan = original.plan()
-        return dataclasses.replace(plan, firmware=FirmwareConfig(rc_timeout_us=60_000))
-
-    monkeypatch.setitem(scenarios.SCENARIOS, "rc-loss", dataclasses.replace(original, plan=slow_plan))
+    monkeypatch.setitem(scenarios.SCENARIOS, "rc-loss", SlowRcLoss)
     result = run_scenario("rc-loss")
     assert not result.passed
     bad = {c.name for c in result.checks if not c.passed}

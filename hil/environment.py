@@ -1,0 +1,238 @@
+"""The one lockstep loop: an environment that owns the virtual board, and a task that owns the question.
+
+In the spirit of dm_control's ``rl/control.py``: :class:`Environment` builds the virtual board (firmware,
+plant, radio, wire) and the scripted host on the board link, and advances them one control period per
+:meth:`Environment.step`, in this order::
+
+    task.before_tick   the task acts on the world (moves an object, sends a command)
+    host.before_tick   the host writes what is due (heartbeat, scripted messages)
+    board.tick         physics, delivery, the firmware's due tasks, the command to the ESCs
+    host.after_tick    the host takes what the board sent
+    sample             the run record samples the firmware and the plant (when one is kept)
+    task.after_tick    the task looks at the result
+
+A :class:`Task` is a scenario, an experiment's trial or a benchmark: it never owns a loop. Scenarios,
+experiments, the benchmark and the tests all step through this one loop; what differs is the task.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from types import TracebackType
+
+from controller.rc import DbusSerialSource
+from protocol.link import LinkParser
+from protocol.messages import Event, Message, RawRc, Telemetry, decode
+
+from . import recording
+from .board import BoardConfig, VirtualBoard
+from .faults import Fault
+from .harness import ScriptedHost
+from .radio import RadioScript
+from .record import PlantSamples, RunRecord, Samples
+from .recording import Recorder, telemetry_json
+
+__all__ = ["Environment", "Task"]
+
+
+class Task:
+    """What a run does and asks; every hook is optional (the defaults do nothing)."""
+
+    def initialize(self, env: Environment) -> None:
+        """Called once, after the board is built and before the first tick."""
+
+    def before_tick(self, env: Environment) -> None:
+        """Called before every tick, at the time of the previous one."""
+
+    def after_tick(self, env: Environment) -> None:
+        """Called after every tick (and after the run record sampled it)."""
+
+
+class Environment:
+    """A virtual board in lockstep, a scripted host on its link, and a task.
+
+    Args:
+        config: the board to build.
+        task: the task whose hooks run around every tick (default: none).
+        faults: faults to inject (windows in board time).
+        radio: the pilot's stick and lever script (``config.rc == "radio"``).
+        host_script: messages the host sends, as (time, message).
+        heartbeats: the host sends heartbeats at all.
+        recorder: record every byte in and out of the board (and the decoded telemetry) to MCAP.
+        record_ticks: keep a :class:`~hil.record.RunRecord` with room for this many ticks (0: none, the
+            cheapest loop, for experiments and benchmarks that measure the plant themselves).
+    """
+
+    def __init__(
+        self,
+        config: BoardConfig | None = None,
+        *,
+        task: Task | None = None,
+        faults: Sequence[Fault] = (),
+        radio: RadioScript | None = None,
+        host_script: Sequence[tuple[int, Message]] = (),
+        heartbeats: bool = True,
+        recorder: Recorder | None = None,
+        record_ticks: int = 0,
+    ) -> None:
+        self.task = task if task is not None else Task()
+        self.recorder = recorder
+        self.board = VirtualBoard(config, faults=tuple(faults), radio_script=radio, recorder=recorder)
+        wire = self.board.wire
+        if wire is None:  # a board built without a link end of its own always has a wire
+            raise RuntimeError("a lockstep board has a wire")
+        self.host = ScriptedHost(wire.host, self.board.faults, heartbeats=heartbeats)
+        for t_us, msg in host_script:
+            self.host.at(t_us, msg)
+        self.samples: Samples | None = None
+        self.plant_samples: PlantSamples | None = None
+        self._board_tx: bytearray | None = None
+        if record_ticks > 0:
+            self.samples = Samples(record_ticks)
+            self.plant_samples = PlantSamples(record_ticks)
+            self._board_tx = wire.tx_tap = bytearray()
+        self._telemetry_written = 0
+        self.ticks = 0
+        self.task.initialize(self)
+
+    # --- what tasks look at -----------------------------------------------------------------------
+
+    @property
+    def now_us(self) -> int:
+        """The board's time (of the last tick)."""
+        return self.board.now_us
+
+    @property
+    def period_us(self) -> int:
+        """The control period: one tick."""
+        return self.board.period_us
+
+    # --- the loop ---------------------------------------------------------------------------------
+
+    def step(self) -> None:
+        """One control period (see the module's docstring for the order)."""
+        board, host, task = self.board, self.host, self.task
+        task.before_tick(self)
+        host.before_tick(board.now_us)
+        board.tick()
+        host.after_tick(board.now_us)
+        if self.samples is not None:
+            self._sample()
+        if self.recorder is not None:
+            self._record_telemetry(self.recorder)
+        self.ticks += 1
+        task.after_tick(self)
+
+    def run(
+        self,
+        duration_us: int,
+        *,
+        until: Callable[[], bool] | None = None,
+        progress: Callable[[int, int], None] | None = None,
+    ) -> int:
+        """Step for ``duration_us`` of simulated time, or until ``until()`` holds after a tick.
+
+        Args:
+            duration_us: how long at most.
+            until: checked after every tick; the run stops when it returns True.
+            progress: called as ``progress(ticks_done, ticks_total)`` every 100 ticks.
+
+        Returns:
+            The number of ticks run.
+        """
+        total = max(0, duration_us // self.period_us)
+        for i in range(total):
+            self.step()
+            if progress is not None and (i + 1) % 100 == 0:
+                progress(i + 1, total)
+            if until is not None and until():
+                return i + 1
+        return total
+
+    def _sample(self) -> None:
+        s, p = self.samples, self.plant_samples
+        assert s is not None and p is not None  # only called when a record is kept
+        i = s.n
+        if i >= s.t_us.size:
+            raise IndexError(f"the run record holds {s.t_us.size} ticks")
+        fw = self.board.firmware
+        plant = self.board.plant
+        s.t_us[i] = self.board.now_us
+        s.current_raw[i] = plant.commanded_currents_raw()[:3]
+        s.target_n[i] = fw.tensions_n
+        s.phase[i] = fw.phase
+        s.mode[i] = fw.mode
+        s.grasp[i] = fw.grasp_state
+        s.rc_frames_ok[i] = fw.rc_frames_ok
+        rc = fw.rc
+        s.rc_refused[i] = fw.rc_rejected + (
+            rc.framer.frames_dropped if isinstance(rc, DbusSerialSource) else 0
+        )
+        link = fw.link
+        s.link_crc_errors[i] = link.crc_errors if link is not None else 0
+        p.tension_n[i] = plant.cable_tensions_n()
+        p.tip_m[i] = plant.tip_pose().pos_m
+        p.cable_m[i] = plant.cable_lengths_m()
+        p.applied_a[i] = abs(plant.applied_currents_a()).max()
+        s.n = i + 1
+
+    def _record_telemetry(self, recorder: Recorder) -> None:
+        telemetry = self.host.telemetry
+        if len(telemetry) > self._telemetry_written:
+            for msg in telemetry[self._telemetry_written :]:
+                recorder.write_json(recording.TELEMETRY, msg.time_us, telemetry_json(msg))
+            self._telemetry_written = len(telemetry)
+
+    # --- the result -------------------------------------------------------------------------------
+
+    def record(self, duration_us: int) -> RunRecord:
+        """The run record of what ran so far (needs ``record_ticks``).
+
+        Raises:
+            RuntimeError: the environment keeps no record.
+        """
+        if self.samples is None or self.plant_samples is None or self._board_tx is None:
+            raise RuntimeError("this environment keeps no run record (record_ticks=0)")
+        board, host = self.board, self.host
+        run = RunRecord(
+            config=board.config.firmware,
+            duration_us=duration_us,
+            samples=self.samples.trim(),
+            plant=self.plant_samples.trim(self.samples.n),
+            sent=list(host.sent),
+            telemetry_received_us=[m.time_us for m in host.telemetry],
+            decode_errors=host.decode_errors,
+        )
+        _board_messages(run, bytes(self._board_tx))
+        run.counters = dict(board.firmware.counters)
+        run.counters.update({f"injected_{k}": v for k, v in board.faults.injected.items()})
+        return run
+
+    def close(self) -> None:
+        """Zero current to the plant and release the link (safe twice)."""
+        self.board.close()
+
+    def __enter__(self) -> Environment:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+def _board_messages(run: RunRecord, data: bytes) -> None:
+    """Fill the record's board-message lists from what the board sent, before any link fault."""
+    parser = LinkParser()
+    for frame in parser.feed(data):
+        try:
+            msg = decode(frame)
+        except ValueError:  # the board's own bytes: cannot happen unless the firmware is broken
+            run.decode_errors += 1
+            continue
+        if isinstance(msg, Telemetry):
+            run.telemetry_sent_us.append(msg.time_us)
+        elif isinstance(msg, RawRc):
+            run.rc.append((msg.time_us, msg.frame))
+        elif isinstance(msg, Event):
+            run.events.append((msg.time_us, msg))
