@@ -150,7 +150,7 @@ def _configure_model(p: argparse.ArgumentParser) -> None:
     e = sub.add_parser("export", help="write a self-contained MJCF model of the arm under a drone")
     add_design_arguments(e)
     e.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="MJCF file to write")
-    m = e.add_argument_group("model (defaults: DESIGN.md section 4)")
+    m = e.add_argument_group("model (defaults: the paper's prototype, docs/plant.md)")
     m.add_argument("--total-mass", type=float, metavar="KG", help="mass of the arm [kg] (default 0.0384)")
     m.add_argument(
         "--base-stiffness",
