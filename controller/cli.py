@@ -15,13 +15,19 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import signal
 import sys
-import threading
 from collections.abc import Sequence
 from contextlib import ExitStack
-from types import FrameType
 
+from controller.cli_kit import (
+    EXIT_OK,
+    EXIT_USAGE,
+    Parser,
+    error_line,
+    parse_or_exit,
+    positive_duration,
+    stop_on_signals,
+)
 from controller.clock import RealTimeClock
 from controller.config import FirmwareConfig
 from controller.errors import ConfigError, PortError
@@ -32,12 +38,10 @@ from controller.transport import SerialTransport, Transport
 
 __all__ = ["build_parser", "main", "parse_args"]
 
-EXIT_USAGE = 2
-
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m controller``."""
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="python -m controller",
         description="SpiRob C-board firmware emulator: 1 kHz control of three C610/M2006 motors.",
     )
@@ -51,7 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rc", metavar="PORT", help="DR16 DBUS UART (100000 8E1), e.g. /dev/ttyUSB0")
     p.add_argument("--link", metavar="PORT", help="host link: device path or pyserial URL (socket://...)")
     p.add_argument("--require-host", action="store_true", help="zero current when the host heartbeat stops")
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
+    p.add_argument(
+        "--duration", type=positive_duration, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
+    )
     p.add_argument("--config", metavar="JSON", help="FirmwareConfig fields as a JSON object")
     p.add_argument("--no-fifo", action="store_true", help="do not ask for SCHED_FIFO")
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
@@ -59,12 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    """Parse ``argv`` (default ``sys.argv[1:]``); exits 2 on usage errors like argparse does."""
-    args = build_parser().parse_args(argv)
+    """Parse ``argv`` (default ``sys.argv[1:]``); a usage error is one line on stderr and exit status 2."""
+    parser = build_parser()
+    args = parse_or_exit(parser, argv)
     if args.rc is None and args.link is None:
-        build_parser().error("give --rc (DBUS UART) or --link (virtual RC from the host), or both")
-    if args.duration is not None and args.duration <= 0:
-        build_parser().error("--duration must be > 0")
+        error_line(parser.prog, "give --rc (DBUS UART) or --link (virtual RC from the host), or both")
+        raise SystemExit(EXIT_USAGE)
     return args
 
 
@@ -100,7 +106,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
-    stop = threading.Event()
     try:
         config = _load_config(args)
         with ExitStack() as stack:
@@ -113,12 +118,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             rc: RcSource = DbusSerialSource(args.rc) if args.rc else LinkRcSource()
             stack.callback(rc.close)
             firmware = Firmware(config, bus, rc, link)
-
-            def _stop(signum: int, frame: FrameType | None) -> None:
-                stop.set()
-
-            for signum in (signal.SIGINT, signal.SIGTERM):
-                stack.callback(signal.signal, signum, signal.signal(signum, _stop))
+            # Ctrl-C and SIGTERM end the loop between two ticks; the ExitStack then closes bus and ports.
+            stop = stack.enter_context(stop_on_signals())
             duration_us = None if args.duration is None else int(args.duration * 1e6)
             firmware.run(RealTimeClock(fifo=not args.no_fifo), duration_us=duration_us, stop=stop)
             ctl = firmware.scheduler["control"]
@@ -128,6 +129,6 @@ def main(argv: Sequence[str] | None = None) -> int:
                 file=sys.stderr,
             )
     except (PortError, ConfigError) as exc:
-        print("error: " + " ".join(str(exc).split()), file=sys.stderr)  # one line, always
+        error_line(None, str(exc))
         return EXIT_USAGE
-    return 0
+    return EXIT_OK

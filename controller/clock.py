@@ -5,7 +5,7 @@ drives the firmware — :meth:`controller.firmware.Firmware.run` (real time) or 
 calls :meth:`~controller.firmware.Firmware.run_due` after each plant step. This is the only module of
 ``controller`` that calls ``time.*``.
 
-Real-time facts this module rests on (measured on the project's 2-core machine, see FIELD-NOTES):
+Real-time facts this module rests on (measured on the project's 2-core machine, docs/realtime.md):
 plain ``time.sleep(0.001)`` loops miss 3-6 % of 1 kHz deadlines with stalls up to 200 ms; what holds is
 SCHED_FIFO + absolute ``clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME)`` deadlines + ``gc.freeze()`` /
 ``gc.disable()`` during the loop + 1 ns timer slack (``prctl(PR_SET_TIMERSLACK)``): p99 lateness

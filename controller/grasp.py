@@ -1,4 +1,4 @@
-"""The grasp strategy of seed Note S4 as a state machine producing one curl tension and a direction.
+"""The grasp strategy of the paper's Note S4 as a state machine producing one curl tension and a direction.
 
 Strategy on (octopus-inspired, Note S4 / Fig. S6B)::
 

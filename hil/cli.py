@@ -12,54 +12,32 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import signal
 import sys
-import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import NoReturn, TextIO
+from typing import TextIO
 
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
+from controller.cli_kit import (
+    EXIT_FAILURE,
+    EXIT_OK,
+    Parser,
+    UsageError,
+    positive_duration,
+    run_command,
+    seed,
+    stop_on_signals,
+)
+from hil.cli_design import add_design_arguments, design_from_args
+from hil.cli_experiments import configure_experiment, run_experiment_command
 from hil.mjcf import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig, write_mjcf
-from hil.spiral import PRESETS, SpiralDesign
 
-__all__ = [
-    "COMMANDS",
-    "Command",
-    "UsageError",
-    "add_design_arguments",
-    "build_parser",
-    "design_from_args",
-    "main",
-]
+__all__ = ["COMMANDS", "Command", "build_parser", "main"]
 
 PROG = "spirob-hil"
-EXIT_OK = 0
-EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
-"""Ctrl-C, as a shell reports a process killed by SIGINT (128 + 2)."""
-
-
-class UsageError(Exception):
-    """A user mistake: reported as one line on stderr with exit status 2.
-
-    Attributes:
-        prog: the (sub)command it concerns, e.g. ``spirob-hil design``.
-    """
-
-    def __init__(self, message: str, prog: str = PROG) -> None:
-        super().__init__(message)
-        self.prog = prog
-
-
-class _Parser(argparse.ArgumentParser):
-    """An ArgumentParser whose errors are exceptions (one line, no usage dump)."""
-
-    def error(self, message: str) -> NoReturn:
-        raise UsageError(message, self.prog)
 
 
 @dataclass(frozen=True)
@@ -77,86 +55,6 @@ class Command:
     help: str
     configure: Callable[[argparse.ArgumentParser], None]
     run: Callable[[argparse.Namespace], int]
-
-
-# ---------------------------------------------------------------------- design options (shared)
-
-
-def add_design_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the options that select a :class:`SpiralDesign` (used by ``design``, ``model export``, ...).
-
-    A design is one of: a preset (default ``prototype``); physical inputs (``--length`` and
-    ``--tip-width`` with ``--taper-deg`` or ``--base-width``); or spiral parameters (``--a``, ``--b``,
-    ``--theta0-deg`` or ``--units``). ``--dtheta-deg`` and ``--cables`` apply to the last two forms.
-    """
-    g = parser.add_argument_group("design (default: --preset prototype)")
-    g.add_argument(
-        "--preset", choices=PRESETS, help="a named design: the paper's prototype or the authors' default"
-    )
-    g.add_argument("--length", type=float, metavar="M", help="length of the straightened arm [m]")
-    g.add_argument("--tip-width", type=float, metavar="M", help="width of the tip [m]")
-    g.add_argument(
-        "--taper-deg", type=float, metavar="DEG", help="taper angle of the straightened arm [degrees]"
-    )
-    g.add_argument(
-        "--base-width", type=float, metavar="M", help="width at the base [m] (instead of the taper)"
-    )
-    g.add_argument("--a", type=float, metavar="M", help="spiral scaling factor a [m]")
-    g.add_argument("--b", type=float, metavar="B", help="spiral growth rate b [1/rad]")
-    g.add_argument("--theta0-deg", type=float, metavar="DEG", help="spiral angle of the base [degrees]")
-    g.add_argument("--units", type=int, metavar="N", help="number of units (instead of --theta0-deg)")
-    g.add_argument(
-        "--dtheta-deg", type=float, metavar="DEG", help="discretisation step [degrees] (default 30)"
-    )
-    g.add_argument("--cables", type=int, choices=(1, 2, 3), help="number of cables (default 3)")
-
-
-def design_from_args(args: argparse.Namespace) -> SpiralDesign:
-    """Build the design the options of :func:`add_design_arguments` describe.
-
-    Raises:
-        UsageError: options from different forms mixed, or a form incomplete.
-        ValueError: the values do not make a design (negative length, taper of 0 or >= 90°, ...).
-    """
-    physical = [args.length, args.tip_width, args.taper_deg, args.base_width]
-    params = [args.a, args.b, args.theta0_deg, args.units]
-    forms = sum(
-        [args.preset is not None, any(v is not None for v in physical), any(v is not None for v in params)]
-    )
-    if forms > 1:
-        raise UsageError("give a --preset, physical inputs or spiral parameters, not a mix")
-    cables = 3 if args.cables is None else args.cables
-    dtheta = math.radians(30.0 if args.dtheta_deg is None else args.dtheta_deg)
-    if any(v is not None for v in physical):
-        if args.length is None or args.tip_width is None:
-            raise UsageError("physical inputs need --length and --tip-width")
-        if (args.taper_deg is None) == (args.base_width is None):
-            raise UsageError("give exactly one of --taper-deg and --base-width")
-        taper = None if args.taper_deg is None else math.radians(args.taper_deg)
-        return SpiralDesign.from_physical(
-            length_m=args.length,
-            tip_width_m=args.tip_width,
-            taper_rad=taper,
-            base_width_m=args.base_width,
-            dtheta_rad=dtheta,
-            cables=cables,
-        )
-    if any(v is not None for v in params):
-        if args.a is None or args.b is None:
-            raise UsageError("spiral parameters need --a and --b")
-        if (args.theta0_deg is None) == (args.units is None):
-            raise UsageError("give exactly one of --theta0-deg and --units")
-        if args.units is not None:
-            if args.units < 1:
-                raise ValueError(f"--units must be >= 1, got {args.units}")
-            theta0 = args.units * dtheta
-        else:
-            theta0 = math.radians(args.theta0_deg)
-        return SpiralDesign.from_params(args.a, args.b, theta0, dtheta, cables)
-    if args.dtheta_deg is not None:
-        raise UsageError("--dtheta-deg needs physical inputs or spiral parameters (a preset fixes it)")
-    design = SpiralDesign.preset(args.preset or "prototype")
-    return design if args.cables is None else design.with_cables(cables)
 
 
 # ---------------------------------------------------------------------- design
@@ -185,17 +83,6 @@ _ROWS: tuple[tuple[str, str, str], ...] = (
     ("discretisation efficiency eta", "eta", ""),
     ("max load at d_min (eq. 16)", "max_load_d_min_kg", "kg"),
 )
-
-
-def seed_arg(text: str) -> int:
-    """A ``--seed``: a whole number >= 0 (numpy's seeds)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
-    return value
 
 
 def _human(value: float, unit: str) -> str:
@@ -259,11 +146,11 @@ def _parse_object(text: str) -> ObjectConfig:
 
 
 def _configure_model(p: argparse.ArgumentParser) -> None:
-    sub = p.add_subparsers(dest="model_command", metavar="ACTION", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="model_command", metavar="ACTION", required=True, parser_class=Parser)
     e = sub.add_parser("export", help="write a self-contained MJCF model of the arm under a drone")
     add_design_arguments(e)
     e.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="MJCF file to write")
-    m = e.add_argument_group("model (defaults: DESIGN.md section 4)")
+    m = e.add_argument_group("model (defaults: the paper's prototype, docs/plant.md)")
     m.add_argument("--total-mass", type=float, metavar="KG", help="mass of the arm [kg] (default 0.0384)")
     m.add_argument(
         "--base-stiffness",
@@ -341,7 +228,9 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
         metavar="socket://HOST:PORT",
         help="serve the board link on TCP (e.g. socket://127.0.0.1:5760)",
     )
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds (default: until Ctrl-C)")
+    p.add_argument(
+        "--duration", type=positive_duration, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
+    )
     p.add_argument(
         "--rc",
         choices=("link", "radio"),
@@ -349,15 +238,13 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
         help="RC source: the host's virtual RC over the link (default), or a virtual radio holding SAFE",
     )
     p.add_argument("--no-fifo", action="store_true", help="do not ask for SCHED_FIFO real-time priority")
-    p.add_argument("--seed", type=seed_arg, default=0, help="seed of the plant's random choices (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the plant's random choices (default 0)")
 
 
 def _run_board(args: argparse.Namespace) -> int:
     from controller.clock import RealTimeClock
     from hil.board import BoardConfig, realtime_board, run_realtime
 
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise ValueError(f"--duration must be > 0, got {args.duration}")
     design = design_from_args(args)
     try:
         board, url = realtime_board(BoardConfig(design=design, rc=args.rc, seed=args.seed), args.listen)
@@ -368,19 +255,16 @@ def _run_board(args: argparse.Namespace) -> int:
         flush=True,
     )
     print("connect with: spirob-host --port " + url, flush=True)
-    stop = threading.Event()
-    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    # Ctrl-C and SIGTERM end the loop between two ticks; the board then sends zero current.
     try:
-        run_realtime(
-            board,
-            RealTimeClock(fifo=not args.no_fifo),
-            None if args.duration is None else round(args.duration * 1e6),
-            stop,
-        )
-    except KeyboardInterrupt:
-        pass
+        with stop_on_signals() as stop:
+            run_realtime(
+                board,
+                RealTimeClock(fifo=not args.no_fifo),
+                None if args.duration is None else round(args.duration * 1e6),
+                stop,
+            )
     finally:
-        signal.signal(signal.SIGTERM, previous)
         board.close()
     print("virtual board stopped (zero current sent)", flush=True)
     return EXIT_OK
@@ -413,7 +297,7 @@ def _run_list(args: argparse.Namespace) -> int:
 def _configure_run(p: argparse.ArgumentParser) -> None:
     p.add_argument("names", nargs="*", metavar="NAME", help="scenarios to run (see 'spirob-hil list')")
     p.add_argument("--all", action="store_true", help="run every scenario")
-    p.add_argument("--seed", type=seed_arg, default=0, help="seed of every random choice (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object per scenario")
     p.add_argument(
         "--record",
@@ -514,7 +398,7 @@ def _run_run(args: argparse.Namespace) -> int:
             print(f"recorded {name} to {path}")
         if args.report:
             print(f"plots in {args.report}")
-    return 0 if all(r.passed for r in results) else 1
+    return EXIT_OK if all(r.passed for r in results) else EXIT_FAILURE
 
 
 def _record_paths(record: str | None, names: list[str]) -> dict[str, Path]:
@@ -557,7 +441,7 @@ def _run_replay(args: argparse.Namespace) -> int:
     else:
         differ = f"{result.mismatches} of {result.outputs_compared} outputs differ"
         print(f"{path}: {differ}; first: {result.first_mismatch}")
-    return 0 if result.matched else 1
+    return EXIT_OK if result.matched else EXIT_FAILURE
 
 
 COMMANDS: list[Command] = [
@@ -579,8 +463,8 @@ COMMANDS: list[Command] = [
     Command(
         "experiment",
         "reproduce a result of the paper: workspace, packing, strategy, grasp-range, load, dynamic",
-        lambda p: __import__("hil.experiments", fromlist=["_"]).configure_experiment(p),
-        lambda a: __import__("hil.experiments", fromlist=["_"]).run_experiment_command(a),
+        configure_experiment,
+        run_experiment_command,
     ),
 ]
 """The subcommands, in ``--help`` order. Later issues append theirs."""
@@ -588,8 +472,8 @@ COMMANDS: list[Command] = [
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``spirob-hil`` with every subcommand in :data:`COMMANDS`."""
-    parser = _Parser(prog=PROG, description="SpiRob hardware-in-the-loop: design math, plant model, harness.")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=_Parser)
+    parser = Parser(prog=PROG, description="SpiRob hardware-in-the-loop: design math, plant model, harness.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
     for cmd in COMMANDS:
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)
         cmd.configure(p)
@@ -598,25 +482,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``spirob-hil``; returns the exit status."""
+    """Entry point of ``spirob-hil``; returns the exit status (2: a user mistake, 130: Ctrl-C)."""
     parser = build_parser()
-    try:
+
+    def body() -> int:
         args = parser.parse_args(argv)
         status: int = args._run(args)
         return status
-    except UsageError as exc:
-        _error_line(exc.prog, str(exc))
-    except ValueError as exc:
-        _error_line(PROG, str(exc))
-    except KeyboardInterrupt:  # Ctrl-C: recordings in progress are closed on the way out
-        _error_line(PROG, "interrupted")
-        return EXIT_INTERRUPTED
-    return EXIT_USAGE
 
-
-def _error_line(prog: str, message: str) -> None:
-    first = message.strip().splitlines()[0] if message.strip() else "invalid input"
-    print(f"{prog}: error: {first}", file=sys.stderr)
+    # Ctrl-C: recordings in progress are closed on the way out (their ``with`` blocks)
+    return run_command(PROG, body)
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""MJCF generator for 1-, 2- and 3-cable SpiRob arms hanging under a drone (seed Note S3, Fig. S5).
+"""MJCF generator for 1-, 2- and 3-cable SpiRob arms hanging under a drone (the paper's Note S3, Fig. S5).
 
 The generated model (``docs/plant.md`` explains every choice and its source):
 
@@ -87,15 +87,15 @@ class ArmConfig:
 
     Attributes:
         total_mass_kg: mass of all units together, split ∝ β³ (uniform density). Prototype: 38.4 g
-            (FIELD-NOTES: reconstruction of the paper's STL in TPU 95A).
+            (a reconstruction of the paper's STL files in TPU 95A).
         base_stiffness_nm_per_rad: stiffness of the joint nearest the base; joint i has
             ``k_base · β^{−3(i−1)}`` (stiffness ∝ size³, Note S3's proportionality). Published
-            identification of a TPU arm: 0.3-0.8 N·m/rad near the base (DESIGN.md section 4).
+            identification of a TPU arm: 0.3-0.8 N·m/rad near the base.
         damping_ratio: ζ of each joint against the inertia it carries (identification: about 0.13).
         cable_offset_ratio: cable hole radius as a fraction of the local half-width.
         cable_mu: capstan friction coefficient of the cable in the holes (0.25-0.4 reproduces the
-            base-first uncurling, DESIGN.md section 4). 0 disables cable friction.
-        cable_diameter_m: UHMWPE cable diameter (seed Note S1: 0.5 mm); drawing only.
+            base-first uncurling). 0 disables cable friction.
+        cable_diameter_m: UHMWPE cable diameter (the paper's Note S1: 0.5 mm); drawing only.
         joint_armature_kg_m2: rotational inertia added to every arm joint. Numerical: with mass ∝ β³ the
             tip joints carry ~1e-9 kg·m², and MuJoCo scales constraint softness by inverse inertia, so
             joint limits and the cable would give way under cable loads; 3e-6 keeps them within about a
@@ -138,20 +138,20 @@ class ArmConfig:
 
 @dataclass(frozen=True)
 class MotorConfig:
-    """DJI M2006 P36 + C610 + spool, one per cable (DESIGN.md section 2, FIELD-NOTES "M2006 figures").
+    """DJI M2006 P36 + C610 + spool, one per cable (DJI's M2006 P36 and C610 documents).
 
     Attributes:
         torque_constant_nm_per_a: output-shaft torque per amp. Default 0.18 N·m/A: DJI's M2006 P36 figure
-            as quoted in DESIGN.md section 2. FIELD-NOTES: DJI also states "1 N·m rated at 3 A" (about
+            on its product page. DJI also states "1 N·m rated at 3 A" (about
             0.33 N·m/A); the C610 manual's curve is the better reference. The firmware must estimate
             tension with the same constant as the plant.
         gear_ratio: rotor turns per output turn (P36: 36).
         rotor_inertia_kg_m2: rotor inertia before the gearbox. No published figure; 1e-7 kg·m² is the
             estimate for a Ø10 × 15 mm steel/NdFeB inner rotor (1.3 kg seen at the cable with a 10 mm
             spool).
-        spool_radius_m: cable spool radius (10 mm, DESIGN.md section 3).
+        spool_radius_m: cable spool radius (10 mm, the prototype's).
         current_limit_a: largest |current| the plant accepts (C610: 10 A peak = raw 10000).
-        no_load_speed_rad_s: output speed at zero torque (500 rpm, DESIGN.md section 2).
+        no_load_speed_rad_s: output speed at zero torque (500 rpm, DJI's M2006 P36 figure).
         stall_current_a: current the drive could push at standstill; with the no-load speed it sets the
             torque-speed line ``I_avail = I_stall · (1 − ω/ω_nl)``. 18 A puts DJI's rated point (3 A at
             416 rpm) on that line.

@@ -135,8 +135,8 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
     produced: list[tuple[int, str, bytes]] = []
     expected: list[tuple[int, str, bytes]] = []
     ticks = 0
-    records: list[Record] = list(read_records(path, topics=_INPUTS | _OUTPUTS | {recording.TICK}))
-    for i, rec in enumerate(records):
+
+    def feed(rec: Record) -> None:
         topic = rec.topic
         if topic in _OUTPUTS:
             expected.append((rec.time_us, topic, rec.data))
@@ -148,24 +148,44 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
             bus.inbox.append(recording.unpack_can(rec.data))
         elif topic == recording.LINK_RX:
             link.inbox += rec.data
-        elif topic == recording.TICK:
-            t = rec.time_us
-            # Poses are pulled by the firmware during this tick, so they were recorded after its mark.
-            poses.clear()
-            for later in records[i + 1 :]:
-                if later.topic == recording.TICK:
-                    break
-                if later.topic == recording.POSES:
-                    poses.append(poses_message(later.time_us, *recording.unpack_poses(later.data)))
-            fw.run_due(t)
-            produced.extend((t, recording.CAN_TX, frame) for frame in bus.sent)
-            bus.sent.clear()
-            if link.outbox:
-                produced.append((t, recording.LINK_TX, bytes(link.outbox)))
-                link.outbox.clear()
-            ticks += 1
-            if progress is not None and ticks % 500 == 0:
-                progress(ticks)
+
+    def run_tick(t_us: int, segment: list[Record]) -> None:
+        nonlocal ticks
+        # Poses are pulled by the firmware during this tick, so they were recorded after its mark.
+        poses.clear()
+        poses.extend(
+            poses_message(r.time_us, *recording.unpack_poses(r.data))
+            for r in segment
+            if r.topic == recording.POSES
+        )
+        fw.run_due(t_us)
+        produced.extend((t_us, recording.CAN_TX, frame) for frame in bus.sent)
+        bus.sent.clear()
+        if link.outbox:
+            produced.append((t_us, recording.LINK_TX, bytes(link.outbox)))
+            link.outbox.clear()
+        ticks += 1
+        if progress is not None and ticks % 500 == 0:
+            progress(ticks)
+
+    # One pass over the file: the records between two tick marks (one segment) are held until the next
+    # mark, then the tick runs with its poses and the segment's inputs are fed after it, as they arrived.
+    # Each record is touched a bounded number of times, so the replay is linear in the recording's length.
+    tick_us: int | None = None
+    segment: list[Record] = []
+    for rec in read_records(path, topics=_INPUTS | _OUTPUTS | {recording.TICK}):
+        if rec.topic != recording.TICK:
+            segment.append(rec)
+            continue
+        if tick_us is not None:
+            run_tick(tick_us, segment)
+        for held in segment:
+            feed(held)
+        tick_us, segment = rec.time_us, []
+    if tick_us is not None:
+        run_tick(tick_us, segment)
+    for held in segment:
+        feed(held)
     # The board's shutdown sends zero current once after the last tick.
     bus.shutdown()
     if bus.sent:

@@ -1,4 +1,4 @@
-"""Logarithmic-spiral design math of a SpiRob (seed Table S1, Note S2, Note S3).
+"""Logarithmic-spiral design math of a SpiRob (the paper's Table S1, Note S2, Note S3).
 
 The robot's two outer contours are the logarithmic spiral ``ρ(θ) = a·e^{bθ}`` one turn apart; its central
 axis is the *central spiral* ``ρc(θ) = a/2·(e^{2πb} + 1)·e^{bθ}``. The robot occupies ``θ ∈ [0, θ0]`` with
@@ -232,7 +232,7 @@ class SpiralDesign:
 
     @classmethod
     def paper_prototype(cls) -> SpiralDesign:
-        """The paper's drone-mounted 3-cable prototype (DESIGN.md section 4, FIELD-NOTES).
+        """The paper's drone-mounted 3-cable prototype (reconstructed in docs/plant.md).
 
         Built from length 0.23 m, tip width 7 mm, taper 6.5° and Δθ = 30°: 21 units, β ≈ 1.075, base
         width ≈ 32 mm, realised central-axis length ≈ 0.22 m. The published reconstructions (226-231 mm,

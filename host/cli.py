@@ -19,7 +19,6 @@ import ipaddress
 import logging
 import math
 import os
-import signal
 import socket
 import sys
 import threading
@@ -29,6 +28,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from controller.cli_kit import (
+    EXIT_FAILURE,
+    EXIT_OK,
+    EXIT_USAGE,
+    Parser,
+    error_line,
+    parse_or_exit,
+    port_number,
+    positive_duration,
+    stop_on_signals,
+)
 from host.board_client import BoardClient, BoardLinkError, LinkState
 from host.model import CLI_CLIENT, UiModel, new_token
 from host.scene import DronePose, SceneObject, scene_objects
@@ -42,9 +52,7 @@ __all__ = ["HostApp", "HostError", "HostOptions", "build_parser", "main"]
 
 _log = logging.getLogger("spirob-host")
 
-EXIT_OK = 0
-EXIT_RUNTIME = 1
-EXIT_USAGE = 2
+PROG = "spirob-host"
 
 VIRTUAL_RC_LEVERS = {"safe": Lever.DOWN, "manual": Lever.MIDDLE, "grasp": Lever.UP}
 """``--virtual-rc`` choices: the right lever position each one ends in (DOWN first, always)."""
@@ -57,26 +65,6 @@ class HostError(Exception):
 # ---------------------------------------------------------------------- argument parsing
 
 
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0: {text!r}")
-    return v
-
-
-def _port_number(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
-    if not 0 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"port must be 0..65535: {text!r}")
-    return v
-
-
 def _mav_id(text: str) -> int:
     try:
         v = int(text)
@@ -87,17 +75,10 @@ def _mav_id(text: str) -> int:
     return v
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (usage errors exit 2, like every other start-up error)."""
-
-    def error(self, message: str) -> Any:  # argparse's signature is NoReturn
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The `spirob-host` argument parser (kept apart from :func:`main` so tests call it with argv)."""
-    p = _Parser(
-        prog="spirob-host",
+    p = Parser(
+        prog=PROG,
         description="SpiRob teleop host: board link, browser panel (viser), recording, MAVLink drone link.",
         epilog="With no --port, the virtual board (MuJoCo plant + firmware emulator) is started.",
     )
@@ -122,19 +103,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ui = p.add_argument_group("panel")
     ui.add_argument("--ui-host", default="127.0.0.1", help="address the panel binds (default 127.0.0.1)")
-    ui.add_argument("--ui-port", type=_port_number, default=8080, help="panel port (default 8080; 0 = any)")
+    ui.add_argument("--ui-port", type=port_number, default=8080, help="panel port (default 8080; 0 = any)")
     ui.add_argument("--headless", action="store_true", help="no panel")
     ui.add_argument(
         "--token",
         help="access token for a non-loopback --ui-host (default: a fresh random one, printed at start)",
     )
     run = p.add_argument_group("run")
-    run.add_argument("--duration", type=_positive_float, metavar="S", help="exit after S seconds")
+    run.add_argument("--duration", type=positive_duration, metavar="S", help="exit after S seconds")
     run.add_argument("--record", type=Path, metavar="FILE", help="record the board link to an MCAP file")
     run.add_argument(
         "--replay", type=Path, metavar="FILE", help="replay a recording (no board) through the same listeners"
     )
-    run.add_argument("--replay-speed", type=_positive_float, default=1.0, help="replay speed factor")
+    run.add_argument("--replay-speed", type=positive_duration, default=1.0, help="replay speed factor")
     mav = p.add_argument_group("drone link (MAVLink)")
     mav.add_argument(
         "--mavlink", metavar="URL", help="pymavlink connection string, e.g. udpout:127.0.0.1:14550"
@@ -773,8 +754,7 @@ def _matrix_to_wxyz(r: Any) -> tuple[float, float, float, float]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `spirob-host`; returns the exit status (0 ok, 1 runtime failure, 2 start-up error)."""
-    parser = build_parser()
-    ns = parser.parse_args(argv)
+    ns = parse_or_exit(build_parser(), argv, hint=" (see --help)")
     # Shorter GIL hand-offs keep the panel's push loop and the link dispatcher responsive while the
     # viser server and numpy work run in other threads (default 5 ms).
     sys.setswitchinterval(0.001)
@@ -784,40 +764,35 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         options = HostOptions.from_args(ns)
     except HostError as exc:
-        print(f"spirob-host: error: {exc}", file=sys.stderr)
+        error_line(PROG, str(exc))
         return EXIT_USAGE
 
-    stop = threading.Event()
-    restore: list[tuple[signal.Signals, Any]] = []
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            restore.append((sig, signal.signal(sig, lambda *_: stop.set())))
-    app = HostApp(options)
-    try:
+    # Ctrl-C and SIGTERM are the normal end of a session: the run loop returns, everything closes in order.
+    with stop_on_signals() as stop:
+        app = HostApp(options)
         try:
-            app.start()
-        except HostError as exc:
-            print(f"spirob-host: error: {exc}", file=sys.stderr)
-            return EXIT_USAGE
-        source = f"replay {options.replay}" if options.replay else app.board_url
-        print(f"spirob-host: board link {source}", flush=True)
-        if app.url:
-            print(f"spirob-host: panel at {app.url}", flush=True)
-            if options.token is not None:
-                print(f"spirob-host: access token {options.token}", flush=True)
-        if options.record is not None:
-            print(f"spirob-host: recording to {options.record}", flush=True)
-        return app.run(options.duration_s, stop)
-    except KeyboardInterrupt:
-        return EXIT_OK
-    except Exception as exc:  # never a traceback for the user; the log has it at debug level
-        _log.debug("fatal", exc_info=True)
-        print(f"spirob-host: error: {exc}", file=sys.stderr)
-        return EXIT_RUNTIME
-    finally:
-        app.close()
-        for sig, handler in restore:
-            signal.signal(sig, handler)
+            try:
+                app.start()
+            except HostError as exc:
+                error_line(PROG, str(exc))
+                return EXIT_USAGE
+            source = f"replay {options.replay}" if options.replay else app.board_url
+            print(f"{PROG}: board link {source}", flush=True)
+            if app.url:
+                print(f"{PROG}: panel at {app.url}", flush=True)
+                if options.token is not None:
+                    print(f"{PROG}: access token {options.token}", flush=True)
+            if options.record is not None:
+                print(f"{PROG}: recording to {options.record}", flush=True)
+            return app.run(options.duration_s, stop)
+        except KeyboardInterrupt:  # Ctrl-C outside the main thread's handler: a normal end too
+            return EXIT_OK
+        except Exception as exc:  # never a traceback for the user; the log has it at debug level
+            _log.debug("fatal", exc_info=True)
+            error_line(PROG, str(exc))
+            return EXIT_FAILURE
+        finally:
+            app.close()
 
 
 if __name__ == "__main__":

@@ -7,8 +7,8 @@ It speaks as component ``compid`` (default 25) of the drone's system ``sysid`` (
 - out: ``HEARTBEAT`` at 1 Hz (``MAV_TYPE_GRIPPER``, ``MAV_AUTOPILOT_INVALID``); ``NAMED_VALUE_FLOAT``
   tensions, mode, failsafe phase and grasp state, and ``ACTUATOR_OUTPUT_STATUS`` motor currents, at
   ``telemetry_rate_hz`` (10 Hz); ``STATUSTEXT`` for board events, refusals and grasp results;
-- in: ``COMMAND_LONG`` ``MAV_CMD_DO_GRIPPER`` (grab / release / hold) with the ACK sequence of DESIGN.md
-  section 2 (``IN_PROGRESS`` then ``ACCEPTED`` / ``FAILED``; ``TEMPORARILY_REJECTED`` while busy;
+- in: ``COMMAND_LONG`` ``MAV_CMD_DO_GRIPPER`` (grab / release / hold) with the ACK sequence of
+  docs/mavlink.md (``IN_PROGRESS`` then ``ACCEPTED`` / ``FAILED``; ``TEMPORARILY_REJECTED`` while busy;
   ``DENIED`` for bad params or when the radio does not allow it; ``UNSUPPORTED`` for other commands);
   the parameter protocol mirroring the firmware's parameters; the drone's ``ATTITUDE`` and
   ``LOCAL_POSITION_NED`` for the panel;

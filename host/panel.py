@@ -16,7 +16,7 @@ Areas and who sees what:
 60 Hz when new poses arrive, plots at 10 Hz, health and control state at 4 Hz): the latest value wins,
 nothing queues up behind a slow browser.
 
-Security (DESIGN.md section 5, FIELD-NOTES "viser 1.1.1"): the caller binds 127.0.0.1 unless told
+Security (docs/host.md): the caller binds 127.0.0.1 unless told
 otherwise; :func:`harden` replaces ``request_share_url`` with a refusal. With a token, a tab is
 authorised when its websocket URL carries ``?token=...`` (the URL printed at start does that through
 viser's ``websocket`` page parameter) or when the token is typed into the panel; an unauthorised tab

@@ -1,4 +1,4 @@
-"""Grasp state machine (seed Note S4): pack, reach, contact, wrap, hold, release; the "off" variant."""
+"""Grasp state machine (the paper's Note S4): pack, reach, contact, wrap, hold, release; the "off" variant."""
 
 from __future__ import annotations
 

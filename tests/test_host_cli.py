@@ -1,12 +1,11 @@
 """`spirob-host` command line: argv in, exit status and one-line errors out.
 
 Runs against the scripted fake board (tests/link_peer.py) on a real pty / TCP socket, and against the
-real virtual board (``hil.board``) when it can be imported.
+real virtual board (``hil.board``).
 """
 
 from __future__ import annotations
 
-import importlib.util
 import socket
 import time
 from collections.abc import Callable, Iterator
@@ -19,13 +18,6 @@ from terminal import ctrl_c, start_in_own_group
 from host.cli import HostApp, HostOptions, build_parser, main
 from protocol.dbus import Lever
 from protocol.messages import Mode, Phase
-
-HAVE_VIRTUAL_BOARD = (
-    importlib.util.find_spec("hil.board") is not None if importlib.util.find_spec("hil") else False
-)
-needs_virtual_board = pytest.mark.skipif(
-    not HAVE_VIRTUAL_BOARD, reason="hil.board (the virtual board, issue 5) cannot be imported yet"
-)
 
 
 def wait_for(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
@@ -199,7 +191,6 @@ def test_unplugged_board_is_retried_and_shown_disconnected() -> None:
 
 
 def test_record_then_replay(peer: LinkPeer, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    pytest.importorskip("mcap")
     path = tmp_path / "run.mcap"
     assert main(["--port", peer.url, "--headless", "--duration", "1", "--record", str(path)]) == 0
     assert path.stat().st_size > 1000
@@ -294,15 +285,13 @@ def test_mavlink_signing_timestamp_path_flag(tmp_path: Path, capsys: pytest.Capt
 # ---------------------------------------------------------------------- the real virtual board
 
 
-@needs_virtual_board
 def test_default_starts_the_virtual_board(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--headless", "--duration", "2", "--virtual-rc", "safe"]) == 0
     assert "board link" in capsys.readouterr().out
 
 
-@needs_virtual_board
 def test_virtual_board_over_a_pty_with_manual_rc() -> None:
-    from hil.board import VirtualBoardProcess  # type: ignore[import-not-found,unused-ignore]
+    from hil.board import VirtualBoardProcess
 
     with VirtualBoardProcess(pty=True) as vb:
         url = vb.start(timeout_s=60.0)
@@ -315,7 +304,6 @@ def test_virtual_board_over_a_pty_with_manual_rc() -> None:
 
 
 def test_scene_objects_from_the_plant_objects() -> None:
-    pytest.importorskip("hil.mjcf")
     import numpy as np
 
     from hil.mjcf import ObjectConfig
@@ -334,11 +322,10 @@ def test_scene_objects_from_the_plant_objects() -> None:
     assert objs[0].color != objs[1].color  # fixed and free objects look different
 
 
-@needs_virtual_board
 def test_the_virtual_boards_objects_are_drawn() -> None:
-    from hil.board import BoardConfig  # type: ignore[import-not-found,unused-ignore]
-    from hil.mjcf import ModelConfig, ObjectConfig  # type: ignore[import-not-found,unused-ignore]
-    from hil.plant import PlantConfig  # type: ignore[import-not-found,unused-ignore]
+    from hil.board import BoardConfig
+    from hil.mjcf import ModelConfig, ObjectConfig
+    from hil.plant import PlantConfig
 
     branch = ObjectConfig("branch", 0.01, 0.12, (0.08, 0.0, 0.85))
     config = BoardConfig(rc="link", plant=PlantConfig(model=ModelConfig().with_objects(branch)))

@@ -1,4 +1,4 @@
-"""The packages import only downward: protocol <- controller <- hil <- host (DESIGN.md section 1)."""
+"""The packages import only downward: protocol <- controller <- hil <- host (docs/architecture.md)."""
 
 from __future__ import annotations
 

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from hil import recording
+from hil import replay as replay_module
 from hil.errors import HilError
 from hil.recording import Recorder, read_metadata, read_records
 from hil.replay import replay
@@ -74,3 +76,37 @@ def test_replay_refuses_a_foreign_file(tmp_path: Path) -> None:
     text.write_text("not a recording\n")
     with pytest.raises(HilError, match="not an MCAP file"):
         replay(text)
+
+
+def test_replay_streams_the_recording_once(rc_loss_recording: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Linear in the recording's length, counted rather than timed: every record is read once, and each
+    tick runs before more than one further tick mark has been read (no copy of what remains, no look
+    ahead past the next mark), so the work per tick does not grow with the file."""
+    ticks_run = 0
+    marks_read = 0
+    records_read = 0
+    behind_max = 0
+
+    class CountingFirmware(replay_module.Firmware):
+        def run_due(self, now_us: int) -> None:
+            nonlocal ticks_run
+            ticks_run += 1
+            super().run_due(now_us)
+
+    def counting_records(path: Path, topics: frozenset[str] | None = None) -> Iterator[recording.Record]:
+        nonlocal marks_read, records_read, behind_max
+        for rec in read_records(path, topics):
+            records_read += 1
+            if rec.topic == recording.TICK:
+                marks_read += 1
+                behind_max = max(behind_max, marks_read - ticks_run)
+            yield rec
+
+    monkeypatch.setattr(replay_module, "Firmware", CountingFirmware)
+    monkeypatch.setattr(replay_module, "read_records", counting_records)
+    result = replay(rc_loss_recording)
+    assert result.matched, result.first_mismatch
+    wanted = replay_module._INPUTS | replay_module._OUTPUTS | {recording.TICK}
+    assert records_read == sum(1 for r in read_records(rc_loss_recording) if r.topic in wanted)
+    assert ticks_run == marks_read == result.ticks == 4000
+    assert behind_max <= 2  # reading mark k, tick k - 2 has run: one segment held, never the file

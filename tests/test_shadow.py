@@ -21,8 +21,6 @@ from host.model import PoseSource, UiModel
 from host.shadow import ShadowConfig, ShadowPlant, ShadowState, reel_in_currents
 from protocol.messages import Message, SimPoses, Telemetry, TelemetryFlags
 
-pytest.importorskip("mujoco")
-
 FRAME_US = 10_000  # the board's telemetry period (100 Hz)
 
 

@@ -1,0 +1,73 @@
+"""Experiments that reproduce the paper's simulation results with the plant and the firmware (issue 8).
+
+Each experiment is a pure function of ``(design, params, seed)`` that runs the virtual board in lockstep
+(firmware + plant, :class:`hil.board.VirtualBoard`) and returns a frozen, picklable result with
+``as_dict()``; a ``progress(done, total)`` callback reports how far it is. Each experiment is one module
+(its parameters, its run, its table rows and its figure); the rig, the grasp trial, the geometry and the
+parallel map they share have their own. ``spirob-hil experiment NAME`` (:mod:`hil.cli_experiments`)
+prints each number next to the paper's prediction and, with ``--report DIR``, writes a PNG.
+
+=============  ==========================================  =============================================
+name           paper                                       what runs through the firmware
+=============  ==========================================  =============================================
+workspace      Note S2, Fig. 2E / S4: envelope ρw          random per-cable tensions (DIRECT mode, host
+                                                           commands over the board link), 2 and 3 cables,
+                                                           three taper angles
+packing        Note S3, Fig. S5C: packed spiral = design b one cable's tension ramped (DIRECT) until every
+                                                           joint sits at its limit
+strategy       Note S4, Fig. S6, Fig. 3C                   the GRASP state machine (left lever) with the
+                                                           strategy on and off, objects on a grid
+grasp-range    eq. (14), (15): d_min, d_max                strategy on/off grasps of cylinders of many
+                                                           diameters, the best wrap angle of each
+load           eq. (16), Fig. 2F: M(φ, d, F_max)           a grasp, then a growing downward load on the
+                                                           object until it slips out
+dynamic        Fig. S11: 0.06 s grasp, 120 ms capture      a current step on one cable (DIRECT); a thrown
+                                                           object against the arm with one cable held
+=============  ==========================================  =============================================
+
+Geometry: the drone sits at (0, 0, 1) m and the arm's base (its mount) 20 mm below it; the arm hangs
+along −z and cable 0 is on its +x side. Object positions are given relative to the base, in the x-z
+plane (the plane cable 0 bends the arm in).
+"""
+
+from __future__ import annotations
+
+from .catalogue import EXPERIMENTS, Experiment, run_experiment
+from .common import SIZES, Progress
+from .dynamic import DynamicParams, DynamicResult
+from .geometry import Envelope, base_first_tip_curve, fit_log_spiral
+from .grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial
+from .grasp_range import GraspRangeParams, GraspRangeResult
+from .load import LoadParams, LoadResult
+from .packing import PackingParams, PackingResult
+from .rig import Rig
+from .strategy import StrategyParams, StrategyResult
+from .workspace import WorkspaceParams, WorkspaceResult
+
+__all__ = [
+    "EXPERIMENTS",
+    "SIZES",
+    "DynamicParams",
+    "DynamicResult",
+    "Envelope",
+    "Experiment",
+    "GraspOutcome",
+    "GraspRangeParams",
+    "GraspRangeResult",
+    "GraspSetup",
+    "LoadParams",
+    "LoadResult",
+    "PackingParams",
+    "PackingResult",
+    "Progress",
+    "Rig",
+    "StrategyParams",
+    "StrategyResult",
+    "WorkspaceParams",
+    "WorkspaceResult",
+    "base_first_tip_curve",
+    "fit_log_spiral",
+    "grasp_firmware",
+    "grasp_trial",
+    "run_experiment",
+]

@@ -1,0 +1,109 @@
+"""The catalogue: every experiment by its CLI name, with its sizes, its table rows and its figure."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..spiral import SpiralDesign
+from . import dynamic, grasp_range, load, packing, strategy, workspace
+from .common import Progress, Row, sized
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One experiment of the catalogue.
+
+    Attributes:
+        name: the CLI word.
+        summary: one line.
+        run: ``run(design, size, seed, progress, jobs)`` -> result.
+        rows: the result's numbers next to the paper's.
+        samples: the result's sample counts, in words.
+        plot: writes the figure, returns its path.
+    """
+
+    name: str
+    summary: str
+    run: Callable[[SpiralDesign, str, int, Progress | None, int], Any]
+    rows: Callable[[Any], list[Row]]
+    samples: Callable[[Any], str]
+    plot: Callable[[Any, Path], Path]
+
+
+EXPERIMENTS: dict[str, Experiment] = {
+    e.name: e
+    for e in (
+        Experiment(
+            "workspace",
+            "random cable tensions on 2- and 3-cable arms of three tapers vs. the envelope ρw (Note S2)",
+            workspace.run_at_size,
+            workspace.table_rows,
+            workspace.describe_samples,
+            workspace.plot_figure,
+        ),
+        Experiment(
+            "packing",
+            "one cable's tension ramped until the arm packs: current, fitted b, curl order (Note S3)",
+            packing.run_at_size,
+            packing.table_rows,
+            packing.describe_samples,
+            packing.plot_figure,
+        ),
+        Experiment(
+            "strategy",
+            "objects on a grid grasped with the strategy on and off: success rates, range map (Note S4)",
+            strategy.run_at_size,
+            strategy.table_rows,
+            strategy.describe_samples,
+            strategy.plot_figure,
+        ),
+        Experiment(
+            "grasp-range",
+            "the smallest and largest cylinder wrapped at least half way vs. d_min, d_max (eq. 14, 15)",
+            grasp_range.run_at_size,
+            grasp_range.table_rows,
+            grasp_range.describe_samples,
+            grasp_range.plot_figure,
+        ),
+        Experiment(
+            "load",
+            "the heaviest object held per diameter at a fixed cable force vs. M(φ, d, F) (eq. 16)",
+            load.run_at_size,
+            load.table_rows,
+            load.describe_samples,
+            load.plot_figure,
+        ),
+        Experiment(
+            "dynamic",
+            "a current step grasping a pen, objects thrown at the arm (Fig. S11)",
+            dynamic.run_at_size,
+            dynamic.table_rows,
+            dynamic.describe_samples,
+            dynamic.plot_figure,
+        ),
+    )
+}
+"""Every experiment, by CLI name."""
+
+
+def run_experiment(
+    name: str,
+    *,
+    design: SpiralDesign | None = None,
+    size: str = "default",
+    seed: int = 0,
+    progress: Progress | None = None,
+    jobs: int = 1,
+) -> Any:
+    """Run the experiment ``name`` at ``size`` (pure; the result is frozen and picklable).
+
+    Raises:
+        KeyError: unknown experiment.
+        ValueError: unknown size.
+    """
+    exp = EXPERIMENTS[name]
+    sized(size, 0, 0, 0)
+    return exp.run(design or SpiralDesign.paper_prototype(), size, seed, progress, max(1, jobs))

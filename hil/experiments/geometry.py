@@ -1,0 +1,145 @@
+"""Geometry of the arm's curl: the log-spiral fit and the workspace envelope ρw."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from ..plant import Plant
+from ..spiral import SpiralDesign
+from .common import BASE_Z_M
+
+
+def fit_log_spiral(points: npt.NDArray[np.complex128]) -> tuple[float, complex, float]:
+    """Fit a discrete logarithmic spiral to planar points (complex numbers), base first.
+
+    Consecutive points of a log spiral are related by one similarity ``z' = s·z + t`` whose fixed point is
+    the pole; log ρ is then regressed on the unwrapped polar angle. Returns ``(b, pole, turn per point)``.
+    """
+    a = np.stack([points[:-1], np.ones(len(points) - 1)], axis=1)
+    s, t = np.linalg.lstsq(a, points[1:], rcond=None)[0]
+    pole = t / (1 - s)
+    w = points - pole
+    angle = np.unwrap(np.angle(w))
+    slope = np.polyfit(angle, np.log(np.abs(w)), 1)[0]
+    return abs(float(slope)), complex(pole), float(np.angle(s))
+
+
+def joint_points_xz(plant: Plant) -> npt.NDArray[np.complex128]:
+    """Joint positions and the tip in the x-z plane (x + i·z), base first."""
+    pos, _ = plant.unit_poses()
+    pts = np.vstack([pos, plant.tip_pose().pos_m])
+    return np.asarray(pts[:, 0] + 1j * pts[:, 2], dtype=np.complex128)
+
+
+def base_first_tip_curve(
+    design: SpiralDesign, base_z_m: float = BASE_Z_M, steps: int = 12
+) -> npt.NDArray[np.float64]:
+    """The real tip's path when the joints close one at a time from the base (Fig. S4A), from the straight
+    arm to the packed one: rows ``(u, z)``, u toward the curl side from the arm's axis, z the world height
+    of a point on an arm whose base (mount) is at ``base_z_m``. Exact for the discretised arm; Table S1's
+    ρw is the smooth involute of the same spiral unwound from the *virtual* tip (θ → −∞), so it lies
+    further out by about the virtual part of the arm, s(0) = δ(0) / (2 tan(φ/2))."""
+    chords = design.unit_chords_m()
+    n = len(chords)
+    dtheta = design.dtheta_rad
+    out = []
+    for k in range(1, n):
+        for a in np.linspace(0.0, dtheta, steps, endpoint=k == n - 1):
+            # joints 1..k-1 closed, joint k at a, the distal ones straight; heading from -z toward +u
+            heading = 0.0
+            u, z = 0.0, base_z_m - chords[0]
+            for j in range(1, n):
+                if j < k:
+                    heading += dtheta
+                elif j == k:
+                    heading += float(a)
+                u += chords[j] * math.sin(heading)
+                z -= chords[j] * math.cos(heading)
+            out.append((u, z))
+    return np.array(out)
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """The workspace envelope ρw of one bending side, in the bending plane (u = horizontal distance from
+    the arm's axis toward the packed side, z = height), as the involute of the packed central spiral
+    about its pole (Table S1; the same construction as ``tests/test_plant.py``)."""
+
+    design: SpiralDesign
+    pole: complex
+    base_angle: float
+    sense: float
+    exact_angle: tuple[float, ...] = field(default=(), repr=False)
+    exact_radius: tuple[float, ...] = field(default=(), repr=False)
+
+    @classmethod
+    def of(cls, plant: Plant) -> Envelope:
+        """Measure the packed spiral's pole on ``plant`` (which is left straight and at rest)."""
+        plant.set_packed(0)
+        pts = joint_points_xz(plant)
+        base_z = float(plant.unit_poses()[0][0][2])
+        _, pole, _ = fit_log_spiral(pts)
+        w = pts - pole
+        base_angle = float(np.angle(w[0]))
+        sense = 1.0 if np.angle(w[1] / w[0]) < 0 else -1.0
+        plant.set_straight()
+        curve = base_first_tip_curve(plant.design, base_z)
+        wc = curve[:, 0] + 1j * curve[:, 1] - pole
+        ang = np.unwrap(np.angle(wc))
+        order = np.argsort(ang)
+        return cls(
+            plant.design,
+            pole,
+            base_angle,
+            sense,
+            tuple(float(v) for v in ang[order]),
+            tuple(float(v) for v in np.abs(wc)[order]),
+        )
+
+    def exact_ratio(self, u: float, z: float) -> float:
+        """Like :meth:`ratio`, against the real tip's base-first curve (:func:`base_first_tip_curve`)."""
+        w = complex(u, z) - self.pole
+        phi = float(np.angle(w))
+        ang = self.exact_angle
+        best = 0.0
+        for k in range(-4, 5):
+            a = phi + 2 * math.pi * k
+            if ang[0] <= a <= ang[-1]:
+                best = max(best, float(np.interp(a, ang, self.exact_radius)))
+        return abs(w) / best if best > 0 else math.inf
+
+    def exact_boundary(self) -> npt.NDArray[np.float64]:
+        """Points ``(u, z)`` of the real tip's base-first curve."""
+        a = np.array(self.exact_angle)
+        z = self.pole + np.array(self.exact_radius) * np.exp(1j * a)
+        return np.stack([z.real, z.imag], axis=1)
+
+    def radius(self, phi: float) -> float:
+        """Envelope radius about the pole at polar angle ``phi`` (0 where the envelope has no point)."""
+        d = self.design
+        best = 0.0
+        for k in range(-4, 5):
+            theta = d.theta0_rad + self.sense * (phi - self.base_angle) + 2 * math.pi * k + math.pi / 2
+            if 0.0 <= theta <= d.theta0_rad:
+                best = max(best, d.rho_w_m(theta + math.pi / 2))
+        return best
+
+    def ratio(self, u: float, z: float) -> float:
+        """Distance from the pole over the envelope radius in that direction (<= 1: inside)."""
+        w = complex(u, z) - self.pole
+        r = self.radius(float(np.angle(w)))
+        return abs(w) / r if r > 0 else math.inf
+
+    def boundary(self, n: int = 200) -> npt.NDArray[np.float64]:
+        """Points ``(u, z)`` of the envelope curve (θ from the tip to the base)."""
+        d = self.design
+        out = []
+        for theta in np.linspace(0.0, d.theta0_rad, n):
+            phi = self.base_angle + self.sense * (theta - math.pi / 2 - d.theta0_rad)
+            p = self.pole + d.rho_w_m(theta + math.pi / 2) * complex(math.cos(phi), math.sin(phi))
+            out.append((p.real, p.imag))
+        return np.array(out)

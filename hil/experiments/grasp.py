@@ -1,0 +1,215 @@
+"""One grasp: the firmware's GRASP state machine against one object, measured (shared by strategy,
+grasp-range and load)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controller.config import FirmwareConfig
+from protocol.dbus import Lever
+from protocol.messages import GraspState
+
+from ..mjcf import ObjectConfig
+from ..spiral import SpiralDesign
+from .common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, S
+from .rig import Rig, contact_units, contact_wrap_deg, rc_frame, world_m
+
+
+@dataclass(frozen=True)
+class GraspSetup:
+    """One grasp trial.
+
+    Attributes:
+        x_m: object centre, horizontal distance from the arm's base on cable 0's side (+x).
+        z_m: object centre, height relative to the base (negative = below).
+        diameter_m: cylinder diameter (axis along y).
+        strategy_on: the bio-inspired strategy (packed start, reach, contact, wrap) or the plain ramp.
+        mass_kg: object mass.
+        length_m: cylinder length.
+        hold_s: how long the object must stay after its support is removed.
+        release: remove the support at HOLD (False: the object stays fixed, a pole or a branch).
+        load_rate_n_per_s: if > 0, once the released object has been held for ``hold_s``, a downward
+            force on it grows at this rate until it drops out (the load experiment).
+        load_cap_n: the load stops growing here.
+        firmware: firmware configuration (None = :func:`grasp_firmware`).
+        seed: seed of the board.
+    """
+
+    x_m: float
+    z_m: float
+    diameter_m: float
+    strategy_on: bool = True
+    mass_kg: float = 0.02
+    length_m: float = 0.06
+    hold_s: float = 0.6
+    release: bool = True
+    load_rate_n_per_s: float = 0.0
+    load_cap_n: float = 20.0
+    firmware: FirmwareConfig | None = None
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class GraspOutcome:
+    """What one grasp trial measured.
+
+    Attributes:
+        setup: the trial.
+        state: the grasp state at the end (``HOLD`` for a completed grasp).
+        t_hold_s: time from the start of the grasp (REACH, or WRAP with the strategy off) to HOLD; NaN if
+            never.
+        contact_s: time from the start of the grasp to the detected contact (strategy on); NaN if none.
+        units_at_hold: arm units touching the object when HOLD was reached.
+        units_after: arm units touching it ``hold_s`` after its support was removed.
+        wrap_deg: angular extent of the contacts around the object at the end.
+        drop_mm: how far below its release height the object is at the end (negative: above).
+        shift_mm: how far the object is from where it was released, at the end.
+        held: HOLD reached, and ``hold_s`` after its support was removed the object still touches at
+            least 2 units, is less than :data:`HELD_DROP_MM` below its release height and slower than
+            :data:`HELD_SPEED_M_S`.
+        max_current_raw: largest |current| sent to an ESC.
+        load_n: with a load ramp, the extra downward force at which the object dropped out (more than
+            :data:`HELD_DROP_MM` below where the ramp started, or no contact); the cap if it never did;
+            NaN without a ramp or if it was not held.
+    """
+
+    setup: GraspSetup
+    state: str
+    t_hold_s: float
+    contact_s: float
+    units_at_hold: int
+    units_after: int
+    wrap_deg: float
+    drop_mm: float
+    shift_mm: float
+    held: bool
+    max_current_raw: int
+    load_n: float = math.nan
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        d = dataclasses.asdict(self)
+        d["setup"] = {k: v for k, v in d["setup"].items() if k != "firmware"}
+        return d
+
+
+def grasp_firmware(**changes: Any) -> FirmwareConfig:
+    """The firmware of the grasp experiments: defaults, except that IDLE winds the pack up at 60 N/s
+    (the trial starts packed and only has to hold it) and a reach that has run its ramp down without
+    contact fails 0.6 s later instead of after 4 s."""
+    base = FirmwareConfig()
+    ramp_s = (base.grasp_pack_n - base.grasp_reach_n) / base.grasp_reach_rate_n_per_s
+    cfg = dataclasses.replace(
+        base, grasp_pack_rate_n_per_s=60.0, grasp_reach_timeout_us=int((ramp_s + 0.6) * S)
+    )
+    return dataclasses.replace(cfg, **changes) if changes else cfg
+
+
+def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspOutcome:
+    """Run one grasp through the firmware's GRASP mode and measure it (pure; picklable in and out).
+
+    Timeline: lever DOWN, then UP (GRASP mode) at 20 ms, left lever UP (grasp request) at 60 ms. The object
+    waits out of reach on its support and is put at its place, still on its support, when the firmware
+    starts the grasp (the drone bringing the ready arm next to it); the support is removed when the
+    firmware reports HOLD; the trial ends ``hold_s`` later, or when the grasp FAILED.
+    """
+    design = design or SpiralDesign.paper_prototype()
+    fw = setup.firmware or grasp_firmware()
+    fw = dataclasses.replace(fw, grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
+    obj = ObjectConfig(
+        OBJ, radius_m=setup.diameter_m / 2, length_m=setup.length_m, pos_m=FAR_M, mass_kg=setup.mass_kg
+    )
+    rig = Rig(
+        design,
+        fw,
+        [(0, rc_frame()), (20 * MS, rc_frame(Lever.UP)), (60 * MS, rc_frame(Lever.UP, Lever.UP))],
+        objects=(obj,),
+        start_packed=setup.strategy_on,
+        seed=setup.seed,
+    )
+    plant = rig.plant
+    plant.hold_object(OBJ)
+    target = world_m(setup.x_m, setup.z_m)
+    t_start = -1
+    t_contact = -1
+    t_hold = -1
+    units_at_hold = 0
+    released_at = np.full(3, math.nan)
+    before_end = np.full(3, math.nan)
+    max_current = 0
+    timeout_us = 12 * S
+    end_us = timeout_us
+    load_n = math.nan
+    while rig.now_us < end_us:
+        rig.tick()
+        state = rig.firmware.grasp_state
+        cur = plant.commanded_currents_raw()
+        max_current = max(max_current, max(abs(c) for c in cur))
+        now = rig.now_us
+        if t_start < 0 and state in (GraspState.REACH, GraspState.WRAP):
+            t_start = now
+            plant.hold_object(OBJ, target)
+        if t_contact < 0 and state == GraspState.WRAP and setup.strategy_on:
+            t_contact = now
+        if t_hold < 0 and state == GraspState.HOLD:
+            t_hold = now
+            units_at_hold = len(contact_units(plant, OBJ))
+            if setup.release:
+                plant.release_object(OBJ)
+            released_at = plant.object_pose(OBJ).pos_m.copy()
+            end_us = now + int(setup.hold_s * S)
+        if t_hold >= 0 and end_us - now == 10 * MS:
+            before_end = plant.object_pose(OBJ).pos_m.copy()
+        if state == GraspState.FAILED:
+            break
+    units_after = len(contact_units(plant, OBJ)) if t_hold >= 0 else 0
+    final = plant.object_pose(OBJ).pos_m
+    drop_mm = float(released_at[2] - final[2]) * 1000
+    shift_mm = float(np.linalg.norm(final - released_at)) * 1000
+    speed = float(np.linalg.norm(final - before_end)) / 0.010
+    held = t_hold >= 0 and units_after >= 2 and drop_mm < HELD_DROP_MM and speed < HELD_SPEED_M_S
+    if held and setup.release and setup.load_rate_n_per_s > 0:
+        load_n = _load_ramp(rig, setup)
+    out = GraspOutcome(
+        setup,
+        GraspState(rig.firmware.grasp_state).name,
+        (t_hold - t_start) / S if t_hold >= 0 else math.nan,
+        (t_contact - t_start) / S if t_contact >= 0 else math.nan,
+        units_at_hold,
+        units_after,
+        contact_wrap_deg(plant, OBJ) if t_hold >= 0 else 0.0,
+        drop_mm,
+        shift_mm,
+        held,
+        max_current,
+        load_n,
+    )
+    rig.close()
+    return out
+
+
+def _load_ramp(rig: Rig, setup: GraspSetup) -> float:
+    """Grow a downward force on the held object until it drops out; the force at that moment [N]."""
+    plant = rig.plant
+    z0 = float(plant.object_pose(OBJ).pos_m[2])
+    rate = setup.load_rate_n_per_s / S
+    t0 = rig.now_us
+    force = 0.0
+    while force < setup.load_cap_n:
+        force = min(setup.load_cap_n, rate * (rig.now_us - t0))
+        plant.apply_object_force(OBJ, (0.0, 0.0, -force))
+        rig.tick()
+        dropped = (z0 - float(plant.object_pose(OBJ).pos_m[2])) * 1000 > HELD_DROP_MM
+        if dropped or not contact_units(plant, OBJ):
+            return force
+    return setup.load_cap_n
+
+
+def grasp_trial_job(args: tuple[GraspSetup, SpiralDesign]) -> GraspOutcome:
+    """:func:`grasp_trial` of one ``(setup, design)`` pair: the unit of work of a parallel map."""
+    return grasp_trial(*args)

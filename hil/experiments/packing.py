@@ -1,0 +1,227 @@
+"""packing (Note S3, Fig. S5C): one cable's tension ramped until the arm packs into the design spiral."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controller.config import FirmwareConfig
+
+from ..spiral import SpiralDesign
+from .common import BASE_Z_M, Progress, Row, pyplot, save_figure, sized
+from .geometry import fit_log_spiral, joint_points_xz
+from .rig import direct_rig
+
+
+@dataclass(frozen=True)
+class PackingParams:
+    """Attributes:
+    tension_end_n: the ramp of cable 0's tension ends here (54 N = 3 A, the firmware's current limit).
+    ramp_s: ramp duration (slow: quasi-static).
+    hold_s: the end tension is held this long before the spiral is fitted.
+    limit_tol_deg: a joint counts as closed within this of its limit Δθ.
+    command_ms: the host sends a new tension this often.
+    """
+
+    tension_end_n: float = 54.0
+    ramp_s: float = 8.0
+    hold_s: float = 0.5
+    limit_tol_deg: float = 1.5
+    command_ms: int = 10
+
+
+@dataclass(frozen=True)
+class PackingResult:
+    """Ramp one cable until the arm packs: the tension and current it took, the fitted spiral, the order."""
+
+    params: PackingParams
+    seed: int
+    b_design: float
+    b_fit: float
+    turn_design_deg: float
+    turn_fit_deg: float
+    joints: int
+    packed: bool
+    pack_tension_n: float
+    pack_current_a: float
+    close_order: tuple[int, ...]
+    close_tension_n: tuple[float, ...]
+    order_correlation: float
+    ramp_tension_n: tuple[float, ...] = field(repr=False)
+    closed_count: tuple[int, ...] = field(repr=False)
+    joint_points: tuple[tuple[float, float], ...] = field(repr=False)
+    pole: tuple[float, float] = field(repr=False)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "experiment": "packing",
+            "seed": self.seed,
+            "b_design": self.b_design,
+            "b_fit": self.b_fit,
+            "b_error": self.b_fit / self.b_design - 1.0,
+            "turn_design_deg": self.turn_design_deg,
+            "turn_fit_deg": self.turn_fit_deg,
+            "joints": self.joints,
+            "packed": self.packed,
+            "pack_tension_n": self.pack_tension_n,
+            "pack_current_a": self.pack_current_a,
+            "close_order": list(self.close_order),
+            "close_tension_n": list(self.close_tension_n),
+            "order_correlation": self.order_correlation,
+            "params": dataclasses.asdict(self.params),
+        }
+
+
+def packing(
+    design: SpiralDesign | None = None,
+    params: PackingParams | None = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+) -> PackingResult:
+    """Ramp cable 0's tension through the firmware (DIRECT) until every joint is at its limit Δθ; fit a
+    logarithmic spiral to the joints; record in which order the joints closed (Note S3, Fig. S5C)."""
+    design = design or SpiralDesign.paper_prototype()
+    p = params or PackingParams()
+    fw = FirmwareConfig(tension_max_n=max(20.0, p.tension_end_n))
+    rig = direct_rig(design, fw, seed=seed)
+    plant = rig.plant
+    limit = design.dtheta_rad - math.radians(p.limit_tol_deg)
+    n_joints = design.joints
+    closed_at = np.full(n_joints, math.nan)
+    ramp_ms = int(p.ramp_s * 1000)
+    total = ramp_ms + int(p.hold_s * 1000)
+    pretension = fw.pretension_n
+    ramp_t: list[float] = []
+    closed_n: list[int] = []
+    pack_t = math.nan
+    pack_i = math.nan
+    for k in range(total):
+        if k % p.command_ms == 0:
+            t_cmd = pretension + (p.tension_end_n - pretension) * min(1.0, k / ramp_ms)
+            rig.set_tensions([t_cmd, pretension, pretension])
+        rig.tick()
+        commanded = rig.firmware.tensions_n[0]
+        angles = np.abs(plant.joint_angles_rad())
+        now_closed = angles >= limit
+        newly = now_closed & np.isnan(closed_at)
+        closed_at[newly] = commanded
+        if k % 20 == 0:
+            ramp_t.append(commanded)
+            closed_n.append(int(now_closed.sum()))
+        if math.isnan(pack_t) and now_closed.all():
+            pack_t = commanded
+            pack_i = abs(plant.commanded_currents_raw()[0]) / 1000.0
+        if progress is not None and k % 100 == 0:
+            progress(k, total)
+    pts = joint_points_xz(plant)
+    b_fit, pole, turn = fit_log_spiral(pts)
+    rig.close()
+    order = tuple(
+        int(j) + 1 for j in np.argsort(np.where(np.isnan(closed_at), np.inf, closed_at), kind="stable")
+    )
+    valid = ~np.isnan(closed_at)
+    if valid.sum() >= 3:
+        ranks_t = np.argsort(np.argsort(closed_at[valid]))
+        ranks_j = np.argsort(np.argsort(np.arange(n_joints)[valid]))
+        corr = float(np.corrcoef(ranks_j, ranks_t)[0, 1])
+    else:
+        corr = math.nan
+    if progress is not None:
+        progress(total, total)
+    return PackingResult(
+        p,
+        seed,
+        design.b,
+        b_fit,
+        math.degrees(design.dtheta_rad),
+        abs(math.degrees(turn)),
+        n_joints,
+        bool(valid.all()),
+        pack_t,
+        pack_i,
+        order,
+        tuple(float(v) for v in closed_at),
+        corr,
+        tuple(ramp_t),
+        tuple(closed_n),
+        tuple((float(z.real), float(z.imag)) for z in pts),
+        (pole.real, pole.imag),
+    )
+
+
+def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+    p = sized(size, PackingParams(ramp_s=1.5, hold_s=0.1), PackingParams(), PackingParams(ramp_s=16.0))
+    return packing(design, p, seed, progress)
+
+
+def table_rows(r: PackingResult) -> list[Row]:
+    """The result\'s numbers next to the paper\'s, one row each."""
+    order = (
+        "tip first" if r.order_correlation < -0.8 else "base first" if r.order_correlation > 0.8 else "mixed"
+    )
+    return [
+        (
+            "fitted spiral b of the packed joints",
+            f"{r.b_fit:.4f} (design {r.b_design:.4f}, {100 * (r.b_fit / r.b_design - 1):+.1f} %)",
+            "packed = the design's log spiral (Fig. S5)",
+        ),
+        ("turn per joint when packed", f"{r.turn_fit_deg:.1f}°", f"Δθ = {r.turn_design_deg:g}°"),
+        ("every joint at its limit", "yes" if r.packed else "no", "yes (tight packing)"),
+        (
+            "cable 0 tension / current that packed it",
+            f"{r.pack_tension_n:.1f} N / {r.pack_current_a:.2f} A",
+            "a minimum force exists (Fig. S3C; no value for this arm)",
+        ),
+        (
+            "curl order (rank correlation joint index vs. closing tension)",
+            f"{order} ({r.order_correlation:+.2f})",
+            "curls from the tip (Fig. S5C, Note S4)",
+        ),
+    ]
+
+
+def describe_samples(r: PackingResult) -> str:
+    """The result\'s sample counts, in words."""
+    return f"1 ramp of {r.params.ramp_s:g} s to {r.params.tension_end_n:g} N, {r.joints} joints"
+
+
+def plot_figure(r: PackingResult, out: Path) -> Path:
+    """Write the figure into the directory ``out``; returns its path (``packing.png``)."""
+    plt = pyplot()
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.5))
+    pts = np.array(r.joint_points)
+    pole = complex(*r.pole)
+    a.plot((pts[:, 0]) * 1000, (pts[:, 1] - BASE_Z_M) * 1000, "o-", ms=3, label="joints (packed)")
+    w = pts[:, 0] + 1j * pts[:, 1] - pole
+    ang = np.unwrap(np.angle(w))
+    th = np.linspace(ang.min(), ang.max(), 300)
+    r0 = abs(w[0])
+    for bb, style, lab in ((r.b_design, "r--", "design b"), (r.b_fit, "g:", "fitted b")):
+        rho = r0 * np.exp(bb * np.sign(ang[0] - ang[-1]) * (th - ang[0]))
+        z = pole + rho * np.exp(1j * th)
+        a.plot(z.real * 1000, (z.imag - BASE_Z_M) * 1000, style, lw=1, label=f"{lab} = {bb:.4f}")
+    a.set_aspect("equal")
+    a.grid(alpha=0.3)
+    a.legend(fontsize=7)
+    a.set_title("packed arm vs. the design spiral", fontsize=9)
+    a.set_xlabel("x [mm]", fontsize=8)
+    a.set_ylabel("z above the base [mm]", fontsize=8)
+    b.plot(r.ramp_tension_n, r.closed_count, "-", lw=1.2)
+    b.set_xlabel("cable 0 tension [N]", fontsize=8)
+    b.set_ylabel("joints at their limit", fontsize=8)
+    b2 = b.twinx()
+    joints = np.arange(1, r.joints + 1)
+    b2.plot(r.close_tension_n, joints, "r.", ms=5)
+    b2.set_ylabel("joint (1 = base) by the tension that closed it", fontsize=8, color="r")
+    b.set_title(
+        f"packs at {r.pack_tension_n:.1f} N ({r.pack_current_a:.2f} A), curling from the tip", fontsize=9
+    )
+    b.grid(alpha=0.3)
+    return save_figure(fig, out / "packing.png")

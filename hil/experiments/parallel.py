@@ -1,0 +1,48 @@
+"""Independent runs over worker processes: a map that reports progress and leaves Ctrl-C to the parent."""
+
+from __future__ import annotations
+
+import signal
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from typing import TypeVar
+
+from .common import Progress
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def parallel_map(
+    fn: Callable[[T], R],
+    items: Sequence[T],
+    jobs: int,
+    progress: Progress | None,
+    done0: int = 0,
+    total: int = 0,
+) -> list[R]:
+    """``[fn(x) for x in items]``, over ``jobs`` processes when > 1, reporting one unit per item."""
+    total = total or done0 + len(items)
+    out: list[R] = []
+    if jobs <= 1 or len(items) <= 1:
+        for i, item in enumerate(items):
+            out.append(fn(item))
+            if progress is not None:
+                progress(done0 + i + 1, total)
+        return out
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_ignore_ctrl_c)
+    try:
+        for i, r in enumerate(pool.map(fn, items)):
+            out.append(r)
+            if progress is not None:
+                progress(done0 + i + 1, total)
+    except BaseException:  # Ctrl-C or a failed item: drop what has not started, do not wait for it
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+    return out
+
+
+def _ignore_ctrl_c() -> None:
+    """Pool workers leave Ctrl-C to the parent (a terminal sends it to the whole process group)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -1,0 +1,171 @@
+"""The rig: a virtual board (firmware + plant + radio) in lockstep with a scripted host, and what the
+experiments measure on its plant (contacts, wrap angle)."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Callable, Sequence
+
+from controller.config import FirmwareConfig
+from protocol.c610 import MotorFeedback
+from protocol.dbus import Lever, RcFrame
+from protocol.messages import Command, CommandCode, Mode
+
+from ..board import BoardConfig, VirtualBoard
+from ..harness import ScriptedHost
+from ..mjcf import ObjectConfig
+from ..plant import Plant, PlantConfig
+from ..radio import RadioScript
+from ..spiral import SpiralDesign
+from .common import BASE_Z_M, MS
+
+
+def rc_frame(right: int = Lever.DOWN, left: int = Lever.DOWN) -> RcFrame:
+    """A radio frame with centred sticks and the two levers at ``right`` and ``left``."""
+    return RcFrame((0, 0, 0, 0), int(right), int(left))
+
+
+class _ThreeMotors:
+    """The C610 trio seen by the firmware when the arm has fewer cables: the spare motor idles.
+
+    The terminal always has three M2006 motors (Note S6); on a 2-cable arm the third has no cable, so it
+    answers with still feedback and its current goes nowhere.
+    """
+
+    def __init__(self, plant: Plant) -> None:
+        self.plant = plant
+        self._spare = MotorFeedback(0, 0, 0, 30)
+
+    def apply_currents(self, raw: Sequence[int]) -> object:
+        return self.plant.apply_currents(list(raw))
+
+    def feedback(self) -> Sequence[MotorFeedback]:
+        fb = tuple(self.plant.feedback())
+        return fb + (self._spare,) * (3 - len(fb))
+
+
+class Rig:
+    """A virtual board (firmware + plant + radio) and a scripted host, stepped in lockstep.
+
+    Args:
+        design: the arm.
+        firmware: firmware configuration.
+        radio: the pilot's lever script.
+        objects: objects in the scene.
+        start_packed: start with the arm coiled on cable 0.
+        seed: seed of the board's random choices.
+    """
+
+    def __init__(
+        self,
+        design: SpiralDesign,
+        firmware: FirmwareConfig,
+        radio: Sequence[tuple[int, RcFrame]],
+        *,
+        objects: Sequence[ObjectConfig] = (),
+        start_packed: bool = False,
+        seed: int = 0,
+    ) -> None:
+        plant = PlantConfig()
+        if objects:
+            plant = dataclasses.replace(plant, model=plant.model.with_objects(*objects))
+        cfg = BoardConfig(
+            design=design, plant=plant, firmware=firmware, rc="radio", seed=seed, start_packed=start_packed
+        )
+        self.board = VirtualBoard(cfg, radio_script=RadioScript(list(radio)))
+        if design.cables < 3:
+            self.board.bus.motors = _ThreeMotors(self.board.plant)
+        assert self.board.wire is not None  # lockstep boards have a wire
+        self.host = ScriptedHost(self.board.wire.host)
+        self.plant = self.board.plant
+        self.firmware = self.board.firmware
+
+    @property
+    def now_us(self) -> int:
+        """Board time."""
+        return self.board.now_us
+
+    def tick(self) -> None:
+        """One control period: host out, physics + firmware, host in."""
+        self.host.before_tick(self.board.now_us)
+        self.board.tick()
+        self.host.after_tick(self.board.now_us)
+
+    def run(self, duration_us: int, each: Callable[[Rig], bool | None] | None = None) -> None:
+        """Tick for ``duration_us``; ``each(rig)`` after every tick may return True to stop early."""
+        for _ in range(max(0, duration_us // self.board.period_us)):
+            self.tick()
+            if each is not None and each(self):
+                return
+
+    def command(self, code: CommandCode, *args: float) -> None:
+        """Send a host command now (it reaches the board on the next tick)."""
+        a = [*args, 0.0, 0.0, 0.0][:3]
+        self.host.send(self.board.now_us, Command(code, (a[0], a[1], a[2])))
+
+    def set_tensions(self, tensions_n: Sequence[float]) -> None:
+        """DIRECT-mode cable tensions (the firmware clamps them to [pretension, tension_max])."""
+        t = [*tensions_n, 0.0, 0.0, 0.0][:3]
+        self.command(CommandCode.SET_TENSIONS, *t)
+
+    def close(self) -> None:
+        """Zero current and release the link."""
+        self.board.close()
+
+
+def direct_rig(
+    design: SpiralDesign,
+    firmware: FirmwareConfig,
+    *,
+    objects: Sequence[ObjectConfig] = (),
+    start_packed: bool = False,
+    seed: int = 0,
+) -> Rig:
+    """A rig in DIRECT mode: lever DOWN (arm), MIDDLE at 20 ms, then the host's SET_MODE DIRECT."""
+    rig = Rig(
+        design,
+        firmware,
+        [(0, rc_frame()), (20 * MS, rc_frame(Lever.MIDDLE))],
+        objects=objects,
+        start_packed=start_packed,
+        seed=seed,
+    )
+    for _ in range(200):
+        rig.tick()
+        if rig.firmware.mode == Mode.MANUAL:
+            break
+    rig.command(CommandCode.SET_MODE, float(Mode.DIRECT))
+    for _ in range(50):
+        rig.tick()
+        if rig.firmware.mode == Mode.DIRECT:
+            return rig
+    raise RuntimeError("the firmware did not enter DIRECT mode")
+
+
+def world_m(x_m: float, z_m: float) -> tuple[float, float, float]:
+    """World position of a point given relative to the arm's base in the x-z plane."""
+    return (x_m, 0.0, BASE_Z_M + z_m)
+
+
+def contact_units(plant: Plant, name: str) -> set[str]:
+    """The arm units touching the object ``name``."""
+    return {c.unit for c in plant.contacts() if c.other == name}
+
+
+def contact_wrap_deg(plant: Plant, name: str) -> float:
+    """Angular extent of the arm's contacts around an object's axis (y), in degrees (0..360).
+
+    The largest gap between contact directions is the part not wrapped; 360° minus it is the wrap.
+    """
+    centre = plant.object_pose(name).pos_m
+    angles = sorted(
+        math.atan2(c.pos_m[2] - centre[2], c.pos_m[0] - centre[0])
+        for c in plant.contacts()
+        if c.other == name
+    )
+    if len(angles) < 2:
+        return 0.0
+    gaps = [b - a for a, b in itertools.pairwise(angles)] + [angles[0] + 2 * math.pi - angles[-1]]
+    return math.degrees(2 * math.pi - max(gaps))

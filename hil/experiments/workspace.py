@@ -1,0 +1,289 @@
+"""workspace (Note S2, Fig. 2E / S4): random per-cable tensions against the envelope ρw."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from controller.config import FirmwareConfig
+
+from ..spiral import SpiralDesign
+from .common import BASE_Z_M, Progress, Row, pct, pyplot, save_figure, sized
+from .geometry import Envelope
+from .parallel import parallel_map
+from .rig import direct_rig
+
+
+@dataclass(frozen=True)
+class WorkspaceParams:
+    """Attributes:
+    tapers_deg: taper angles of the three designs (length, tip width and Δθ of the prototype).
+    cables: cable counts to run for each taper.
+    duration_s: random drive per design (one tip sample every ``sample_ms``).
+    sample_ms: tip sample period.
+    hold_ms: each random tension set is held for a time drawn from this range.
+    tension_max_n: largest random tension (the firmware's per-cable ceiling).
+    cell_m: raster cell of the coverage measure.
+    drive: how a random tension set is drawn (see :func:`_random_tensions`).
+    """
+
+    tapers_deg: tuple[float, ...] = (5.0, 6.5, 9.0)
+    cables: tuple[int, ...] = (2, 3)
+    duration_s: float = 30.0
+    sample_ms: int = 5
+    hold_ms: tuple[int, int] = (50, 300)
+    tension_max_n: float = 20.0
+    cell_m: float = 0.004
+    drive: str = "mixed"
+
+
+@dataclass(frozen=True)
+class WorkspaceRun:
+    """One design's random drive.
+
+    ``inside_share`` / ``coverage`` / ``envelope_area_m2`` refer to Table S1's ρw (the involute unwound from
+    the virtual tip), ``*_exact`` to the real tip's base-first curve (:func:`base_first_tip_curve`);
+    ``inside_share_eta`` allows ρw the discretisation tolerance 1/η. Areas: the half plane on the curl
+    side (u >= 0), rastered in ``cell_m`` cells; ``covered_area_m2``: the cells the tip visited.
+    """
+
+    taper_deg: float
+    cables: int
+    b: float
+    units: int
+    samples: int
+    inside_share: float
+    inside_share_eta: float
+    inside_share_exact: float
+    coverage: float
+    coverage_exact: float
+    envelope_area_m2: float
+    exact_area_m2: float
+    covered_area_m2: float
+    u_m: tuple[float, ...] = field(repr=False)
+    z_m: tuple[float, ...] = field(repr=False)
+    boundary: tuple[tuple[float, float], ...] = field(repr=False)
+    exact_boundary: tuple[tuple[float, float], ...] = field(repr=False)
+
+
+@dataclass(frozen=True)
+class WorkspaceResult:
+    """All designs: the share of tip samples inside ρw, and the covered share of its area."""
+
+    params: WorkspaceParams
+    seed: int
+    runs: tuple[WorkspaceRun, ...]
+
+    @property
+    def inside_share(self) -> float:
+        """Share of all tip samples (every design) inside the envelope."""
+        n = sum(r.samples for r in self.runs)
+        return sum(r.inside_share * r.samples for r in self.runs) / n if n else math.nan
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (without the raw samples)."""
+        return {
+            "experiment": "workspace",
+            "seed": self.seed,
+            "inside_share": self.inside_share,
+            "samples": sum(r.samples for r in self.runs),
+            "runs": [
+                {
+                    k: v
+                    for k, v in dataclasses.asdict(r).items()
+                    if k not in ("u_m", "z_m", "boundary", "exact_boundary")
+                }
+                for r in self.runs
+            ],
+            "params": dataclasses.asdict(self.params),
+        }
+
+
+def _random_tensions(rng: np.random.Generator, p: WorkspaceParams) -> npt.NDArray[np.float64]:
+    """One random tension set: ``uniform`` per cable, or ``single``: one cable anywhere in the range and
+    the others low (one cable at a time is what bends the arm furthest), or ``mixed`` (either, 50/50)."""
+    hi = p.tension_max_n
+    single = p.drive == "single" or (p.drive == "mixed" and rng.random() < 0.5)
+    if not single:
+        return rng.uniform(0.5, hi, 3)
+    out = rng.uniform(0.5, 2.0, 3)
+    out[int(rng.integers(0, 3))] = rng.uniform(0.5, hi)
+    return out
+
+
+def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRun:
+    taper_deg, cables, p, seed = args
+    base = SpiralDesign.paper_prototype()
+    design = SpiralDesign.from_physical(
+        length_m=0.23,
+        tip_width_m=base.tip_width_m,
+        taper_rad=math.radians(taper_deg),
+        dtheta_rad=base.dtheta_rad,
+        cables=cables,
+    )
+    fw = FirmwareConfig(tension_max_n=p.tension_max_n)
+    rig = direct_rig(design, fw, seed=seed)
+    env = Envelope.of(rig.plant)
+    rng = np.random.default_rng([seed, cables, round(taper_deg * 100)])
+    n = int(p.duration_s * 1000 / p.sample_ms)
+    u = np.empty(n)
+    z = np.empty(n)
+    next_change = 0
+    i = 0
+    warm = 300  # ms before the first sample
+    t = 0
+    while i < n:
+        if t >= next_change:
+            tensions = _random_tensions(rng, p)
+            rig.set_tensions(tensions[:cables].tolist() + [0.0] * (3 - cables))
+            next_change = t + int(rng.integers(p.hold_ms[0], p.hold_ms[1] + 1))
+        rig.tick()
+        t += 1
+        if t > warm and t % p.sample_ms == 0:
+            tip = rig.plant.tip_pose().pos_m
+            u[i] = abs(tip[0]) if cables < 3 else math.hypot(tip[0], tip[1])
+            z[i] = tip[2]
+            i += 1
+    rig.close()
+    ratios = np.array([env.ratio(float(a), float(b)) for a, b in zip(u, z, strict=True)])
+    exact = np.array([env.exact_ratio(float(a), float(b)) for a, b in zip(u, z, strict=True)])
+    # Coverage: raster cells whose centre is inside an envelope, and those a sample falls in.
+    bnd = env.boundary()
+    lo_u, hi_u = 0.0, float(max(bnd[:, 0].max(), u.max())) + p.cell_m
+    lo_z, hi_z = (
+        float(min(bnd[:, 1].min(), z.min())) - p.cell_m,
+        float(max(bnd[:, 1].max(), z.max())) + p.cell_m,
+    )
+    nu = int((hi_u - lo_u) / p.cell_m) + 1
+    nz = int((hi_z - lo_z) / p.cell_m) + 1
+    in_w = np.zeros((nu, nz), bool)
+    in_exact = np.zeros((nu, nz), bool)
+    for a in range(nu):
+        for b in range(nz):
+            cu, cz = lo_u + (a + 0.5) * p.cell_m, lo_z + (b + 0.5) * p.cell_m
+            in_w[a, b] = env.ratio(cu, cz) <= 1.0
+            in_exact[a, b] = env.exact_ratio(cu, cz) <= 1.0
+    hit = np.zeros((nu, nz), bool)
+    ia = np.clip(((u - lo_u) / p.cell_m).astype(int), 0, nu - 1)
+    ib = np.clip(((z - lo_z) / p.cell_m).astype(int), 0, nz - 1)
+    hit[ia, ib] = True
+    cell_area = p.cell_m**2
+
+    def share(mask: npt.NDArray[np.bool_]) -> float:
+        cells = int(mask.sum())
+        return float((hit & mask).sum() / cells) if cells else math.nan
+
+    return WorkspaceRun(
+        taper_deg,
+        cables,
+        design.b,
+        design.units,
+        n,
+        float(np.mean(ratios <= 1.0)),
+        float(np.mean(ratios <= 1.0 / design.eta)),
+        float(np.mean(exact <= 1.0 + 1e-9)),
+        share(in_w),
+        share(in_exact),
+        float(in_w.sum()) * cell_area,
+        float(in_exact.sum()) * cell_area,
+        float(hit.sum()) * cell_area,
+        tuple(float(v) for v in u),
+        tuple(float(v) for v in z),
+        tuple((float(a), float(b)) for a, b in bnd),
+        tuple((float(a), float(b)) for a, b in env.exact_boundary()),
+    )
+
+
+def workspace(
+    params: WorkspaceParams | None = None, seed: int = 0, progress: Progress | None = None, jobs: int = 1
+) -> WorkspaceResult:
+    """Random per-cable tensions through the firmware (DIRECT mode) on 2- and 3-cable arms of three
+    taper angles; tip samples against the involute envelope ρw (Note S2, Fig. 2E / S4)."""
+    p = params or WorkspaceParams()
+    items = [(taper, c, p, seed) for taper in p.tapers_deg for c in p.cables]
+    runs = parallel_map(_workspace_run, items, jobs, progress)
+    return WorkspaceResult(p, seed, tuple(runs))
+
+
+def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+    p = sized(
+        size,
+        WorkspaceParams(tapers_deg=(6.5,), cables=(2,), duration_s=0.5),
+        WorkspaceParams(),
+        WorkspaceParams(duration_s=40.0),
+    )
+    return workspace(p, seed, progress, jobs)
+
+
+def table_rows(r: WorkspaceResult) -> list[Row]:
+    """The result\'s numbers next to the paper\'s, one row each."""
+    n = sum(x.samples for x in r.runs)
+    exact = sum(x.inside_share_exact * x.samples for x in r.runs) / n if n else math.nan
+    rows: list[Row] = [
+        ("tip samples inside ρw (all designs)", pct(r.inside_share), "reachable points lie inside ρw"),
+        ("  inside the real tip's base-first curve", pct(exact), "(ρw is for the virtual tip)"),
+    ]
+    for run in r.runs:
+        rows.append(
+            (
+                f"taper {run.taper_deg:g}° (b = {run.b:.3f}), {run.cables} cables: area inside ρw / exact",
+                f"{run.envelope_area_m2 * 1e4:.0f} / {run.exact_area_m2 * 1e4:.0f} cm²",
+                "shrinks as b grows",
+            )
+        )
+        rows.append(
+            (
+                "  share of that area the tip reached (ρw / exact)",
+                f"{pct(run.coverage)} / {pct(run.coverage_exact)} ({run.covered_area_m2 * 1e4:.0f} cm²)",
+                "every point inside is reachable",
+            )
+        )
+    return rows
+
+
+def describe_samples(r: WorkspaceResult) -> str:
+    """The result\'s sample counts, in words."""
+    return (
+        f"{len(r.runs)} designs x {r.params.duration_s:g} s of random tensions, "
+        f"{sum(x.samples for x in r.runs)} tip samples (every {r.params.sample_ms} ms)"
+    )
+
+
+def plot_figure(r: WorkspaceResult, out: Path) -> Path:
+    """Write the figure into the directory ``out``; returns its path (``workspace.png``)."""
+    plt = pyplot()
+    cables = sorted({x.cables for x in r.runs})
+    tapers = sorted({x.taper_deg for x in r.runs})
+    fig, axes = plt.subplots(
+        len(cables), len(tapers), figsize=(3.6 * len(tapers), 4.2 * len(cables)), squeeze=False
+    )
+    for run in r.runs:
+        ax = axes[cables.index(run.cables)][tapers.index(run.taper_deg)]
+        b = np.array(run.boundary)
+        ax.plot(np.array(run.u_m) * 1000, (np.array(run.z_m) - BASE_Z_M) * 1000, ".", ms=1.2, alpha=0.5)
+        ax.plot(b[:, 0] * 1000, (b[:, 1] - BASE_Z_M) * 1000, "r-", lw=1.2, label="ρw (Table S1)")
+        e = np.array(run.exact_boundary)
+        ax.plot(e[:, 0] * 1000, (e[:, 1] - BASE_Z_M) * 1000, "g-", lw=1.0, label="real tip, base first")
+        ax.plot([0], [0], "k^", ms=6, label="base")
+        ax.set_title(
+            f"taper {run.taper_deg:g}°, b={run.b:.3f}, {run.cables} cables\n"
+            f"inside ρw {pct(run.inside_share)}, exact {pct(run.inside_share_exact)}; "
+            f"reached {pct(run.coverage_exact)} of the exact area",
+            fontsize=8,
+        )
+        ax.set_aspect("equal")
+        ax.set_xlim(-20, 280)
+        ax.grid(alpha=0.3)
+        ax.set_xlabel("distance from the arm's axis [mm]", fontsize=7)
+        ax.set_ylabel("height above the base [mm]", fontsize=7)
+        ax.tick_params(labelsize=7)
+    axes[0][0].legend(fontsize=7, loc="lower right")
+    fig.suptitle("workspace: tip samples under random cable tensions vs. the envelope ρw", fontsize=10)
+    return save_figure(fig, out / "workspace.png")
