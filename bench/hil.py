@@ -31,8 +31,8 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
 import numpy as np  # noqa: E402
 
-from hil.board import BoardConfig, VirtualBoard  # noqa: E402
-from hil.harness import ScriptedHost  # noqa: E402
+from hil.board import BoardConfig  # noqa: E402
+from hil.environment import Environment  # noqa: E402
 from hil.plant import Plant  # noqa: E402
 from hil.radio import RadioScript  # noqa: E402
 from hil.scenarios import SCENARIOS, rc, run_scenario  # noqa: E402
@@ -77,9 +77,8 @@ class ClosedLoop:
     def __init__(
         self, seconds: float, seed: int, *, stand_in: np.ndarray | None = None, time_firmware: bool = False
     ) -> None:
-        self.board = VirtualBoard(BoardConfig(seed=seed), radio_script=stick_script(seconds))
-        assert self.board.wire is not None
-        self.host = ScriptedHost(self.board.wire.host, self.board.faults)
+        self.env = Environment(BoardConfig(seed=seed), radio=stick_script(seconds))
+        self.board, self.host = self.env.board, self.env.host
         self.ticks = 0
         self.firmware_s = 0.0
         firmware = self.board.firmware
@@ -106,15 +105,12 @@ class ClosedLoop:
 
     def run(self, ticks: int) -> tuple[float, np.ndarray]:
         """Wall time of ``ticks`` ticks and the currents the ESCs received in each."""
-        board, host = self.board, self.host
-        bus = board.bus
+        step, host, bus = self.env.step, self.host, self.board.bus
         applied: list[tuple[int, ...]] = []
         keep = applied.append  # the benchmark's own bookkeeping: one append per tick
         t0 = time.perf_counter()
         for _ in range(ticks):
-            host.before_tick(board.now_us)
-            board.tick()
-            host.after_tick(board.now_us)
+            step()  # the one lockstep loop every scenario and experiment runs
             keep(bus.applied)
         host.drain()  # the scripted host decodes what it received in batches: timed here, with the loop
         wall = time.perf_counter() - t0
@@ -127,7 +123,7 @@ class ClosedLoop:
             raise SystemExit(
                 f"closed loop broken: {len(self.host.telemetry)} telemetry frames in {self.ticks} ticks"
             )
-        self.board.close()
+        self.env.close()
 
 
 class BarePlant:
@@ -227,7 +223,7 @@ def bounds(seconds: float, seed: int, chunk_s: float, repeats: int) -> None:
     firmware_us = timed.firmware_s / ticks * 1e6
     reference = ClosedLoop(seconds, seed)
     _, currents = reference.run(ticks)
-    reference.board.close()
+    reference.env.close()
     floors = []
     for _ in range(repeats):
         stand_in = ClosedLoop(seconds, seed, stand_in=currents)

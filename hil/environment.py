@@ -93,6 +93,10 @@ class Environment:
             self._board_tx = wire.tx_tap = bytearray()
         self._telemetry_written = 0
         self.ticks = 0
+        # Hooks the task does not override are not called: the loop stays as lean as the board's tick.
+        kind = type(self.task)
+        self._before_tick = self.task.before_tick if kind.before_tick is not Task.before_tick else None
+        self._after_tick = self.task.after_tick if kind.after_tick is not Task.after_tick else None
         self.task.initialize(self)
 
     # --- what tasks look at -----------------------------------------------------------------------
@@ -111,8 +115,9 @@ class Environment:
 
     def step(self) -> None:
         """One control period (see the module's docstring for the order)."""
-        board, host, task = self.board, self.host, self.task
-        task.before_tick(self)
+        board, host = self.board, self.host
+        if self._before_tick is not None:
+            self._before_tick(self)
         host.before_tick(board.now_us)
         board.tick()
         host.after_tick(board.now_us)
@@ -121,7 +126,8 @@ class Environment:
         if self.recorder is not None:
             self._record_telemetry(self.recorder)
         self.ticks += 1
-        task.after_tick(self)
+        if self._after_tick is not None:
+            self._after_tick(self)
 
     def run(
         self,

@@ -111,7 +111,7 @@ def _dynamic_run(args: tuple[str, float, DynamicParams, int]) -> DynamicRun:
     trace = []
     max_wrap = 0.0
     for _ in range(p.window_ms):
-        rig.tick()
+        rig.step()
         units = contact_units(plant, OBJ)
         wrap = contact_wrap_deg(plant, OBJ)
         trace.append(wrap)

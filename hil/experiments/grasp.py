@@ -146,7 +146,7 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
     end_us = timeout_us
     load_n = math.nan
     while rig.now_us < end_us:
-        rig.tick()
+        rig.step()
         state = rig.firmware.grasp_state
         cur = plant.commanded_currents_raw()
         max_current = max(max_current, max(abs(c) for c in cur))
@@ -203,7 +203,7 @@ def _load_ramp(rig: Rig, setup: GraspSetup) -> float:
     while force < setup.load_cap_n:
         force = min(setup.load_cap_n, rate * (rig.now_us - t0))
         plant.apply_object_force(OBJ, (0.0, 0.0, -force))
-        rig.tick()
+        rig.step()
         dropped = (z0 - float(plant.object_pose(OBJ).pos_m[2])) * 1000 > HELD_DROP_MM
         if dropped or not contact_units(plant, OBJ):
             return force

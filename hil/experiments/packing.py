@@ -105,7 +105,7 @@ def packing(
         if k % p.command_ms == 0:
             t_cmd = pretension + (p.tension_end_n - pretension) * min(1.0, k / ramp_ms)
             rig.set_tensions([t_cmd, pretension, pretension])
-        rig.tick()
+        rig.step()
         commanded = rig.firmware.tensions_n[0]
         angles = np.abs(plant.joint_angles_rad())
         now_closed = angles >= limit

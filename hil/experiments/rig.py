@@ -6,15 +6,15 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 from controller.config import FirmwareConfig
 from protocol.c610 import MotorFeedback
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, CommandCode, Mode
 
-from ..board import BoardConfig, VirtualBoard
-from ..harness import ScriptedHost
+from ..board import BoardConfig
+from ..environment import Environment
 from ..mjcf import ObjectConfig
 from ..plant import Plant, PlantConfig
 from ..radio import RadioScript
@@ -46,8 +46,9 @@ class _ThreeMotors:
         return fb + (self._spare,) * (3 - len(fb))
 
 
-class Rig:
-    """A virtual board (firmware + plant + radio) and a scripted host, stepped in lockstep.
+class Rig(Environment):
+    """The experiments' environment: a virtual board (firmware + plant + radio) and a scripted host in
+    the one lockstep loop, built from what an experiment varies.
 
     Args:
         design: the arm.
@@ -74,31 +75,11 @@ class Rig:
         cfg = BoardConfig(
             design=design, plant=plant, firmware=firmware, rc="radio", seed=seed, start_packed=start_packed
         )
-        self.board = VirtualBoard(cfg, radio_script=RadioScript(list(radio)))
+        super().__init__(cfg, radio=RadioScript(list(radio)))
         if design.cables < 3:
             self.board.bus.motors = _ThreeMotors(self.board.plant)
-        assert self.board.wire is not None  # lockstep boards have a wire
-        self.host = ScriptedHost(self.board.wire.host)
         self.plant = self.board.plant
         self.firmware = self.board.firmware
-
-    @property
-    def now_us(self) -> int:
-        """Board time."""
-        return self.board.now_us
-
-    def tick(self) -> None:
-        """One control period: host out, physics + firmware, host in."""
-        self.host.before_tick(self.board.now_us)
-        self.board.tick()
-        self.host.after_tick(self.board.now_us)
-
-    def run(self, duration_us: int, each: Callable[[Rig], bool | None] | None = None) -> None:
-        """Tick for ``duration_us``; ``each(rig)`` after every tick may return True to stop early."""
-        for _ in range(max(0, duration_us // self.board.period_us)):
-            self.tick()
-            if each is not None and each(self):
-                return
 
     def command(self, code: CommandCode, *args: float) -> None:
         """Send a host command now (it reaches the board on the next tick)."""
@@ -109,10 +90,6 @@ class Rig:
         """DIRECT-mode cable tensions (the firmware clamps them to [pretension, tension_max])."""
         t = [*tensions_n, 0.0, 0.0, 0.0][:3]
         self.command(CommandCode.SET_TENSIONS, *t)
-
-    def close(self) -> None:
-        """Zero current and release the link."""
-        self.board.close()
 
 
 def direct_rig(
@@ -133,12 +110,12 @@ def direct_rig(
         seed=seed,
     )
     for _ in range(200):
-        rig.tick()
+        rig.step()
         if rig.firmware.mode == Mode.MANUAL:
             break
     rig.command(CommandCode.SET_MODE, float(Mode.DIRECT))
     for _ in range(50):
-        rig.tick()
+        rig.step()
         if rig.firmware.mode == Mode.DIRECT:
             return rig
     raise RuntimeError("the firmware did not enter DIRECT mode")

@@ -143,7 +143,7 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRu
             tensions = _random_tensions(rng, p)
             rig.set_tensions(tensions[:cables].tolist() + [0.0] * (3 - cables))
             next_change = t + int(rng.integers(p.hold_ms[0], p.hold_ms[1] + 1))
-        rig.tick()
+        rig.step()
         t += 1
         if t > warm and t % p.sample_ms == 0:
             tip = rig.plant.tip_pose().pos_m
