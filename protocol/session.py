@@ -272,8 +272,9 @@ class HostSession:
     def poll(self, now_us: int) -> None:
         """Queue what is due by ``now_us``: the heartbeat, then the RC frame of the current slot.
 
-        Both grids start at the first poll. A blocked heartbeat still passes its slot; so does an RC
-        slot whose source gives None.
+        Both grids start at the first poll. A late poll serves the first slot it missed (the RC source
+        is asked with that slot's time) and skips the rest. A blocked heartbeat still passes its slot;
+        so does an RC slot whose source gives None.
         """
         if self._next_hb_us is None:
             self._next_hb_us = now_us
