@@ -151,8 +151,9 @@ class HostSession:
         self._data = bytearray()
         self._rc = bytearray()
         self._rc_fixed: bytes | None = None
-        self._next_hb_us: int | None = None
-        self._next_rc_us: int | None = None
+        self._polled = False
+        self._next_hb_us = 0
+        self._next_rc_us = 0
         self._tokens = 0
         self._pending: dict[int, tuple[CommandToken, int, int]] = {}
         """Command ``seq`` -> (token, code, sent at): awaiting their final ack."""
@@ -276,7 +277,8 @@ class HostSession:
         is asked with that slot's time) and skips the rest. A blocked heartbeat still passes its slot;
         so does an RC slot whose source gives None.
         """
-        if self._next_hb_us is None:
+        if not self._polled:
+            self._polled = True
             self._next_hb_us = now_us
             self._next_rc_us = now_us
         if self.heartbeats and now_us >= self._next_hb_us:
@@ -287,7 +289,6 @@ class HostSession:
                 self.last_heartbeat_us = now_us
             self._next_hb_us = next_slot(self._next_hb_us, now_us, self.heartbeat_period_us)
         slot_us = self._next_rc_us
-        assert slot_us is not None  # set with the heartbeat grid above
         if now_us >= slot_us and (self.rc_source is not None or self._rc_fixed is not None):
             source = self.rc_source
             payload = self._rc_fixed if source is None else source(slot_us)
@@ -297,16 +298,14 @@ class HostSession:
 
     def next_rc_slot_us(self) -> int | None:
         """The time of the next RC slot (None before the first poll)."""
-        return self._next_rc_us
+        return self._next_rc_us if self._polled else None
 
     def next_deadline_us(self) -> int | None:
         """When :meth:`poll` next has work: 0 before the first poll, None when nothing is periodic."""
-        hb = self._next_hb_us
-        if hb is None:
-            return 0 if self.heartbeats or self._rc_wanted() else None
         rc = self._next_rc_us if self._rc_wanted() else None
         if not self.heartbeats:
-            return rc
+            return rc if rc is None or self._polled else 0
+        hb = self._next_hb_us if self._polled else 0
         return hb if rc is None else min(hb, rc)
 
     def _rc_wanted(self) -> bool:
