@@ -1,4 +1,4 @@
-"""The harness around a virtual board in lockstep: a scripted host and a per-tick probe.
+"""The host's side of a lockstep board link: a scripted host.
 
 - :class:`ScriptedHost` is the host's side of the board link: 10 Hz heartbeats (unless a ``host-loss``
   fault blocks them), messages scheduled at given times, and every board message decoded (in batches,
@@ -10,26 +10,22 @@ The loop that drives it is :class:`hil.environment.Environment`; what a run meas
 from __future__ import annotations
 
 from controller.transport import Transport
-from protocol.link import LinkParser
 from protocol.messages import (
     CommandAck,
     Event,
-    Heartbeat,
     Message,
     ParamValue,
     Telemetry,
-    decode,
-    encode,
 )
+from protocol.session import HEARTBEAT_PERIOD_US, HostSession
 
 from .faults import FaultSet
 
-HEARTBEAT_PERIOD_US = 100_000
-"""The host's heartbeat period (10 Hz, as spirob-host sends)."""
+__all__ = ["HEARTBEAT_PERIOD_US", "ScriptedHost"]
 
 
 class ScriptedHost:
-    """A host that follows a script over a lockstep link.
+    """A host that follows a script over a lockstep link: a :class:`~protocol.session.HostSession`'s shell.
 
     Args:
         end: the host's end of the link (:attr:`hil.board.LinkWire.host`).
@@ -40,21 +36,28 @@ class ScriptedHost:
     def __init__(self, end: Transport, faults: FaultSet | None = None, *, heartbeats: bool = True) -> None:
         self.end = end
         self.faults = faults
-        self.heartbeats = heartbeats
-        self.parser = LinkParser()
-        self._seq = 0
-        self._next_hb_us = 0
-        self._hb_count = 0
+        blocked = faults.heartbeat_blocked if faults is not None else None
+        self.session = HostSession(
+            heartbeats=heartbeats,
+            heartbeat_allowed=None if blocked is None else lambda t_us: not blocked(t_us),
+        )
         self._script: list[tuple[int, Message]] = []
-        self.sent: list[tuple[int, Message]] = []
         self._received = bytearray()
+        self._received_us = 0
         self._telemetry: list[Telemetry] = []
         self._events: list[Event] = []
         self._acks: list[CommandAck] = []
-        self._params: dict[str, float] = {}
         self._other: list[Message] = []
-        self._decode_errors = 0
-        self.last_heartbeat_us: int | None = None
+
+    @property
+    def sent(self) -> list[tuple[int, Message]]:
+        """``(t_us, msg)`` of every message sent, in order."""
+        return self.session.sent
+
+    @property
+    def last_heartbeat_us(self) -> int | None:
+        """When the last heartbeat was sent (None before any)."""
+        return self.session.last_heartbeat_us
 
     def at(self, t_us: int, msg: Message) -> None:
         """Send ``msg`` at ``t_us``."""
@@ -63,20 +66,18 @@ class ScriptedHost:
 
     def send(self, t_us: int, msg: Message) -> None:
         """Send ``msg`` now."""
-        self.end.write(encode(msg, self._seq))
-        self._seq = (self._seq + 1) & 0xFF
-        self.sent.append((t_us, msg))
+        self.session.send(msg, t_us)
+        self.end.write(self.session.data_to_send())
 
     def before_tick(self, t_us: int) -> None:
-        """Write what is due by ``t_us``."""
-        if self.heartbeats and t_us >= self._next_hb_us:
-            self._next_hb_us = t_us + HEARTBEAT_PERIOD_US
-            if self.faults is None or not self.faults.heartbeat_blocked(t_us):
-                self.send(t_us, Heartbeat(t_us, self._hb_count))
-                self._hb_count += 1
-                self.last_heartbeat_us = t_us
+        """Write what is due by ``t_us``: the heartbeat, then the scripted messages."""
+        session = self.session
+        session.poll(t_us)
         while self._script and self._script[0][0] <= t_us:
-            self.send(t_us, self._script.pop(0)[1])
+            session.send(self._script.pop(0)[1], t_us)
+        data = session.data_to_send()
+        if data:
+            self.end.write(data)
 
     def after_tick(self, t_us: int) -> None:
         """Take what the board sent; it is decoded when a received message is first looked at.
@@ -87,6 +88,7 @@ class ScriptedHost:
         data = self.end.read()
         if data:
             self._received += data
+            self._received_us = t_us
 
     def drain(self) -> None:
         """Decode everything received so far (every accessor below does this first)."""
@@ -94,21 +96,14 @@ class ScriptedHost:
             return
         data = bytes(self._received)
         self._received.clear()
-        for frame in self.parser.feed(data):
-            try:
-                msg = decode(frame)
-            except ValueError:
-                self._decode_errors += 1
-                continue
+        for msg in self.session.receive_data(data, self._received_us):
             if isinstance(msg, Telemetry):
                 self._telemetry.append(msg)
             elif isinstance(msg, Event):
                 self._events.append(msg)
             elif isinstance(msg, CommandAck):
                 self._acks.append(msg)
-            elif isinstance(msg, ParamValue):
-                self._params[msg.name] = msg.value
-            else:
+            elif not isinstance(msg, ParamValue):  # parameters: the session's table
                 self._other.append(msg)
 
     @property
@@ -133,7 +128,7 @@ class ScriptedHost:
     def params(self) -> dict[str, float]:
         """The last value received for each parameter (``ParamValue``)."""
         self.drain()
-        return self._params
+        return self.session.params
 
     @property
     def other(self) -> list[Message]:
@@ -145,4 +140,4 @@ class ScriptedHost:
     def decode_errors(self) -> int:
         """Intact frames whose payload did not decode."""
         self.drain()
-        return self._decode_errors
+        return self.session.stream.decode_errors

@@ -46,18 +46,17 @@ import serial
 
 from controller.transport import set_tcp_nodelay
 from protocol.dbus import FRAME_LEN, FRAME_PERIOD_US, RcFrame
-from protocol.errors import DecodeError, UnknownMessageError
-from protocol.link import LinkParser, encode_frame
+from protocol.link import LinkParser
 from protocol.messages import (
     MESSAGES,
     Command,
     CommandAck,
-    Heartbeat,
     Message,
     Telemetry,
     VirtualRc,
-    decode,
 )
+from protocol.session import HostSession
+from protocol.stream import MessageStream
 
 __all__ = [
     "RC_TIMEOUT_US",
@@ -320,11 +319,22 @@ class _LinkWorker:
         self.reconnect = reconnect
         self.port: Any = None
         self.fd: int | None = None
-        self.seq = 0
         self.gen = 0
-        self.hb_counter = 0
         self.stop = False
         self.rc_last_us: int | None = None
+        self.now_us = 0
+        """The time of the current loop pass (the session's callbacks below run inside it)."""
+        self.rc_slot_us: int | None = None
+        """The slot of the RC frame the session just queued from shared memory (None: none queued)."""
+        # The link's protocol state: seq, heartbeat clock, RC slots. It only sends; the host process
+        # decodes what is received.
+        self.session = HostSession(
+            heartbeat_period_us=cfg.heartbeat_period_us,
+            rc_period_us=cfg.rc_period_us,
+            heartbeat_allowed=self._heartbeat_allowed,
+            rc_source=self._rc_payload,
+            keep_sent=False,
+        )
 
     # ---------------------------------------------------------------- helpers
 
@@ -341,17 +351,23 @@ class _LinkWorker:
         except (OSError, ValueError):
             self.stop = True
 
-    def _write(self, cmd_id: int, payload: bytes) -> int | None:
-        seq = self.seq
-        frame = encode_frame(cmd_id, payload, seq)
+    def _flush(self) -> None:
+        """Write what the session queued (link traffic, then RC: the order of their seqs in a poll)."""
+        session = self.session
+        link, rc = session.data_to_send(), session.rc_to_send()
+        slot_us, self.rc_slot_us = self.rc_slot_us, None
+        if not link and not rc:
+            return
+        data = link + rc if link and rc else link or rc
         try:
-            self.port.write(frame)
+            self.port.write(data)
         except Exception as exc:
             self._lost(f"write failed: {exc}")
-            return None
-        self.seq = (seq + 1) & 0xFF
-        self._post("tx", cmd_id, seq, frame, _now_us())
-        return seq
+            return
+        now = _now_us()
+        self._post("tx", data, now)
+        if slot_us is not None:
+            self._rc_written(slot_us)
 
     def _open(self) -> str | None:
         try:
@@ -364,8 +380,10 @@ class _LinkWorker:
         except Exception:
             self.fd = None
         self.gen += 1
+        now = _now_us()
         for _ in range(self.cfg.safe_frames_on_connect):
-            self._write(VirtualRc.CMD_ID, _SAFE_FRAME)
+            self.session.send(VirtualRc(_SAFE_FRAME), now)
+        self._flush()
         return None
 
     def _close(self) -> None:
@@ -401,13 +419,11 @@ class _LinkWorker:
             return
         self._post("state", "connected", "", self.gen)
         cfg = self.cfg
-        now = _now_us()
-        next_hb = now
-        next_rc = now
+        session = self.session
         next_retry = 0
         conn_fd = self.conn.fileno()
         while not self.stop:
-            now = _now_us()
+            now = self.now_us = _now_us()
             if self.port is None:
                 if not self.reconnect:
                     break
@@ -415,20 +431,14 @@ class _LinkWorker:
                     next_retry = now + cfg.reconnect_period_us
                     if self._open() is None:
                         self._post("state", "connected", "", self.gen)
-            lease_ok = now <= self.sh.lease_until_us.value
-            if now >= next_hb:
-                next_hb = max(next_hb + cfg.heartbeat_period_us, now)
-                if self.port is not None and lease_ok:
-                    self.hb_counter = (self.hb_counter + 1) & 0xFFFF_FFFF
-                    self._write(Heartbeat.CMD_ID, Heartbeat(now, self.hb_counter).pack())
-            if now >= next_rc:
-                late = now - next_rc > cfg.rc_period_us // 2
-                next_rc += cfg.rc_period_us
-                if next_rc < now:
-                    next_rc = now + cfg.rc_period_us
-                self._send_rc(now, late, lease_ok)
+            # Polled while the port is down too: the slots pass (the callbacks send nothing then), so
+            # a reconnect resumes on the same grids.
+            session.poll(now)
+            if self.port is not None:
+                self._flush()
             # Sleep until the next deadline or until bytes / a host request arrive.
-            timeout_s = max(0.0, (min(next_hb, next_rc) - _now_us()) / 1e6)
+            deadline = session.next_deadline_us()
+            timeout_s = 0.0 if deadline is None else max(0.0, (deadline - _now_us()) / 1e6)
             if self.port is None:
                 timeout_s = min(timeout_s, 0.05)
             fds = [conn_fd] + ([self.fd] if self.fd is not None else [])
@@ -443,29 +453,39 @@ class _LinkWorker:
             if conn_fd in ready or self.conn.poll(0):
                 self._requests()
         if self.port is not None:
+            session.send(VirtualRc(_SAFE_FRAME), _now_us())
             with contextlib.suppress(Exception):
-                self.port.write(encode_frame(VirtualRc.CMD_ID, _SAFE_FRAME, self.seq))
+                self.port.write(session.data_to_send() + session.rc_to_send())
         self._close()
 
-    def _send_rc(self, now: int, late: bool, lease_ok: bool) -> None:
+    def _heartbeat_allowed(self, now: int) -> bool:
+        """The session's heartbeat gate: a port, and a host that renewed its lease."""
+        return self.port is not None and now <= self.sh.lease_until_us.value
+
+    def _rc_payload(self, slot_us: int) -> bytes | None:
+        """The session's RC source: the host's frame from shared memory, if it may be sent now."""
         sh = self.sh
         if self.port is None:
             self.rc_last_us = None
-            return
-        if not lease_ok:
+            return None
+        if self.now_us > sh.lease_until_us.value:
             if sh.rc_on.value:
                 sh.lease_expired.value += 1
                 sh.rc_on.value = 0
             self.rc_last_us = None
-            return
+            return None
         if not sh.rc_on.value:
             self.rc_last_us = None
-            return
+            return None
+        self.rc_slot_us = slot_us
         # Until the host has seen this connection, only SAFE frames (right lever DOWN).
-        payload = bytes(sh.rc) if sh.rc_gen.value == self.gen else _SAFE_FRAME
-        if self._write(VirtualRc.CMD_ID, payload) is None:
-            return
-        if late:
+        return bytes(sh.rc) if sh.rc_gen.value == self.gen else _SAFE_FRAME
+
+    def _rc_written(self, slot_us: int) -> None:
+        """Timing statistics of a slot's RC frame that reached the port."""
+        sh = self.sh
+        now = self.now_us
+        if now - slot_us > self.cfg.rc_period_us // 2:
             sh.rc_late.value += 1
         if self.rc_last_us is not None:
             gap = now - self.rc_last_us
@@ -491,11 +511,12 @@ class _LinkWorker:
             while self.conn.poll(0):
                 item = self.conn.recv()
                 if item[0] == "send":
-                    _, cmd_id, payload = item
+                    msg: Message = item[1]
                     if self.port is None:
-                        self._post("tx_dropped", cmd_id)
+                        self._post("tx_dropped", msg.CMD_ID)
                     else:
-                        self._write(cmd_id, payload)
+                        self.session.send(msg, _now_us())  # packed once by BoardClient.send already
+                        self._flush()
                 elif item[0] == "stop":
                     self.stop = True
                     return
@@ -557,14 +578,14 @@ class BoardClient:
         self._connected = threading.Event()
         self._thread: threading.Thread | None = None
         self._state = LinkState.STOPPED
-        self._parser = LinkParser()
+        self._stream = MessageStream()
+        self._tx_parser = LinkParser()
+        """Splits what the link process wrote back into frames, to count them and time commands."""
         self._rx_counts: collections.Counter[str] = collections.Counter()
         self._tx_counts: collections.Counter[str] = collections.Counter()
         self._rx_times: dict[str, collections.deque[int]] = {}
         self._tx_dropped = 0
         self._rx_bytes = 0
-        self._decode_errors = 0
-        self._unknown = 0
         self._listener_errors = 0
         self._reconnects = 0
         self._ever_lost = False
@@ -721,13 +742,14 @@ class BoardClient:
                 self._tx_dropped += 1
             return False
         try:
-            payload = msg.pack()
+            # Refused here rather than in the link process, whose session encodes it with the link's seq.
+            msg.pack()
         except ValueError:
             _log.exception("cannot encode %r", msg)
             return False
         try:
             with self._send_lock:
-                conn.send(("send", msg.CMD_ID, payload))
+                conn.send(("send", msg))
         except (OSError, ValueError):
             with self._stats_lock:
                 self._tx_dropped += 1
@@ -791,24 +813,24 @@ class BoardClient:
         if kind == "rx":
             self._on_bytes(item[1], item[2])
         elif kind == "tx":
-            _, cmd_id, seq, frame, t_us = item
-            cls = MESSAGES.get(cmd_id)
-            name = cls.__name__ if cls is not None else f"{cmd_id:#06x}"
+            _, data, t_us = item
             with self._stats_lock:
-                self._tx_counts[name] += 1
-                if cls is Command:
-                    self._pending_cmd[seq] = t_us
-                    if len(self._pending_cmd) > 64:
-                        self._pending_cmd.pop(next(iter(self._pending_cmd)))
+                for frame in self._tx_parser.feed(data):
+                    cls = MESSAGES.get(frame.cmd_id)
+                    self._tx_counts[cls.__name__ if cls is not None else f"{frame.cmd_id:#06x}"] += 1
+                    if cls is Command:
+                        self._pending_cmd[frame.seq] = t_us
+                        if len(self._pending_cmd) > 64:
+                            self._pending_cmd.pop(next(iter(self._pending_cmd)))
             if self._taps:
-                self._tap("tx", frame, t_us)
+                self._tap("tx", data, t_us)
         elif kind == "tx_dropped":
             with self._stats_lock:
                 self._tx_dropped += 1
         elif kind == "state":
             _, what, reason, gen = item
             if what == "connected":
-                self._parser.reset()
+                self._stream.reset()
                 if self._ever_lost:
                     with self._stats_lock:
                         self._reconnects += 1
@@ -849,15 +871,7 @@ class BoardClient:
         self._rx_bytes += len(data)
         if self._taps:
             self._tap("rx", data, t_us)
-        for frame in self._parser.feed(data):
-            try:
-                msg = decode(frame)
-            except UnknownMessageError:
-                self._unknown += 1
-                continue
-            except DecodeError:
-                self._decode_errors += 1
-                continue
+        for _, msg in self._stream.feed(data):
             self.dispatch(msg, t_us)
 
     def dispatch(self, msg: Message, rx_us: int | None = None) -> None:
@@ -903,6 +917,7 @@ class BoardClient:
         now = _now_us()
         window_s = self.config.rate_window_us / 1e6
         sh = self._shared
+        stream = self._stream
         with self._stats_lock:
             horizon = now - self.config.rate_window_us
             rates = {}
@@ -920,9 +935,9 @@ class BoardClient:
                 tx_counts=dict(self._tx_counts),
                 tx_dropped=self._tx_dropped,
                 rx_bytes=self._rx_bytes,
-                parser=self._parser.counters(),
-                decode_errors=self._decode_errors,
-                unknown_messages=self._unknown,
+                parser=stream.parser.counters(),
+                decode_errors=stream.decode_errors - stream.unknown_ids,
+                unknown_messages=stream.unknown_ids,
                 listener_errors=self._listener_errors,
                 reconnects=self._reconnects,
                 rc_late=int(sh.rc_late.value) if sh else 0,
