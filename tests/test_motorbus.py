@@ -9,9 +9,10 @@ from collections.abc import Iterator
 
 import can
 import pytest
+from c610_rigs import C610TrioServer, SlcanAdapterEmulator
 
 from controller.errors import BusError, PortError
-from controller.fake_c610 import C610TrioServer, FakeC610Trio, SlcanAdapterEmulator
+from controller.fake_c610 import FakeC610Trio
 from controller.motorbus import CanMotorBus, FakeMotorBus, MotorBus, parse_can_spec
 from protocol.c610 import MotorFeedback, current_command
 
