@@ -12,8 +12,6 @@ fake``) or directly with :meth:`FakeC610Trio.step`.
 
 from __future__ import annotations
 
-import math
-import struct
 from collections.abc import Iterable
 from typing import Any
 
@@ -21,14 +19,16 @@ from protocol.c610 import (
     ANGLE_COUNTS,
     COMMAND_ID_LOW,
     FEEDBACK_ID_BASE,
-    M2006_GEAR_RATIO,
+    FRAME_LEN,
     RAW_PER_AMP,
     MotorFeedback,
+    output_rad_s_to_rotor_rpm,
+    output_rad_to_counts,
+    unpack_currents,
 )
 
 __all__ = ["FakeC610", "FakeC610Trio"]
 
-_COMMAND = struct.Struct(">hhhh")
 _INT16_MAX = 32767
 
 
@@ -76,8 +76,8 @@ class FakeC610:
 
     def feedback(self) -> MotorFeedback:
         """The C610 feedback frame for the present state."""
-        rotor_counts = round(self.angle_out_rad * ANGLE_COUNTS * M2006_GEAR_RATIO / (2.0 * math.pi))
-        rpm = round(self.speed_out_rad_s * 60.0 * M2006_GEAR_RATIO / (2.0 * math.pi))
+        rotor_counts = output_rad_to_counts(self.angle_out_rad)
+        rpm = round(output_rad_s_to_rotor_rpm(self.speed_out_rad_s))
         rpm = max(-_INT16_MAX, min(_INT16_MAX, rpm))
         return MotorFeedback((self._angle0_counts + rotor_counts) % ANGLE_COUNTS, rpm, self.current_raw, 30)
 
@@ -99,10 +99,10 @@ class FakeC610Trio:
 
     def handle_frame(self, can_id: int, data: bytes) -> None:
         """Take a frame from the bus; only 8-byte 0x200 commands matter."""
-        if can_id != COMMAND_ID_LOW or len(data) != 8:
+        if can_id != COMMAND_ID_LOW or len(data) != FRAME_LEN:
             return
         self.commands += 1
-        values = _COMMAND.unpack(data)
+        values = unpack_currents(data)
         for motor, raw in zip(self.motors, values, strict=False):
             motor.current_raw = raw
 

@@ -18,14 +18,20 @@ answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``). CAN bus at 1 Mbit/s
 
 from __future__ import annotations
 
-import struct
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from controller.errors import BusError, PortError
-from protocol.c610 import COMMAND_ID_LOW, CURRENT_RAW_MAX, FEEDBACK_ID_BASE, MotorFeedback, current_command
+from protocol.c610 import (
+    COMMAND_ID_LOW,
+    CURRENT_RAW_MAX,
+    FEEDBACK_ID_BASE,
+    MotorFeedback,
+    current_command,
+    pack_currents,
+)
 from protocol.errors import DecodeError
 
 if TYPE_CHECKING:
@@ -42,8 +48,6 @@ CAN_BITRATE = 1_000_000
 """C610s talk at 1 Mbit/s."""
 _RECV_BURST_MAX = 64
 """Most frames drained per ``read_feedback`` call (a flooded bus cannot stall the control tick)."""
-_COMMAND_FRAME = struct.Struct(">hhhh")
-"""The 0x200 frame's data: four big-endian int16 setpoints (``protocol.c610.current_command``'s layout)."""
 
 
 class MotorBus(ABC):
@@ -124,9 +128,9 @@ class MotorBus(ABC):
             if type(v) is not int:
                 v = round(v)
             out[i] = lim if v > lim else -lim if v < -lim else v
-        # The clamp above leaves ints within ±10000, so the frame is packed here directly, without
+        # The clamp above leaves ints within ±10000, so the frame is packed by the unchecked packer, without
         # current_command's per-value validation (the same bytes; this runs every control tick).
-        data = _COMMAND_FRAME.pack(*out, *self._unused_slots)
+        data = pack_currents(*out, *self._unused_slots)
         try:
             self._send_frame(COMMAND_ID_LOW, data)
         except (BusError, OSError):
