@@ -91,12 +91,13 @@ class ChunkUart(Uart):
 
 def test_dbus_source_reads_any_uart_and_counts_read_errors() -> None:
     uart = ChunkUart(GOOD.pack(), chunk_n=10)
-    with DbusSerialSource(uart) as source:
-        assert source.poll(0) == [] and source.poll(100) == []  # 10 + 8 bytes, no gap yet
-        uart.fail = True
-        assert source.poll(200) == []
-        assert source.read_errors == 1
-        assert source.poll(3_000) == [GOOD]  # the idle gap closed the frame
+    source = DbusSerialSource(uart)
+    assert source.poll(0) == [] and source.poll(100) == []  # 10 + 8 bytes, no gap yet
+    uart.fail = True
+    assert source.poll(200) == []
+    assert source.read_errors == 1
+    assert source.poll(3_000) == [GOOD]  # the idle gap closed the frame
+    source.close()
     source.close()
     assert uart.closed_n == 1
 
