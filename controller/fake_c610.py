@@ -6,38 +6,29 @@ is taken as ideal (measured current = command), the output shaft integrates
 carry the wrapped rotor angle (8192 counts per rotor turn, 36 rotor turns per output turn), the rotor
 speed in rpm and the current, byte for byte as ``protocol.c610`` defines them.
 
-Three ways to use it:
-
-- stepped synchronously: :class:`~controller.motorbus.FakeMotorBus` (or :meth:`FakeC610Trio.step`);
-- on a python-can bus in a thread: :class:`C610TrioServer` answers every 0x200 with 0x201-0x203;
-- behind a fake USB-CAN adapter speaking slcan on a pty: :class:`SlcanAdapterEmulator`, so that
-  ``CanMotorBus(interface="slcan", channel=<pty slave>)`` is tested end to end.
+It is stepped synchronously by :class:`~controller.motorbus.FakeMotorBus` (``python -m controller --can
+fake``) or directly with :meth:`FakeC610Trio.step`.
 """
 
 from __future__ import annotations
 
-import contextlib
-import math
-import os
-import select
-import struct
-import threading
 from collections.abc import Iterable
-from types import TracebackType
 from typing import Any
 
 from protocol.c610 import (
     ANGLE_COUNTS,
     COMMAND_ID_LOW,
     FEEDBACK_ID_BASE,
-    M2006_GEAR_RATIO,
+    FRAME_LEN,
     RAW_PER_AMP,
     MotorFeedback,
+    output_rad_s_to_rotor_rpm,
+    output_rad_to_counts,
+    unpack_currents,
 )
 
-__all__ = ["C610TrioServer", "FakeC610", "FakeC610Trio", "SlcanAdapterEmulator"]
+__all__ = ["FakeC610", "FakeC610Trio"]
 
-_COMMAND = struct.Struct(">hhhh")
 _INT16_MAX = 32767
 
 
@@ -85,8 +76,8 @@ class FakeC610:
 
     def feedback(self) -> MotorFeedback:
         """The C610 feedback frame for the present state."""
-        rotor_counts = round(self.angle_out_rad * ANGLE_COUNTS * M2006_GEAR_RATIO / (2.0 * math.pi))
-        rpm = round(self.speed_out_rad_s * 60.0 * M2006_GEAR_RATIO / (2.0 * math.pi))
+        rotor_counts = output_rad_to_counts(self.angle_out_rad)
+        rpm = round(output_rad_s_to_rotor_rpm(self.speed_out_rad_s))
         rpm = max(-_INT16_MAX, min(_INT16_MAX, rpm))
         return MotorFeedback((self._angle0_counts + rotor_counts) % ANGLE_COUNTS, rpm, self.current_raw, 30)
 
@@ -108,10 +99,10 @@ class FakeC610Trio:
 
     def handle_frame(self, can_id: int, data: bytes) -> None:
         """Take a frame from the bus; only 8-byte 0x200 commands matter."""
-        if can_id != COMMAND_ID_LOW or len(data) != 8:
+        if can_id != COMMAND_ID_LOW or len(data) != FRAME_LEN:
             return
         self.commands += 1
-        values = _COMMAND.unpack(data)
+        values = unpack_currents(data)
         for motor, raw in zip(self.motors, values, strict=False):
             motor.current_raw = raw
 
@@ -124,157 +115,3 @@ class FakeC610Trio:
             if n not in self.silent:
                 out.append((FEEDBACK_ID_BASE + n, motor.feedback().pack()))
         return out
-
-
-class _Worker:
-    """A worker thread with a stop flag, joined by :meth:`stop` (safe twice; daemon, so a failed test
-    cannot hang the interpreter)."""
-
-    def __init__(self, name: str) -> None:
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
-        self.error: BaseException | None = None
-
-    def start(self) -> None:
-        """Start serving."""
-        self._thread.start()
-
-    def stop(self) -> None:
-        """Stop serving and join the thread (safe twice)."""
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=5.0)
-
-    def _loop(self) -> None:
-        try:
-            while not self._stop.is_set():
-                self._poll()
-        except BaseException as exc:
-            self.error = exc
-
-    def _poll(self) -> None:
-        raise NotImplementedError
-
-
-class C610TrioServer(_Worker):
-    """Answers each 0x200 command on a python-can bus with the trio's 0x201-0x203 feedback (a thread).
-
-    Use as a context manager; the bus given is shut down on exit.
-    """
-
-    def __init__(self, bus: Any, trio: FakeC610Trio | None = None, *, dt_us: int = 1000) -> None:
-        """Serve ``trio`` (default: a fresh one) on the python-can ``bus``; each command steps ``dt_us``."""
-        super().__init__("c610-trio")
-        import can
-
-        self._can = can
-        self.bus = bus
-        self.trio = trio if trio is not None else FakeC610Trio()
-        self.dt_us = dt_us
-
-    def __enter__(self) -> C610TrioServer:
-        self.start()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
-        self.bus.shutdown()
-
-    def _poll(self) -> None:
-        msg = self.bus.recv(timeout=0.01)
-        if msg is None or msg.arbitration_id != COMMAND_ID_LOW or msg.is_extended_id:
-            return
-        self.trio.handle_frame(msg.arbitration_id, bytes(msg.data))
-        for can_id, data in self.trio.step(self.dt_us):
-            self.bus.send(self._can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
-
-
-class SlcanAdapterEmulator(_Worker):
-    """A USB-CAN adapter speaking the slcan (Lawicel) ASCII protocol on a pty master, trio behind it.
-
-    Answers ``S<n>``, ``O``, ``C``, ``L``, ``V``, ``v``, ``N`` with ``\\r`` (version queries with a
-    version), and each ``t200 8 ...`` command with three ``t20n8...`` feedback lines. Use as a context
-    manager; ``fd`` (the pty master) is closed on exit.
-
-    Attributes:
-        lines: slcan lines received (for assertions).
-        is_open: the host sent ``O`` (and not ``C`` since).
-    """
-
-    def __init__(self, fd: int, trio: FakeC610Trio | None = None, *, dt_us: int = 1000) -> None:
-        """Serve on the pty master ``fd``."""
-        super().__init__("slcan-adapter")
-        self.fd = fd
-        self.trio = trio if trio is not None else FakeC610Trio()
-        self.dt_us = dt_us
-        self.lines: list[str] = []
-        self.is_open = False
-        self._buf = bytearray()
-
-    def __enter__(self) -> SlcanAdapterEmulator:
-        self.start()
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
-        with contextlib.suppress(OSError):
-            os.close(self.fd)
-
-    def _poll(self) -> None:
-        ready, _, _ = select.select([self.fd], [], [], 0.01)
-        if not ready:
-            return
-        try:
-            data = os.read(self.fd, 4096)
-        except OSError:  # the slave side closed: nothing more to serve
-            self._stop.wait(0.01)
-            return
-        self._buf += data
-        while True:
-            end = self._buf.find(b"\r")
-            if end < 0:
-                break
-            line = self._buf[:end].decode("ascii", errors="replace")
-            del self._buf[: end + 1]
-            self._handle(line)
-
-    def _handle(self, line: str) -> None:
-        self.lines.append(line)
-        if not line:
-            return
-        cmd = line[0]
-        reply = b"\r"
-        if cmd == "O" or cmd == "L":
-            self.is_open = True
-        elif cmd == "C":
-            self.is_open = False
-        elif cmd == "V":
-            reply = b"V1013\r"
-        elif cmd == "v":
-            reply = b"v1013\r"
-        elif cmd == "N":
-            reply = b"NA123\r"
-        elif cmd == "t" and len(line) >= 5:
-            can_id = int(line[1:4], 16)
-            dlc = int(line[4])
-            data = bytes.fromhex(line[5 : 5 + 2 * dlc])
-            self.trio.handle_frame(can_id, data)
-            reply = b"\r" if not self.is_open else b""
-            if can_id == COMMAND_ID_LOW and self.is_open:
-                for fid, fdata in self.trio.step(self.dt_us):
-                    reply += f"t{fid:03X}8{fdata.hex().upper()}\r".encode("ascii")
-        self._write(reply)
-
-    def _write(self, data: bytes) -> None:
-        view = memoryview(data)
-        while view:
-            try:
-                n = os.write(self.fd, view)
-            except BlockingIOError:
-                select.select([], [self.fd], [], 0.01)
-                continue
-            view = view[n:]

@@ -7,10 +7,10 @@ errors — over two tiny private hooks that a back end implements:
   ``OSError`` on failure; the caller counts it).
 - ``_recv_frames() -> list[(can_id, data)]``: every frame received since the last call, never blocking.
 
-Back ends by name (:func:`make_bus`, imported lazily): ``can`` (any python-can bus: ``slcan`` over a
-serial port such as /dev/ttyACM0 for USB-CAN adapters, ``socketcan``, ``virtual``) and ``fake`` (an
-in-process C610 trio, no threads). The ``sim`` back end lives in ``hil`` and registers itself with
-:func:`register_bus`.
+Back ends: :class:`CanMotorBus` (any python-can bus: ``slcan`` over a serial port such as /dev/ttyACM0
+for USB-CAN adapters, ``socketcan``, ``virtual``; python-can's ``interface`` name picks the driver) and
+:class:`FakeMotorBus` (an in-process C610 trio, no threads). The simulated back end lives in ``hil``
+(``hil.simbus.SimMotorBus``), which builds it around its plant.
 
 Facts: C610 command id 0x200 carries motors 1-4 as big-endian int16, -10000..10000 = -10..10 A; motor n
 answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``). CAN bus at 1 Mbit/s.
@@ -18,15 +18,20 @@ answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``). CAN bus at 1 Mbit/s
 
 from __future__ import annotations
 
-import importlib
-import struct
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from controller.errors import BusError, PortError
-from protocol.c610 import COMMAND_ID_LOW, CURRENT_RAW_MAX, FEEDBACK_ID_BASE, MotorFeedback, current_command
+from protocol.c610 import (
+    COMMAND_ID_LOW,
+    CURRENT_RAW_MAX,
+    FEEDBACK_ID_BASE,
+    MotorFeedback,
+    current_command,
+    pack_currents,
+)
 from protocol.errors import DecodeError
 
 if TYPE_CHECKING:
@@ -36,17 +41,13 @@ __all__ = [
     "CanMotorBus",
     "FakeMotorBus",
     "MotorBus",
-    "make_bus",
     "parse_can_spec",
-    "register_bus",
 ]
 
 CAN_BITRATE = 1_000_000
 """C610s talk at 1 Mbit/s."""
 _RECV_BURST_MAX = 64
 """Most frames drained per ``read_feedback`` call (a flooded bus cannot stall the control tick)."""
-_COMMAND_FRAME = struct.Struct(">hhhh")
-"""The 0x200 frame's data: four big-endian int16 setpoints (``protocol.c610.current_command``'s layout)."""
 
 
 class MotorBus(ABC):
@@ -127,9 +128,9 @@ class MotorBus(ABC):
             if type(v) is not int:
                 v = round(v)
             out[i] = lim if v > lim else -lim if v < -lim else v
-        # The clamp above leaves ints within ±10000, so the frame is packed here directly, without
+        # The clamp above leaves ints within ±10000, so the frame is packed by the unchecked packer, without
         # current_command's per-value validation (the same bytes; this runs every control tick).
-        data = _COMMAND_FRAME.pack(*out, *self._unused_slots)
+        data = pack_currents(*out, *self._unused_slots)
         try:
             self._send_frame(COMMAND_ID_LOW, data)
         except (BusError, OSError):
@@ -331,40 +332,3 @@ class FakeMotorBus(MotorBus):
         out = self._pending
         self._pending = []
         return out
-
-
-_BACKENDS: dict[str, str | type[MotorBus]] = {
-    "can": "controller.motorbus:CanMotorBus",
-    "fake": "controller.motorbus:FakeMotorBus",
-}
-
-
-def register_bus(name: str, target: str | type[MotorBus]) -> None:
-    """Register a back end by name: a class, or ``"module:Class"`` imported on first use.
-
-    ``hil`` registers ``sim`` this way (``controller`` never imports ``hil``).
-    """
-    _BACKENDS[name] = target
-
-
-def make_bus(name: str, **kwargs: Any) -> MotorBus:
-    """Create the back end registered as ``name`` with ``kwargs`` (e.g. ``make_bus("can", channel=...,
-    interface="slcan")``).
-
-    Raises:
-        ValueError: no back end of that name.
-        PortError: the back end could not open its port.
-    """
-    try:
-        target = _BACKENDS[name]
-    except KeyError:
-        raise ValueError(f"unknown motor bus {name!r}; known: {', '.join(sorted(_BACKENDS))}") from None
-    if isinstance(target, str):
-        module, _, attr = target.partition(":")
-        cls = getattr(importlib.import_module(module), attr)
-        if not (isinstance(cls, type) and issubclass(cls, MotorBus)):
-            raise ValueError(f"{target} is not a MotorBus")
-        _BACKENDS[name] = cls
-    else:
-        cls = target
-    return cls(**kwargs)

@@ -10,15 +10,40 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from types import TracebackType
-from typing import Any
+from typing import Protocol
 
 from controller.errors import PortError
 from protocol.dbus import FRAME_PERIOD_US, IDLE_GAP_US, DbusFramer, RcFrame
 
-__all__ = ["DbusSerialSource", "LinkRcSource", "RcSource", "ScriptedRcSource"]
+__all__ = ["DbusSerialSource", "LinkRcSource", "RcSource", "ScriptedRcSource", "Uart"]
 
 DBUS_BAUDRATE = 100_000
 """DR16 DBUS: 100 000 baud, 8 data bits, even parity, 1 stop bit (inverted in hardware on the C-board)."""
+
+
+class Uart(Protocol):
+    """A UART's receive side as :class:`DbusSerialSource` reads it (the part of pyserial's ``Serial`` used).
+
+    A pyserial port satisfies it as it is; other implementations (an in-memory UART for a simulated
+    board) subclass it to say so.
+    """
+
+    @property
+    def in_waiting(self) -> int:
+        """Bytes received and not read yet."""
+        ...
+
+    def read(self, n: int, /) -> bytes:
+        """Take up to ``n`` received bytes.
+
+        Raises:
+            OSError: the port failed (pyserial's ``SerialException`` is one).
+        """
+        ...
+
+    def close(self) -> None:
+        """Release the port."""
+        ...
 
 
 class RcSource(ABC):
@@ -52,15 +77,16 @@ class DbusSerialSource(RcSource):
     the poll time as their arrival time; the framer closes a frame after ``idle_gap_us`` of silence.
     """
 
-    def __init__(self, port: str | Any, *, idle_gap_us: int = IDLE_GAP_US) -> None:
-        """Open ``port`` (path or pyserial URL) at 100000 8E1, or wrap an open pyserial object.
+    def __init__(self, port: str | Uart, *, idle_gap_us: int = IDLE_GAP_US) -> None:
+        """Open ``port`` (path or pyserial URL) at 100000 8E1, or read from an open :class:`Uart`.
 
         Raises:
             PortError: the port cannot be opened.
         """
-        import serial
-
+        self._serial: Uart
         if isinstance(port, str):
+            import serial
+
             try:
                 self._serial = serial.serial_for_url(
                     port,
@@ -74,8 +100,8 @@ class DbusSerialSource(RcSource):
             except (serial.SerialException, OSError, ValueError) as exc:
                 raise PortError(f"cannot open RC port {port}: {exc}") from exc
         else:
+            # No timeout to set: poll reads only what in_waiting reports, so a read never waits.
             self._serial = port
-            self._serial.timeout = 0
         self.framer = DbusFramer(idle_gap_us)
         self.read_errors = 0
         self._closed = False

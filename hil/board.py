@@ -40,7 +40,7 @@ import numpy as np
 from controller.clock import Clock, RealTimeClock, monotonic_ns, zero_ns
 from controller.config import FirmwareConfig
 from controller.firmware import Firmware
-from controller.rc import DbusSerialSource, LinkRcSource, RcSource
+from controller.rc import DbusSerialSource, LinkRcSource, RcSource, Uart
 from controller.transport import Transport
 from protocol.dbus import RcFrame
 from protocol.messages import ClockKind, SimPoses
@@ -140,11 +140,10 @@ class LinkWire:
             self.host.inbox += data
 
 
-class MemoryUart:
-    """The board's DBUS UART in lockstep: the pyserial subset :class:`DbusSerialSource` uses."""
+class MemoryUart(Uart):
+    """The board's DBUS UART in lockstep: the virtual radio feeds it, :class:`DbusSerialSource` reads it."""
 
     def __init__(self) -> None:
-        self.timeout: float | None = 0
         self._buf = bytearray()
 
     def feed(self, data: bytes) -> None:

@@ -28,7 +28,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from protocol.c610 import MotorFeedback
+from protocol.c610 import ANGLE_COUNTS, MotorFeedback
 from protocol.dbus import CH_OFFSET, FRAME_LEN, RcFrame
 
 
@@ -260,7 +260,7 @@ class FaultSet:
         if self._active(FaultKind.MOTOR_WRONG, t_us, motor):
             self._count("feedback_wrong")
             return MotorFeedback(
-                angle=int(self.rng.integers(0, 8192)),
+                angle=int(self.rng.integers(0, ANGLE_COUNTS)),
                 speed_rpm=int(self.rng.integers(-20000, 20000)),
                 current=int(self.rng.integers(-10000, 10001)),
                 temperature=frame.temperature,

@@ -1,15 +1,16 @@
 """The MuJoCo plant: a SpiRob arm under a drone, driven by raw C610 currents, answering C610 feedback.
 
 One :meth:`Plant.step` is one control period (1 ms by default) and a whole number of physics steps.
-The firmware side only sees what a real C610 bus shows it: :meth:`Plant.apply_currents` takes the raw
-int16 setpoints of a 0x200 frame and :meth:`Plant.feedback` returns one :class:`MotorFeedback` per motor
-(rotor angle wrapping at 8192 counts per *rotor* turn, rotor speed in rpm, measured current in raw
-units). Everything else is a named accessor for tests, scenarios and the UI; no caller needs a raw
-``qpos`` index.
+The firmware side only sees what a real C610 bus shows it: :attr:`Plant.apply_currents` takes the raw
+int16 setpoints of a 0x200 frame and :attr:`Plant.feedback` returns one :class:`MotorFeedback` per motor.
+Those are the plant's drives (:mod:`hil.drives`: C610 current loop, M2006 rotor and gearbox, spool,
+feedback frames); this module is the MuJoCo physics they turn. Everything else is a named accessor for
+tests, scenarios and the UI; no caller needs a raw ``qpos`` index.
 
 Per control period the plant also applies what MuJoCo cannot express statically:
 
-- the motors' torque-speed line (the drive runs out of voltage towards the no-load speed);
+- the drives' currents, through the motors' torque-speed line (the drive runs out of voltage towards the
+  no-load speed);
 - capstan friction of the cables in the unit holes, as per-joint dry friction whose size follows the
   capstan law from the current cable tensions and joint angles (``docs/plant.md``);
 - the drone's acceleration, as a change of the gravity vector (the arm is simulated in the drone's frame).
@@ -21,104 +22,27 @@ given to the constructor.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from hil.drives import Drives
 from hil.errors import PlantDivergedError
-from hil.mjcf import ModelConfig, ObjectConfig, build_mjcf, cable_layout, unit_geometry
+from hil.mjcf import ObjectConfig, build_mjcf, cable_layout, unit_geometry
+from hil.plant_types import BodyPoses, Contact, PlantConfig, Pose, finite_vector, unit_quat
 from hil.spiral import SpiralDesign
-from protocol.c610 import ANGLE_COUNTS, CURRENT_RAW_MAX, FEEDBACK_FORMAT, RAW_PER_AMP, MotorFeedback
+from protocol.c610 import MotorFeedback
 
 __all__ = ["BodyPoses", "Contact", "Plant", "PlantConfig", "Pose"]
 
 FloatArray = NDArray[np.float64]
 
 _GRAVITY = np.array([0.0, 0.0, -9.80665])
-_INT16_MAX = 32767
 _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
-
-
-@dataclass(frozen=True)
-class PlantConfig:
-    """Configuration of a :class:`Plant`.
-
-    Attributes:
-        model: everything the MJCF generator needs besides the design (arm, motors, drone, solver,
-            objects).
-        control_period_us: length of one :meth:`Plant.step`; must be a whole number of physics steps.
-        max_joint_speed_rad_s: any arm joint faster than this counts as divergence.
-        max_spool_speed_m_s: any spool (cable) faster than this counts as divergence.
-    """
-
-    model: ModelConfig = field(default_factory=ModelConfig)
-    control_period_us: int = 1000
-    max_joint_speed_rad_s: float = 5.0e3
-    max_spool_speed_m_s: float = 50.0
-
-    def validate(self) -> None:
-        """Raise ``ValueError`` if a value is out of range."""
-        self.model.validate()
-        if isinstance(self.control_period_us, bool) or not isinstance(self.control_period_us, int):
-            raise ValueError(f"control_period_us must be an int, got {self.control_period_us!r}")
-        if self.control_period_us <= 0:
-            raise ValueError(f"control_period_us must be > 0, got {self.control_period_us}")
-        for name in ("max_joint_speed_rad_s", "max_spool_speed_m_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be > 0, got {value!r}")
-
-
-@dataclass(frozen=True)
-class Pose:
-    """A position and orientation in world coordinates.
-
-    Attributes:
-        pos_m: position, shape (3,).
-        quat_wxyz: unit quaternion w, x, y, z (MuJoCo's and viser's convention), shape (4,).
-    """
-
-    pos_m: FloatArray
-    quat_wxyz: FloatArray
-
-
-@dataclass(frozen=True)
-class BodyPoses:
-    """Poses of the drone and every unit, for drawing (drone first, then ``unit_00`` ... tip).
-
-    A unit's frame has its origin on the joint at its base-side face and its axis along −z towards the
-    tip; its size is given by :meth:`Plant.unit_dimensions_m`.
-
-    Attributes:
-        names: body names, ``("drone", "unit_00", ...)``.
-        positions_m: shape (n, 3).
-        quats_wxyz: shape (n, 4).
-    """
-
-    names: tuple[str, ...]
-    positions_m: FloatArray
-    quats_wxyz: FloatArray
-
-
-@dataclass(frozen=True)
-class Contact:
-    """A contact between a unit and something else.
-
-    Attributes:
-        unit: the unit's body name (``unit_07``).
-        other: the other body's name (an object's name, or ``world`` for the floor).
-        pos_m: contact point, world frame.
-        normal_force_n: force along the contact normal (>= 0).
-    """
-
-    unit: str
-    other: str
-    pos_m: tuple[float, float, float]
-    normal_force_n: float
 
 
 class Plant:
@@ -136,6 +60,19 @@ class Plant:
             physics steps.
     """
 
+    # The C610 side is the drives' own methods, bound once in __init__: the 1 kHz bus calls them with no
+    # extra Python frame in between.
+    apply_currents: Callable[[Sequence[int]], tuple[int, ...]]
+    """Set the motors' current setpoints, raw, one per cable (:meth:`hil.drives.Drives.apply_currents`)."""
+    feedback: Callable[[], tuple[MotorFeedback, ...]]
+    """One C610 feedback frame per motor now (see :meth:`hil.drives.Drives.feedback`)."""
+    feedback_payloads: Callable[[], list[bytes]]
+    """The 8 data bytes of each motor's feedback frame now (:meth:`hil.drives.Drives.feedback_payloads`)."""
+    commanded_currents_raw: Callable[[], tuple[int, ...]]
+    """The setpoints last applied (after clamping), raw units."""
+    applied_currents_a: Callable[[], FloatArray]
+    """Current each drive delivered in the last period (after the torque-speed line) [A]."""
+
     def __init__(
         self,
         design: SpiralDesign | None = None,
@@ -147,9 +84,14 @@ class Plant:
         self._config.validate()
         if rng is not None and not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-        if rng is None and self._config.model.motor.current_noise_raw > 0:
-            raise ValueError("current noise needs an rng (numpy.random.Generator)")
-        self._rng = rng
+        drives = Drives(self._config.model.motor, self._design.cables, rng)
+        self._drives = drives
+        self._drive = drives.drive
+        self.apply_currents = drives.apply_currents
+        self.feedback = drives.feedback
+        self.feedback_payloads = drives.feedback_payloads
+        self.commanded_currents_raw = drives.commanded_currents_raw
+        self.applied_currents_a = drives.applied_currents_a
         period_s = self._config.control_period_us * 1e-6
         ratio = period_s / self._config.model.solver.timestep_s
         substeps = round(ratio)
@@ -178,10 +120,7 @@ class Plant:
         self._n_cables = n_cables
         self._geo = unit_geometry(self._design, cfg.arm)
         self._layout = cable_layout(self._design, n_cables, cfg)
-        motor = cfg.motor
-        self._r_spool = motor.spool_radius_m
-        self._gear = motor.gear_ratio
-        self._limit_raw = round(motor.current_limit_a * RAW_PER_AMP)
+        self._r_spool = cfg.motor.spool_radius_m
 
         def jid(name: str) -> int:
             return int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name))
@@ -229,15 +168,6 @@ class Plant:
         self._friction_on = False
         self._mu = cfg.arm.cable_mu
         self._tension_adr_list = [int(a) for a in self._tension_adr]
-        self._spool_dadr_list = [int(a) for a in self._spool_dadr]
-        self._spool_qadr_list = [int(a) for a in self._spool_qadr]
-        self._inv_r_spool = 1.0 / motor.spool_radius_m
-        self._counts_per_m = self._gear * ANGLE_COUNTS / (2.0 * math.pi * self._r_spool)
-        self._rpm_per_m_s = self._gear * 60.0 / (2.0 * math.pi * self._r_spool)
-        self._noise_raw = motor.current_noise_raw
-        self._temperature_c = motor.temperature_c
-        self._inv_no_load = 1.0 / motor.no_load_speed_rad_s
-        self._stall_a = motor.stall_current_a
         self._arm_slice = slice(int(self._arm_dofs.min()), int(self._arm_dofs.max()) + 1)
         self._spool_slice = slice(int(self._spool_dadr.min()), int(self._spool_dadr.max()) + 1)
         self._object_names = tuple(o.name for o in cfg.objects)
@@ -250,13 +180,9 @@ class Plant:
             for o in cfg.objects
             if o.mass_kg is not None
         }
-        self._current_raw_list = [0] * n_cables
-        self._applied_a = np.zeros(n_cables)
         self._drone_accel = np.zeros(3)
-        # Plain buffer views of this MjData's state for the 1 kHz feedback (valid while it lives).
-        self._qpos_mv = self._d.qpos.data
-        self._qvel_mv = self._d.qvel.data
-        self._applied_mv = self._applied_a.data
+        d = self._d
+        self._drives.attach(d.qpos, d.qvel, d.ctrl, self._spool_qadr.tolist(), self._spool_dadr.tolist())
 
     # ------------------------------------------------------------------ properties
 
@@ -306,6 +232,11 @@ class Plant:
         return self._d
 
     @property
+    def drives(self) -> Drives:
+        """The C610/M2006/spool drives that turn the spools (the plant's motor side)."""
+        return self._drives
+
+    @property
     def unit_names(self) -> tuple[str, ...]:
         """Body names of the units, base first."""
         return self._unit_names
@@ -323,18 +254,11 @@ class Plant:
         mujoco.mj_resetData(m, d)
         drone = self._config.model.drone
         d.mocap_pos[self._drone_mocap] = drone.pos_m
-        d.mocap_quat[self._drone_mocap] = _unit_quat(drone.quat_wxyz)
+        d.mocap_quat[self._drone_mocap] = unit_quat(drone.quat_wxyz)
         m.opt.gravity[:] = _GRAVITY
         self._drone_accel[:] = 0.0
-        self._current_raw_list = [0] * self._n_cables
-        self._applied_a[:] = 0.0
+        self._drives.reset()
         self._time_us = 0
-        if self._rng is not None:
-            self._angle_offset_list = [
-                int(v) for v in self._rng.integers(0, ANGLE_COUNTS, size=self._n_cables)
-            ]
-        else:
-            self._angle_offset_list = [0] * self._n_cables
         m.dof_frictionloss[self._bend_dofs_flat] = 0.0
         self._friction_on = False
         self._bad_qacc = 0
@@ -348,27 +272,14 @@ class Plant:
                 or spool speed beyond the configured bounds). :meth:`reset` before stepping again.
         """
         m, d = self._m, self._d
-        qvel = d.qvel
-        ctrl = d.ctrl
-        # Torque-speed line: in the direction of motion the drive can push at most I_stall·(1 − ω/ω_nl).
-        # Plain floats: three motors are cheaper in Python than in numpy.
-        for k in range(self._n_cables):
-            cmd = self._current_raw_list[k] / RAW_PER_AMP
-            if cmd == 0.0:
-                applied = 0.0
-            else:
-                omega = qvel[self._spool_dadr_list[k]] * self._inv_r_spool
-                sign = 1.0 if cmd > 0 else -1.0
-                avail = self._stall_a * (1.0 - sign * omega * self._inv_no_load)
-                applied = sign * min(abs(cmd), avail) if avail > 0.0 else 0.0
-            self._applied_a[k] = applied
-            ctrl[k] = applied
+        self._drive()  # the drives' currents into the spool actuators
         if self._mu > 0:
             self._update_cable_friction()
         for _ in range(self._substeps):
             mujoco.mj_step(m, d)
         self._time_us += self._config.control_period_us
         # One cheap test per period; the detailed diagnosis only when it fails.
+        qvel = d.qvel
         arm_speed = np.abs(qvel[self._arm_slice]).max()
         spool_speed = np.abs(qvel[self._spool_slice]).max()
         if (
@@ -444,96 +355,7 @@ class Plant:
         self._m.dof_frictionloss[self._bend_dofs] = wrap[:, None]
         self._friction_on = True
 
-    # ------------------------------------------------------------------ the motor bus side
-
-    def apply_currents(self, currents_raw: Sequence[int]) -> tuple[int, ...]:
-        """Set the motors' current setpoints in raw C610 units (1000 per amp), one per cable.
-
-        Values beyond the configured current limit are clamped, like the ESC does. A C610 command frame
-        has four slots: values beyond the plant's motors (e.g. slot 3 for a 2-cable arm) are accepted and
-        ignored, like a slot with no ESC on it.
-
-        Args:
-            currents_raw: one int per cable (up to four); positive winds the cable in (pulls).
-
-        Returns:
-            The setpoints actually applied to the plant's motors (after clamping), one per cable.
-
-        Raises:
-            ValueError: fewer values than cables or more than four, or a value that is not an integer.
-        """
-        if not self._n_cables <= len(currents_raw) <= 4:
-            raise ValueError(f"expected {self._n_cables} currents (at most 4), got {len(currents_raw)}")
-        lim = self._limit_raw
-        out = []
-        for i, value in enumerate(currents_raw):
-            if type(value) is not int:  # the bus always passes plain ints: one test for them
-                if isinstance(value, bool) or not isinstance(value, int | np.integer):
-                    raise ValueError(f"current[{i}] must be an int, got {type(value).__name__}")
-                value = int(value)
-            out.append(lim if value > lim else -lim if value < -lim else value)
-        del out[self._n_cables :]
-        self._current_raw_list = out
-        return tuple(out)
-
-    def feedback(self) -> tuple[MotorFeedback, ...]:
-        """One C610 feedback frame per motor, as the motor would report it now.
-
-        Angle: rotor position, 0..8191 per *rotor* turn (the output turns 36x slower), with an arbitrary
-        zero drawn from the rng at :meth:`reset`. Speed: rotor rpm. Current: the current the drive actually
-        delivers (the torque-speed line can make it smaller than the setpoint), raw units, with the
-        configured noise. (Decoded from :meth:`feedback_payloads`: one computation for both.)
-        """
-        unpack = MotorFeedback.unpack
-        return tuple(unpack(data) for data in self.feedback_payloads())
-
-    def feedback_payloads(self) -> list[bytes]:
-        """The 8 data bytes of each motor's feedback frame now (see :meth:`feedback` for the fields).
-
-        The simulated bus calls this every millisecond, right after a MuJoCo step has evicted most of
-        Python's working set from the caches; so it is straight-line code over locals, memoryviews of the
-        state instead of numpy indexing, and no comprehensions or temporary tuples (measured: half the
-        time of the same arithmetic written with gathers and comprehensions). The fields are in range by
-        construction: the angle is wrapped, speed and current are clamped to int16 and ±10000, and the
-        temperature is validated by the motor config.
-        """
-        qpos = self._qpos_mv
-        qvel = self._qvel_mv
-        applied = self._applied_mv
-        qadr = self._spool_qadr_list
-        dadr = self._spool_dadr_list
-        offsets = self._angle_offset_list
-        counts_per_m = self._counts_per_m
-        rpm_per_m_s = self._rpm_per_m_s
-        temperature = self._temperature_c
-        noise = None
-        if self._noise_raw > 0 and self._rng is not None:
-            noise = self._rng.normal(0.0, self._noise_raw, self._n_cables).tolist()
-        pack = FEEDBACK_FORMAT.pack
-        out = []
-        for k in range(self._n_cables):
-            rpm = round(qvel[dadr[k]] * rpm_per_m_s)
-            if rpm > _INT16_MAX or rpm < -_INT16_MAX:
-                rpm = _INT16_MAX if rpm > 0 else -_INT16_MAX
-            current_raw = applied[k] * RAW_PER_AMP
-            if noise is not None:
-                current_raw += noise[k]
-            current = round(current_raw)
-            if current > CURRENT_RAW_MAX or current < -CURRENT_RAW_MAX:
-                current = CURRENT_RAW_MAX if current > 0 else -CURRENT_RAW_MAX
-            angle = (round(qpos[qadr[k]] * counts_per_m) + offsets[k]) % ANGLE_COUNTS
-            out.append(pack(angle, rpm, current, temperature))
-        return out
-
     # ------------------------------------------------------------------ named accessors
-
-    def commanded_currents_raw(self) -> tuple[int, ...]:
-        """The setpoints last applied (after clamping), raw units."""
-        return tuple(self._current_raw_list)
-
-    def applied_currents_a(self) -> FloatArray:
-        """Current each drive delivered in the last period (after the torque-speed line) [A]."""
-        return self._applied_a.copy()
 
     def spool_angles_rad(self) -> FloatArray:
         """Output-shaft angle of each spool since reset, multi-turn; positive = cable wound in [rad]."""
@@ -650,9 +472,9 @@ class Plant:
         Raises:
             ValueError: wrong shape, a non-finite value, or a zero quaternion.
         """
-        pos = _finite_vector("pos_m", pos_m, 3)
-        acc = _finite_vector("accel_m_s2", accel_m_s2, 3)
-        quat = _unit_quat(quat_wxyz)
+        pos = finite_vector("pos_m", pos_m, 3)
+        acc = finite_vector("accel_m_s2", accel_m_s2, 3)
+        quat = unit_quat(quat_wxyz)
         d = self._d
         d.mocap_pos[self._drone_mocap] = pos
         d.mocap_quat[self._drone_mocap] = quat
@@ -671,8 +493,8 @@ class Plant:
         """
         if name not in self._object_bodies:
             raise KeyError(f"no object named {name!r}; objects: {', '.join(self._object_names) or 'none'}")
-        pos = _finite_vector("pos_m", pos_m, 3)
-        quat = _unit_quat(quat_wxyz)
+        pos = finite_vector("pos_m", pos_m, 3)
+        quat = unit_quat(quat_wxyz)
         m, d = self._m, self._d
         body = self._object_bodies[name]
         jnt = int(m.body_jntadr[body])
@@ -770,8 +592,8 @@ class Plant:
             raise KeyError(
                 f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
             )
-        lin = _finite_vector("linear_m_s", linear_m_s, 3)
-        ang = _finite_vector("angular_rad_s", angular_rad_s, 3)
+        lin = finite_vector("linear_m_s", linear_m_s, 3)
+        ang = finite_vector("angular_rad_s", angular_rad_s, 3)
         m, d = self._m, self._d
         jnt = int(m.body_jntadr[self._object_bodies[name]])
         da = int(m.jnt_dofadr[jnt])
@@ -791,7 +613,7 @@ class Plant:
             raise KeyError(
                 f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
             )
-        force = _finite_vector("force_n", force_n, 3)
+        force = finite_vector("force_n", force_n, 3)
         self._d.xfrc_applied[self._object_bodies[name], :3] = force
 
     def add_object(self, obj: ObjectConfig) -> None:
@@ -803,14 +625,7 @@ class Plant:
         old_m, old_d = self._m, self._d
         state = (old_d.qpos.copy(), old_d.qvel.copy(), old_d.mocap_pos.copy(), old_d.mocap_quat.copy())
         eq_active = old_d.eq_active.copy()
-        keep = (
-            self._time_us,
-            list(self._current_raw_list),
-            self._applied_a.copy(),
-            list(self._angle_offset_list),
-            self._drone_accel.copy(),
-            old_d.time,
-        )
+        keep = (self._time_us, self._drone_accel.copy(), old_d.time)  # the drives keep their own state
         model = self._config.model.with_objects(obj)
         new_config = replace(self._config, model=model)
         new_config.validate()
@@ -829,11 +644,8 @@ class Plant:
                 qa = int(m.jnt_qposadr[jnt])
                 d.qpos[qa : qa + 3] = o.pos_m
                 d.qpos[qa + 3 : qa + 7] = (1.0, 0.0, 0.0, 0.0)
-        self._time_us, cur, app, off, acc, d.time = keep
-        self._applied_a[:] = app
-        self._angle_offset_list = off
+        self._time_us, acc, d.time = keep
         self._drone_accel[:] = acc
-        self._current_raw_list = cur
         m.opt.gravity[:] = _GRAVITY - acc
         self._bad_qacc = 0
         mujoco.mj_forward(m, d)
@@ -881,18 +693,3 @@ class Plant:
         excess = d.ten_length[self._tendon_ids] - self._layout.taut_length_m
         d.qpos[self._spool_qadr] = -excess
         mujoco.mj_forward(m, d)
-
-
-def _finite_vector(name: str, value: Sequence[float], n: int) -> FloatArray:
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.shape != (n,) or not np.isfinite(arr).all():
-        raise ValueError(f"{name} must be {n} finite numbers, got {value!r}")
-    return arr
-
-
-def _unit_quat(value: Sequence[float]) -> FloatArray:
-    q = _finite_vector("quat_wxyz", value, 4)
-    norm = float(np.linalg.norm(q))
-    if norm == 0.0:
-        raise ValueError("quat_wxyz must be non-zero")
-    return q / norm

@@ -57,9 +57,7 @@ RAW_TOPICS: Final = (DBUS_RX, CAN_RX, CAN_TX, LINK_RX, LINK_TX, TICK, POSES)
 
 # Decoded channels (JSON) for people and plotting tools.
 TELEMETRY: Final = "/telemetry"
-EVENTS: Final = "/events"
-PLANT: Final = "/plant"
-"""Plant ground truth in simulation: tip position, cable tensions and lengths."""
+"""The firmware's telemetry messages, decoded."""
 
 KIND_PORT: Final = "port"
 """Metadata ``kind`` of a recording of a run against a port (``spirob-hil run --port --record``): the

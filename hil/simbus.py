@@ -13,13 +13,12 @@ Every frame that crosses is recorded (raw CAN channels) when a recorder is attac
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Callable, Sequence
 from typing import ClassVar, Protocol, runtime_checkable
 
 from controller.errors import BusError
 from controller.motorbus import MotorBus
-from protocol.c610 import COMMAND_ID_LOW, CURRENT_RAW_MAX, FEEDBACK_ID_BASE, MotorFeedback
+from protocol.c610 import COMMAND_ID_LOW, CURRENT_RAW_MAX, FEEDBACK_ID_BASE, MotorFeedback, unpack_currents3
 
 from . import recording
 from .faults import FaultSet
@@ -131,7 +130,7 @@ class SimMotorBus(MotorBus):
         if data == self._applied:  # the ESCs already hold these setpoints
             return
         self._applied = data
-        self.applied = _unpack_command(data)
+        self.applied = unpack_currents3(data)  # 8 bytes: MotorBus packed them
         self._motors.apply_currents(self.applied)
 
     def _send_frame(self, can_id: int, data: bytes) -> None:
@@ -149,12 +148,3 @@ class SimMotorBus(MotorBus):
 
     def _shutdown_backend(self) -> None:
         self.deliver_command()
-
-
-_COMMAND3 = struct.Struct(">hhh")
-
-
-def _unpack_command(data: bytes) -> tuple[int, int, int]:
-    """The three setpoints of a 0x200 frame (big-endian int16; slot 4 is unused)."""
-    a, b, c = _COMMAND3.unpack_from(data)
-    return a, b, c

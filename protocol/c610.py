@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from operator import index
 from typing import NamedTuple
 
@@ -23,6 +23,8 @@ from protocol.errors import DecodeError
 
 __all__ = [
     "ANGLE_COUNTS",
+    "COMMAND3_FORMAT",
+    "COMMAND_FORMAT",
     "COMMAND_ID_HIGH",
     "COMMAND_ID_LOW",
     "CURRENT_RAW_MAX",
@@ -40,8 +42,13 @@ __all__ = [
     "feedback_id",
     "output_rad_s_to_rotor_rpm",
     "output_rad_to_counts",
+    "pack_currents",
+    "pack_currents3",
+    "pack_feedback",
     "raw_to_amps",
     "rotor_rpm_to_output_rad_s",
+    "unpack_currents",
+    "unpack_currents3",
 ]
 
 COMMAND_ID_LOW = 0x200
@@ -61,7 +68,28 @@ ANGLE_COUNTS = 8192
 M2006_GEAR_RATIO = 36
 """M2006 P36 gearbox: 36 rotor turns per output turn."""
 
-_COMMAND = struct.Struct(">hhhh")
+COMMAND_FORMAT = struct.Struct(">hhhh")
+"""Layout of a command frame's 8 data bytes: four int16 setpoints, the frame's first motor first."""
+COMMAND3_FORMAT = struct.Struct(">hhhxx")
+"""The same frame for motors 1-3 of a 0x200 frame: slot 4 packed as 0 and skipped when unpacking."""
+FEEDBACK_FORMAT = struct.Struct(">HhhBx")
+"""Layout of a feedback frame's 8 data bytes: angle u16, speed int16, current int16, temperature u8, pad."""
+
+# The 1 kHz entry points: the precompiled structs' own methods, so a control tick or a plant step pays one
+# C call and no Python frame for a frame. They check nothing: the caller has clamped every value into its
+# wire range (beyond int16/u16 they raise ``struct.error``) and unpacks only 8-byte data (any other length
+# raises ``struct.error``). :func:`current_command` and :class:`MotorFeedback` are the checked ones.
+pack_currents: Callable[[int, int, int, int], bytes] = COMMAND_FORMAT.pack
+"""Four raw setpoints -> the 8 data bytes of a command frame (unchecked)."""
+pack_currents3: Callable[[int, int, int], bytes] = COMMAND3_FORMAT.pack
+"""Setpoints of motors 1-3 -> the 8 data bytes of a 0x200 frame, slot 4 = 0 (unchecked)."""
+unpack_currents: Callable[[bytes], tuple[int, int, int, int]] = COMMAND_FORMAT.unpack
+"""The 8 data bytes of a command frame -> its four raw setpoints."""
+unpack_currents3: Callable[[bytes], tuple[int, int, int]] = COMMAND3_FORMAT.unpack
+"""The 8 data bytes of a 0x200 frame -> the setpoints of motors 1-3 (slot 4 ignored)."""
+pack_feedback: Callable[[int, int, int, int], bytes] = FEEDBACK_FORMAT.pack
+"""``(angle, speed_rpm, current, temperature)`` -> the 8 data bytes of a feedback frame (unchecked)."""
+
 _ZEROS = (0, 0, 0, 0)
 _new_tuple = tuple.__new__  # builds a named tuple from a ready tuple without re-checking its arity
 
@@ -104,7 +132,7 @@ def current_command(currents: Sequence[int], can_id: int = COMMAND_ID_LOW) -> tu
     values = [_as_current(v, i) for i, v in enumerate(currents)]
     if n < MOTORS_PER_COMMAND:
         values.extend(_ZEROS[n:])
-    return can_id, _COMMAND.pack(*values)
+    return can_id, COMMAND_FORMAT.pack(*values)
 
 
 def feedback_id(motor: int) -> int:
@@ -116,10 +144,6 @@ def feedback_id(motor: int) -> int:
     if not 1 <= motor <= 2 * MOTORS_PER_COMMAND:
         raise ValueError(f"motor must be 1..8, got {motor}")
     return FEEDBACK_ID_BASE + motor
-
-
-FEEDBACK_FORMAT = struct.Struct(">HhhBx")
-"""Layout of a feedback frame's 8 data bytes: angle u16, speed int16, current int16, temperature u8, pad."""
 
 
 class MotorFeedback(NamedTuple):

@@ -25,8 +25,13 @@ from protocol.c610 import (
     feedback_id,
     output_rad_s_to_rotor_rpm,
     output_rad_to_counts,
+    pack_currents,
+    pack_currents3,
+    pack_feedback,
     raw_to_amps,
     rotor_rpm_to_output_rad_s,
+    unpack_currents,
+    unpack_currents3,
 )
 from protocol.errors import DecodeError
 
@@ -79,7 +84,27 @@ def test_command_round_trip(currents: list[int], can_id: int) -> None:
     assert list(struct.unpack(">4h", data)) == currents + [0] * (4 - len(currents))
 
 
+def test_unchecked_command_entry_points_match_the_checked_frame() -> None:
+    assert pack_currents(1000, -1000, 10000, 0) == bytes.fromhex("03e8fc1827100000")
+    assert pack_currents3(1000, -1000, 10000) == bytes.fromhex("03e8fc1827100000")
+    assert unpack_currents(bytes.fromhex("d8f000000001ffff")) == (-10000, 0, 1, -1)
+    assert unpack_currents3(bytes.fromhex("d8f000000001ffff")) == (-10000, 0, 1)  # slot 4 ignored
+
+
+@SETTINGS
+@given(st.lists(st.integers(-CURRENT_RAW_MAX, CURRENT_RAW_MAX), min_size=3, max_size=3))
+def test_unchecked_command_round_trip(currents: list[int]) -> None:
+    a, b, c = currents
+    data = current_command(currents)[1]
+    assert pack_currents(a, b, c, 0) == pack_currents3(a, b, c) == data
+    assert unpack_currents(data) == (a, b, c, 0) and unpack_currents3(data) == (a, b, c)
+
+
 GOLDEN_FEEDBACK = bytes.fromhex("1fff03e8ff382400")
+
+
+def test_unchecked_feedback_packer_matches_the_checked_one() -> None:
+    assert pack_feedback(8191, 1000, -200, 36) == GOLDEN_FEEDBACK
 
 
 def test_golden_feedback_frame() -> None:

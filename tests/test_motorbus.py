@@ -1,4 +1,4 @@
-"""MotorBus: clamping, packing, feedback decoding, shutdown, registry; loopback over python-can's virtual
+"""MotorBus: clamping, packing, feedback decoding, shutdown, CAN specs; loopback over python-can's virtual
 bus and over a real pty pair (slcan adapter emulator with a fake C610 trio behind it)."""
 
 from __future__ import annotations
@@ -9,10 +9,11 @@ from collections.abc import Iterator
 
 import can
 import pytest
+from c610_rigs import C610TrioServer, SlcanAdapterEmulator
 
 from controller.errors import BusError, PortError
-from controller.fake_c610 import C610TrioServer, FakeC610Trio, SlcanAdapterEmulator
-from controller.motorbus import CanMotorBus, FakeMotorBus, MotorBus, make_bus, parse_can_spec, register_bus
+from controller.fake_c610 import FakeC610Trio
+from controller.motorbus import CanMotorBus, FakeMotorBus, MotorBus, parse_can_spec
 from protocol.c610 import MotorFeedback, current_command
 
 
@@ -88,12 +89,7 @@ def test_shutdown_sends_zero_once_and_is_safe_twice() -> None:
     assert bus.read_feedback() == []
 
 
-def test_registry_and_spec_parsing() -> None:
-    assert isinstance(make_bus("fake"), FakeMotorBus)
-    register_bus("recording", RecordingBus)
-    assert isinstance(make_bus("recording"), RecordingBus)
-    with pytest.raises(ValueError, match="unknown motor bus"):
-        make_bus("nope")
+def test_spec_parsing() -> None:
     assert parse_can_spec("slcan:///dev/ttyACM0") == ("slcan", "/dev/ttyACM0")
     assert parse_can_spec("virtual:bus0") == ("virtual", "bus0")
     assert parse_can_spec("/dev/ttyACM1") == ("slcan", "/dev/ttyACM1")

@@ -73,12 +73,13 @@ def test_feedback_frames_follow_the_spool_state() -> None:
     """Each frame against the documented formulas, computed here from the MuJoCo state with numpy."""
     plant = Plant(rng=np.random.default_rng(4))
     plant.apply_currents([amps(2.0), amps(-1.0), amps(0.3)])
-    r, gear = plant._r_spool, plant._gear
+    r, gear = plant.drives.spool_radius_m, plant.drives.gear_ratio
+    offsets = list(plant.drives.angle_offsets_counts)
     for _ in range(100):
         plant.step()
         pos = plant._d.qpos[plant._spool_qadr]
         vel = plant._d.qvel[plant._spool_dadr]
-        angle = (np.rint(pos * gear * 8192 / (2 * np.pi * r)).astype(int) + plant._angle_offset_list) % 8192
+        angle = (np.rint(pos * gear * 8192 / (2 * np.pi * r)).astype(int) + offsets) % 8192
         rpm = np.rint(vel * gear * 60 / (2 * np.pi * r)).astype(int)
         current = np.rint(plant.applied_currents_a() * 1000).astype(int)
         frames = plant.feedback()

@@ -9,7 +9,7 @@ from collections.abc import Iterator
 import pytest
 
 from controller.errors import PortError
-from controller.rc import DbusSerialSource, LinkRcSource, ScriptedRcSource
+from controller.rc import DbusSerialSource, LinkRcSource, ScriptedRcSource, Uart
 from protocol.dbus import Lever, RcFrame
 
 GOOD = RcFrame((100, -200, 300, -400), Lever.MIDDLE, Lever.UP)
@@ -63,6 +63,43 @@ def test_busy_rc_port_is_a_port_error(dbus_pty: tuple[int, DbusSerialSource]) ->
     _, source = dbus_pty
     with pytest.raises(PortError):
         DbusSerialSource(source._serial.port)
+
+
+class ChunkUart(Uart):
+    """A UART in memory that hands out at most ``chunk_n`` bytes per read and can fail."""
+
+    def __init__(self, data: bytes, chunk_n: int) -> None:
+        self.data = bytearray(data)
+        self.chunk_n = chunk_n
+        self.fail = False
+        self.closed_n = 0
+
+    @property
+    def in_waiting(self) -> int:
+        if self.fail:
+            raise OSError("adapter unplugged")
+        return min(len(self.data), self.chunk_n)
+
+    def read(self, n: int, /) -> bytes:
+        out = bytes(self.data[:n])
+        del self.data[:n]
+        return out
+
+    def close(self) -> None:
+        self.closed_n += 1
+
+
+def test_dbus_source_reads_any_uart_and_counts_read_errors() -> None:
+    uart = ChunkUart(GOOD.pack(), chunk_n=10)
+    source = DbusSerialSource(uart)
+    assert source.poll(0) == [] and source.poll(100) == []  # 10 + 8 bytes, no gap yet
+    uart.fail = True
+    assert source.poll(200) == []
+    assert source.read_errors == 1
+    assert source.poll(3_000) == [GOOD]  # the idle gap closed the frame
+    source.close()
+    source.close()
+    assert uart.closed_n == 1
 
 
 def test_scripted_source_repeats_at_the_dr16_cadence() -> None:

@@ -1,0 +1,174 @@
+"""C610 test rigs that run in a thread: the fake trio on a python-can bus, or behind an slcan adapter.
+
+- :class:`C610TrioServer` answers every 0x200 on a python-can bus with 0x201-0x203;
+- :class:`SlcanAdapterEmulator` is a USB-CAN adapter speaking slcan on a pty, the trio behind it, so that
+  ``CanMotorBus(interface="slcan", channel=<pty slave>)`` is tested end to end.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import select
+import threading
+from types import TracebackType
+from typing import Any
+
+from controller.fake_c610 import FakeC610Trio
+from protocol.c610 import COMMAND_ID_LOW
+
+__all__ = ["C610TrioServer", "SlcanAdapterEmulator"]
+
+
+class _Worker:
+    """A worker thread with a stop flag, joined by :meth:`stop` (safe twice; daemon, so a failed test
+    cannot hang the interpreter)."""
+
+    def __init__(self, name: str) -> None:
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+        self.error: BaseException | None = None
+
+    def start(self) -> None:
+        """Start serving."""
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop serving and join the thread (safe twice)."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+
+    def _loop(self) -> None:
+        try:
+            while not self._stop.is_set():
+                self._poll()
+        except BaseException as exc:
+            self.error = exc
+
+    def _poll(self) -> None:
+        raise NotImplementedError
+
+
+class C610TrioServer(_Worker):
+    """Answers each 0x200 command on a python-can bus with the trio's 0x201-0x203 feedback (a thread).
+
+    Use as a context manager; the bus given is shut down on exit.
+    """
+
+    def __init__(self, bus: Any, trio: FakeC610Trio | None = None, *, dt_us: int = 1000) -> None:
+        """Serve ``trio`` (default: a fresh one) on the python-can ``bus``; each command steps ``dt_us``."""
+        super().__init__("c610-trio")
+        import can
+
+        self._can = can
+        self.bus = bus
+        self.trio = trio if trio is not None else FakeC610Trio()
+        self.dt_us = dt_us
+
+    def __enter__(self) -> C610TrioServer:
+        self.start()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+        self.bus.shutdown()
+
+    def _poll(self) -> None:
+        msg = self.bus.recv(timeout=0.01)
+        if msg is None or msg.arbitration_id != COMMAND_ID_LOW or msg.is_extended_id:
+            return
+        self.trio.handle_frame(msg.arbitration_id, bytes(msg.data))
+        for can_id, data in self.trio.step(self.dt_us):
+            self.bus.send(self._can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+
+
+class SlcanAdapterEmulator(_Worker):
+    """A USB-CAN adapter speaking the slcan (Lawicel) ASCII protocol on a pty master, trio behind it.
+
+    Answers ``S<n>``, ``O``, ``C``, ``L``, ``V``, ``v``, ``N`` with ``\\r`` (version queries with a
+    version), and each ``t200 8 ...`` command with three ``t20n8...`` feedback lines. Use as a context
+    manager; ``fd`` (the pty master) is closed on exit.
+
+    Attributes:
+        lines: slcan lines received (for assertions).
+        is_open: the host sent ``O`` (and not ``C`` since).
+    """
+
+    def __init__(self, fd: int, trio: FakeC610Trio | None = None, *, dt_us: int = 1000) -> None:
+        """Serve on the pty master ``fd``."""
+        super().__init__("slcan-adapter")
+        self.fd = fd
+        self.trio = trio if trio is not None else FakeC610Trio()
+        self.dt_us = dt_us
+        self.lines: list[str] = []
+        self.is_open = False
+        self._buf = bytearray()
+
+    def __enter__(self) -> SlcanAdapterEmulator:
+        self.start()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.stop()
+        with contextlib.suppress(OSError):
+            os.close(self.fd)
+
+    def _poll(self) -> None:
+        ready, _, _ = select.select([self.fd], [], [], 0.01)
+        if not ready:
+            return
+        try:
+            data = os.read(self.fd, 4096)
+        except OSError:  # the slave side closed: nothing more to serve
+            self._stop.wait(0.01)
+            return
+        self._buf += data
+        while True:
+            end = self._buf.find(b"\r")
+            if end < 0:
+                break
+            line = self._buf[:end].decode("ascii", errors="replace")
+            del self._buf[: end + 1]
+            self._handle(line)
+
+    def _handle(self, line: str) -> None:
+        self.lines.append(line)
+        if not line:
+            return
+        cmd = line[0]
+        reply = b"\r"
+        if cmd == "O" or cmd == "L":
+            self.is_open = True
+        elif cmd == "C":
+            self.is_open = False
+        elif cmd == "V":
+            reply = b"V1013\r"
+        elif cmd == "v":
+            reply = b"v1013\r"
+        elif cmd == "N":
+            reply = b"NA123\r"
+        elif cmd == "t" and len(line) >= 5:
+            can_id = int(line[1:4], 16)
+            dlc = int(line[4])
+            data = bytes.fromhex(line[5 : 5 + 2 * dlc])
+            self.trio.handle_frame(can_id, data)
+            reply = b"\r" if not self.is_open else b""
+            if can_id == COMMAND_ID_LOW and self.is_open:
+                for fid, fdata in self.trio.step(self.dt_us):
+                    reply += f"t{fid:03X}8{fdata.hex().upper()}\r".encode("ascii")
+        self._write(reply)
+
+    def _write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            try:
+                n = os.write(self.fd, view)
+            except BlockingIOError:
+                select.select([], [self.fd], [], 0.01)
+                continue
+            view = view[n:]
