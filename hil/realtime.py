@@ -43,13 +43,9 @@ through the host-to-board clock offset (the smallest telemetry latency) and carr
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import logging
 import math
-import queue
-import select
-import threading
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Final
@@ -58,37 +54,22 @@ import numpy as np
 
 from controller.clock import RealTimeClock
 from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig
-from controller.errors import ConfigError, PortError
-from controller.transport import SerialTransport
-from protocol.dbus import FRAME_LEN, FRAME_PERIOD_US, Lever, RcFrame
-from protocol.link import LinkFrame, LinkParser
+from controller.errors import ConfigError
+from protocol.dbus import FRAME_LEN, Lever, RcFrame
 from protocol.messages import (
-    PARAM_LIST_ALL,
     AckResult,
-    Command,
-    CommandAck,
     CommandCode,
-    Event,
-    Heartbeat,
-    Message,
-    ParamRequest,
-    ParamSet,
-    ParamValue,
     Phase,
-    RawRc,
     Telemetry,
-    VirtualRc,
-    decode,
-    encode,
 )
 
 from . import recording
 from .errors import HilError
 from .faults import Fault, FaultKind, FaultSet
-from .harness import HEARTBEAT_PERIOD_US
+from .port_host import PortHost
 from .radio import RadioScript
 from .record import RunRecord, Samples, ScenarioResult
-from .recording import Recorder, telemetry_json
+from .recording import Recorder
 from .scenarios import SCENARIOS, Plan, judge
 
 __all__ = [
@@ -104,7 +85,7 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-TELEMETRY_PERIOD_US: Final = 10_000
+TELEMETRY_PERIOD_US: Final = FirmwareConfig().telemetry_period_us
 """The board's telemetry period (100 Hz): currents, phases and modes are seen once per period, so a
 bound on "zero current within X" is widened by it."""
 LINK_ALLOWANCE_US: Final = 2_000
@@ -118,8 +99,6 @@ timing checks, and its ``control_late`` counter says why."""
 SETTLE_US: Final = 100_000
 """After the scenario's duration the host keeps playing its last state this long, so the telemetry of
 the last moments arrives, then puts the board in SAFE."""
-LOOP_PERIOD_US: Final = 1_000
-"""The host loop's period: RC, heartbeat and command times are quantised to it."""
 
 BOARD_ONLY_FAULTS: Final = frozenset(
     {
@@ -138,10 +117,7 @@ BOARD_ONLY_FAULTS: Final = frozenset(
 _PREAMBLE_TIMEOUT_US = 3_000_000  # the board answers within a few ms; 3 s covers a slow USB enumeration
 _REPLY_TIMEOUT_US = 1_000_000
 _RESEND_US = 500_000
-_REOPEN_TIMEOUT_US = 2_000_000
 _FINISH_SAFE_US = 150_000
-_EOF_READS = 200  # readable but empty this many times in a row (>= 1 ms apart): the board closed the link
-_READER_POLL_S = 0.01  # the reader thread checks for a stop this often
 _HOST_FIFO_PRIORITY = 30  # below the virtual board's 50: a board on the same machine keeps its deadlines
 _MARKER_CH2 = 321  # left horizontal stick: no mode reads it; seeing it in telemetry proves our RC rules
 
@@ -201,328 +177,6 @@ def check_port_run(name: str, faults: Sequence[Fault] = ()) -> None:
         raise HilError(reason)
 
 
-# --- the host's end of the link -------------------------------------------------------------------
-
-
-def _open(port: str) -> SerialTransport:
-    try:
-        transport = SerialTransport(port)
-    except PortError as exc:
-        raise HilError(str(exc).splitlines()[0] if str(exc) else f"cannot open {port}") from exc
-    with contextlib.suppress(Exception):  # stale bytes a pty kept while nobody listened
-        transport.serial.reset_input_buffer()
-    return transport
-
-
-def _fileno(transport: SerialTransport) -> int | None:
-    try:
-        fd = int(transport.serial.fileno())
-    except Exception:  # loop:// and friends: no descriptor, the host polls every tick instead
-        return None
-    return fd
-
-
-class _Reader:
-    """Reads the port on a thread of its own and queues what arrives with its receive time.
-
-    Why a thread: on a pty, ``read`` and ``poll`` wait for the kernel's tty flush worker, a
-    normal-priority kworker; on this shared machine a real-time host loop was measured waiting 20-80 ms
-    in them, long enough to miss two RC frames (an RC loss the board rightly latches). Writes never wait
-    for it, so the loop that sends RC and heartbeats on time never reads the port itself.
-    """
-
-    def __init__(self, transport: SerialTransport, clock: RealTimeClock) -> None:
-        self.transport = transport
-        self.clock = clock
-        self.fd = _fileno(transport)
-        self.queue: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
-        self.closed = False
-        """The port reported end of file (the board closed the link)."""
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="board-link-reader", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        empty = 0
-        while not self._stop.is_set():
-            if self.fd is not None:
-                try:
-                    readable, _, _ = select.select([self.fd], [], [], _READER_POLL_S)
-                except (OSError, ValueError):  # closed under us
-                    return
-                if not readable:
-                    continue
-            data = self.transport.read()
-            if data:
-                empty = 0
-                self.queue.put((self.clock.now_us(), data))
-                continue
-            if self.fd is not None:  # readable but empty: end of file, or an error
-                empty += 1
-                if empty >= _EOF_READS:
-                    self.closed = True
-                    return
-            self._stop.wait(LOOP_PERIOD_US / 1e6)
-
-    def drain(self) -> list[tuple[int, bytes]]:
-        """Everything received so far, oldest first."""
-        out: list[tuple[int, bytes]] = []
-        with contextlib.suppress(queue.Empty):
-            while True:
-                out.append(self.queue.get_nowait())
-        return out
-
-    def stop(self) -> None:
-        """Stop and join the thread (safe twice)."""
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=2.0)
-
-
-class _Host:
-    """The host's side of the board link on a port: scheduled RC and heartbeats, link faults, decoding.
-
-    Times are the host's CLOCK_MONOTONIC in µs. Everything received is kept with the board times it
-    carries; ``offset_us`` (host receive time minus board time, the smallest seen) maps host times to
-    board times.
-    """
-
-    def __init__(self, port: str, clock: RealTimeClock, recorder: Recorder | None = None) -> None:
-        self.port = port
-        self.clock = clock
-        self.recorder = recorder
-        """Records the bytes on the link (board's view: ``link_rx`` what reached it after the emulated
-        faults, ``link_tx`` what it sent before them) and the decoded telemetry, on the host's clock."""
-        self.transport: SerialTransport | None = _open(port)
-        self._reader: _Reader | None = _Reader(self.transport, clock)
-        self.parser = LinkParser()
-        self._clean_parser = LinkParser()
-        self.board_telemetry_us: list[int] = []
-        self.board_rc: list[tuple[int, RcFrame]] = []
-        self.board_events: list[Event] = []
-        self.faults: FaultSet | None = None
-        self.t0_us = 0
-        self.rc_at: Callable[[int], bytes | None] = lambda slot_us: None
-        self.heartbeat_on: Callable[[int], bool] = lambda now_us: True
-        self.commands: list[tuple[int, Message]] = []
-        now = clock.now_us()
-        self.next_rc_us = now
-        self.next_hb_us = now
-        self._seq = 0
-        self._hb_count = 0
-        self._pending = bytearray()
-        self._down_since: int | None = None
-        self.telemetry: list[Telemetry] = []
-        self.raw_rc: list[RawRc] = []
-        self.events: list[Event] = []
-        self.acks: list[tuple[CommandAck, int]] = []  # with the telemetry count when it arrived
-        self.params: dict[str, float] = {}
-        self.param_log: list[str] = []
-        self.param_count = 0
-        self.decode_errors = 0
-        self.sent: list[tuple[int, Message]] = []
-        self.rc_sent_us: list[int] = []
-        self.reconnects_us: list[int] = []
-        self.offset_us: int | None = None
-        self.counters: dict[str, int] = {}
-
-    # --- sending ----------------------------------------------------------------------------------
-
-    def _next_seq(self) -> int:
-        seq = self._seq
-        self._seq = (seq + 1) & 0xFF
-        return seq
-
-    def send(self, now_us: int, msg: Message) -> int:
-        """Send a link message (through the link faults while a scenario runs); returns its seq."""
-        seq = self._next_seq()
-        frame = encode(msg, seq)
-        self.sent.append((now_us, msg))
-        if self.faults is None:
-            self._write(frame)
-        else:
-            self._pending += frame
-        return seq
-
-    def send_rc(self, now_us: int, payload: bytes) -> None:
-        """Send one ``VirtualRc`` frame (the radio's stand-in: outside the link faults)."""
-        if self.transport is None:
-            return
-        self._write(encode(VirtualRc(payload), self._next_seq()))
-        self.rc_sent_us.append(now_us)
-
-    def _write(self, data: bytes) -> None:
-        if self.transport is not None and data:
-            self.transport.write(data)
-            if self.recorder is not None:
-                self.recorder.write_raw(recording.LINK_RX, self.clock.now_us(), data)
-
-    # --- receiving --------------------------------------------------------------------------------
-
-    def receive(self, now_us: int) -> None:
-        """Take what the reader thread queued (each chunk with its receive time) and decode it.
-
-        Raises:
-            HilError: the board closed the link.
-        """
-        reader = self._reader
-        chunks = reader.drain() if reader is not None else []
-        if reader is not None and reader.closed and not chunks:
-            raise HilError(f"the board closed the link on {self.port}")
-        faults = self.faults
-        for t_us, data in chunks:
-            if self.recorder is not None:
-                self.recorder.write_raw(recording.LINK_TX, t_us, data)
-            if faults is not None:
-                self._watch_board(data)
-                data = faults.link_bytes(t_us - self.t0_us, data, "tx")
-            if data:
-                self._dispatch(t_us, self.parser.feed(data))
-        if faults is not None:  # bytes a link-delay fault held back until now
-            held = faults.link_bytes(now_us - self.t0_us, b"", "tx")
-            if held:
-                self._dispatch(now_us, self.parser.feed(held))
-
-    def _watch_board(self, data: bytes) -> None:
-        """What the board sent, before the emulated noise: its telemetry times, the RC it received (with
-        its receive times) and its events."""
-        for frame in self._clean_parser.feed(data):
-            if frame.cmd_id not in (Telemetry.CMD_ID, RawRc.CMD_ID, Event.CMD_ID):
-                continue
-            try:
-                msg = decode(frame)
-            except ValueError:
-                continue  # counted by the dispatch of the same bytes, when no fault hides them
-            if isinstance(msg, Telemetry):
-                self.board_telemetry_us.append(msg.time_us)
-            elif isinstance(msg, RawRc):
-                self.board_rc.append((msg.time_us, msg.frame))
-            elif isinstance(msg, Event):
-                self.board_events.append(msg)
-
-    def _dispatch(self, now_us: int, frames: list[LinkFrame]) -> None:
-        for frame in frames:
-            try:
-                msg = decode(frame)
-            except ValueError:
-                self.decode_errors += 1
-                continue
-            if isinstance(msg, Telemetry):
-                self.telemetry.append(msg)
-                if self.recorder is not None:
-                    self.recorder.write_json(recording.TELEMETRY, now_us, telemetry_json(msg))
-                lag = now_us - msg.time_us
-                if self.offset_us is None or lag < self.offset_us:
-                    self.offset_us = lag
-            elif isinstance(msg, RawRc):
-                self.raw_rc.append(msg)
-            elif isinstance(msg, Event):
-                self.events.append(msg)
-            elif isinstance(msg, CommandAck):
-                self.acks.append((msg, len(self.telemetry)))
-            elif isinstance(msg, ParamValue):
-                self.params[msg.name] = msg.value
-                self.param_log.append(msg.name)
-                self.param_count = msg.count
-
-    def ack(self, seq: int, code: CommandCode) -> tuple[CommandAck, int] | None:
-        """The board's answer to our command frame ``seq``, with the telemetry count when it came."""
-        for ack, count in reversed(self.acks):
-            if ack.request_seq == seq and ack.command == code:
-                return ack, count
-        return None
-
-    # --- the loop ---------------------------------------------------------------------------------
-
-    def tick(self, now_us: int) -> None:
-        """One host period: connection per faults, receive, due RC / heartbeat / commands, flush."""
-        self._connection(now_us)
-        self.receive(now_us)
-        if now_us >= self.next_rc_us:
-            payload = self.rc_at(self.next_rc_us)
-            if payload is not None:
-                self.send_rc(now_us, payload)
-            self.next_rc_us = _next_slot(self.next_rc_us, now_us, FRAME_PERIOD_US)
-        if now_us >= self.next_hb_us:
-            if self.heartbeat_on(now_us):
-                self.send(now_us, Heartbeat(now_us, self._hb_count & 0xFFFF_FFFF))
-                self._hb_count += 1
-            self.next_hb_us = _next_slot(self.next_hb_us, now_us, HEARTBEAT_PERIOD_US)
-        while self.commands and self.commands[0][0] <= now_us:
-            self.send(now_us, self.commands.pop(0)[1])
-        if self.faults is not None:
-            data = bytes(self._pending)
-            self._pending.clear()
-            self._write(self.faults.link_bytes(now_us - self.t0_us, data, "rx"))
-
-    def _connection(self, now_us: int) -> None:
-        down = self.faults is not None and self.faults.link_down(now_us - self.t0_us)
-        if down and self.transport is not None:
-            self.close()
-            self._down_since = now_us
-        elif not down and self.transport is None:
-            try:
-                self.transport = _open(self.port)
-            except HilError:
-                since = self._down_since if self._down_since is not None else now_us
-                if now_us - since > _REOPEN_TIMEOUT_US:
-                    raise
-                return
-            self._reader = _Reader(self.transport, self.clock)
-            self._down_since = None
-            self.reconnects_us.append(now_us)
-
-    def run_until(self, end_us: int, done: Callable[[], bool] | None = None) -> bool:
-        """Tick every :data:`LOOP_PERIOD_US` until ``end_us`` or until ``done()``; True if done."""
-        clock = self.clock
-        start = clock.now_us()
-        next_tick = start
-        for _ in range(2 * max(0, end_us - start) // LOOP_PERIOD_US + 10):
-            now = clock.now_us()
-            if now >= end_us:
-                return False
-            self._note_max("loop_late_max_us", now - next_tick)
-            self.tick(now)
-            self._note_max("tick_exec_max_us", clock.now_us() - now)
-            if done is not None and done():
-                return True
-            next_tick += LOOP_PERIOD_US
-            if now - next_tick >= LOOP_PERIOD_US:  # late: skip the missed ticks, never burst
-                next_tick = now + LOOP_PERIOD_US
-            clock.sleep_until_us(min(next_tick, end_us))
-        return False
-
-    def _note_max(self, key: str, value: int) -> None:
-        if self.faults is not None and value > self.counters.get(key, 0):  # only while a scenario runs
-            self.counters[key] = value
-
-    def start_scenario(self, t0_us: int, faults: FaultSet) -> None:
-        """From ``t0_us`` on, scenario time runs and the link faults apply."""
-        self.t0_us = t0_us
-        self.faults = faults
-        self.next_rc_us = self.next_hb_us = t0_us
-
-    def stop_scenario(self) -> None:
-        """No more faults or scripted commands (what the faults held back is dropped)."""
-        self.faults = None
-        self.commands.clear()
-        self._pending.clear()
-
-    def close(self) -> None:
-        """Stop the reader and release the port (safe twice)."""
-        if self._reader is not None:
-            self._reader.stop()
-            self._reader = None
-        if self.transport is not None:
-            self.transport.close()
-            self.transport = None
-
-
-def _next_slot(slot_us: int, now_us: int, period_us: int) -> int:
-    """The next slot of the ``slot_us + k * period_us`` grid after ``now_us`` (missed slots skipped)."""
-    return slot_us + ((now_us - slot_us) // period_us + 1) * period_us
-
-
 # --- preparing the board, and leaving it safe -----------------------------------------------------
 
 
@@ -539,7 +193,7 @@ def _float(value: float) -> float:
     return float(f"{value:.7g}")
 
 
-def _prepare(host: _Host, plan: Plan, originals: list[tuple[str, float]]) -> FirmwareConfig:
+def _prepare(host: PortHost, plan: Plan, originals: list[tuple[str, float]]) -> FirmwareConfig:
     """Bring the board to its boot state with our RC, apply the plan's parameters, re-arm the host.
 
     Args:
@@ -550,37 +204,39 @@ def _prepare(host: _Host, plan: Plan, originals: list[tuple[str, float]]) -> Fir
     Returns:
         The configuration in force.
     """
-    clock = host.clock
+    clock, session = host.clock, host.session
     safe, middle = _marker(Lever.DOWN), _marker(Lever.MIDDLE)
-    host.rc_at = lambda slot_us: safe
-    host.heartbeat_on = lambda now_us: True
+    session.rc_source = None
+    session.set_rc(safe)
+    session.heartbeat_allowed = None
     begin = clock.now_us()
-    disarm = host.send(begin, Command(CommandCode.DISARM))
-    host.send(begin, ParamRequest(PARAM_LIST_ALL))
+    disarm = session.command(CommandCode.DISARM, now_us=begin)
+    session.request_params(begin)
     last_try = begin
     cleared = False
+    answered_at = 0  # telemetry received when DISARM's ack was first seen: only later frames count
 
     def at_gate() -> bool:
-        nonlocal disarm, last_try, cleared
+        nonlocal disarm, last_try, cleared, answered_at
         now = clock.now_us()
-        latest = host.telemetry[-1] if host.telemetry else None
+        latest = session.last_telemetry
         if latest is not None and latest.phase == Phase.ESTOP and not cleared:
-            host.send(now, Command(CommandCode.CLEAR_ESTOP))
+            session.command(CommandCode.CLEAR_ESTOP, now_us=now)
             cleared = True
-        answer = host.ack(disarm, CommandCode.DISARM)
-        if answer is None:
+        if session.ack(disarm) is None:
             if now - last_try > _RESEND_US:
-                disarm = host.send(now, Command(CommandCode.DISARM))
-                host.send(now, ParamRequest(PARAM_LIST_ALL))
+                disarm = session.command(CommandCode.DISARM, now_us=now)
+                session.request_params(now)
                 last_try = now
+            answered_at = len(host.telemetry)
             return False
-        fresh = host.telemetry[answer[1] :]
+        fresh = host.telemetry[answered_at:]
         return (
             bool(fresh)
             and _ours(fresh[-1], Lever.DOWN)
             and fresh[-1].phase == Phase.GATE
-            and host.param_count > 0
-            and len(host.params) >= host.param_count
+            and session.param_count > 0
+            and len(session.params) >= session.param_count
         )
 
     if not host.run_until(begin + _PREAMBLE_TIMEOUT_US, at_gate):
@@ -588,7 +244,7 @@ def _prepare(host: _Host, plan: Plan, originals: list[tuple[str, float]]) -> Fir
 
     _set_params(host, list(_plan_params(plan).items()), originals)
 
-    host.rc_at = lambda slot_us: middle  # the gate must see the lever DOWN again, as after boot
+    session.set_rc(middle)  # the gate must see the lever DOWN again, as after boot
     start = clock.now_us()
     mark = len(host.telemetry)
     if not host.run_until(
@@ -596,18 +252,16 @@ def _prepare(host: _Host, plan: Plan, originals: list[tuple[str, float]]) -> Fir
         lambda: any(_ours(m, Lever.MIDDLE) and m.phase == Phase.GATE for m in host.telemetry[mark:]),
     ):
         raise HilError(f"the board on {host.port} did not take the lever MIDDLE while disarmed")
-    arm = host.send(clock.now_us(), Command(CommandCode.ARM))
-    if not host.run_until(
-        clock.now_us() + _REPLY_TIMEOUT_US, lambda: host.ack(arm, CommandCode.ARM) is not None
-    ):
+    arm = session.command(CommandCode.ARM, now_us=clock.now_us())
+    if not host.run_until(clock.now_us() + _REPLY_TIMEOUT_US, lambda: session.ack(arm) is not None):
         raise HilError(f"the board on {host.port} did not answer ARM")
-    answer = host.ack(arm, CommandCode.ARM)
-    if answer is not None and answer[0].result != AckResult.ACCEPTED:
-        raise HilError(f"the board on {host.port} refused ARM: {answer[0].text or answer[0].result.name}")
-    return _config(plan.firmware, host.params)
+    answer = session.ack(arm)
+    if answer is not None and answer.result != AckResult.ACCEPTED:
+        raise HilError(f"the board on {host.port} refused ARM: {answer.text or answer.result.name}")
+    return _config(plan.firmware, session.params)
 
 
-def _why_not_ready(host: _Host) -> str:
+def _why_not_ready(host: PortHost) -> str:
     port = host.port
     secs = _PREAMBLE_TIMEOUT_US / 1e6
     if not host.telemetry:
@@ -623,21 +277,23 @@ def _why_not_ready(host: _Host) -> str:
     return f"the board on {port} did not answer DISARM or list its parameters within {secs:g} s"
 
 
-def _set_param(host: _Host, name: str, value: float) -> bool:
+def _set_param(host: PortHost, name: str, value: float) -> bool:
     """Set one parameter; True if the board now holds ``value``.
 
     Raises:
         HilError: no answer.
     """
-    clock = host.clock
-    mark = len(host.param_log)
-    host.send(clock.now_us(), ParamSet(name, value))
-    if not host.run_until(clock.now_us() + _REPLY_TIMEOUT_US, lambda: name in host.param_log[mark:]):
+    clock, session = host.clock, host.session
+    mark = session.param_mark()
+    session.set_param(name, value, clock.now_us())
+    if not host.run_until(clock.now_us() + _REPLY_TIMEOUT_US, lambda: name in session.answered_since(mark)):
         raise HilError(f"the board on {host.port} did not answer setting {name}")
-    return _float(host.params.get(name, math.nan)) == _float(value)
+    return _float(session.params.get(name, math.nan)) == _float(value)
 
 
-def _set_params(host: _Host, values: Sequence[tuple[str, float]], changed: list[tuple[str, float]]) -> None:
+def _set_params(
+    host: PortHost, values: Sequence[tuple[str, float]], changed: list[tuple[str, float]]
+) -> None:
     """Set several parameters, in as many passes as their relations need.
 
     The board validates each value against the others (``common_max_n <= tension_max_n``, ...), so a
@@ -647,18 +303,18 @@ def _set_params(host: _Host, values: Sequence[tuple[str, float]], changed: list[
     Raises:
         HilError: no answer, or a value the board keeps refusing.
     """
-    todo = [(n, v) for n, v in values if _float(host.params.get(n, math.nan)) != _float(v)]
+    todo = [(n, v) for n, v in values if _float(host.session.params.get(n, math.nan)) != _float(v)]
     while todo:  # every pass takes at least one value or stops: at most len(values) passes
         refused: list[tuple[str, float]] = []
         for name, value in todo:
-            old = _float(host.params.get(name, math.nan))
+            old = _float(host.session.params.get(name, math.nan))
             if _set_param(host, name, value):
                 changed.append((name, old))
             else:
                 refused.append((name, value))
         if len(refused) == len(todo):
             name, value = refused[0]
-            got = host.params.get(name, math.nan)
+            got = host.session.params.get(name, math.nan)
             raise HilError(f"the board on {host.port} refused {name} = {value:g} (keeps {got:g})")
         todo = refused
 
@@ -683,7 +339,7 @@ def _config(plan_config: FirmwareConfig, params: dict[str, float]) -> FirmwareCo
         raise HilError(f"the board reports an inconsistent configuration: {exc}") from exc
 
 
-def _finish(host: _Host, originals: list[tuple[str, float]]) -> None:
+def _finish(host: PortHost, originals: list[tuple[str, float]]) -> None:
     """Leave the board as found: SAFE frames (zero current), the changed parameters restored.
 
     Best effort (the board may be gone): failures are logged and counted, never raised, so they do not
@@ -692,8 +348,9 @@ def _finish(host: _Host, originals: list[tuple[str, float]]) -> None:
     clock = host.clock
     host.stop_scenario()
     safe = _marker(Lever.DOWN)
-    host.rc_at = lambda slot_us: safe
-    host.heartbeat_on = lambda now_us: True
+    host.session.rc_source = None
+    host.session.set_rc(safe)
+    host.session.heartbeat_allowed = None
     try:
         host.run_until(clock.now_us() + _FINISH_SAFE_US)
     except HilError as exc:
@@ -714,7 +371,7 @@ def _active(faults: Sequence[Fault], kind: FaultKind, t_us: int) -> bool:
     return any(f.kind is kind and f.active(t_us) for f in faults)
 
 
-def _radio(host: _Host, plan: Plan, faults: FaultSet, t0_us: int) -> Callable[[int], bytes | None]:
+def _radio(host: PortHost, plan: Plan, faults: FaultSet, t0_us: int) -> Callable[[int], bytes | None]:
     """What the emulated radio sends at each 14 ms slot (host time), RC faults applied."""
     script = RadioScript(plan.radio)
     kinds = faults.faults
@@ -735,7 +392,7 @@ def _radio(host: _Host, plan: Plan, faults: FaultSet, t0_us: int) -> Callable[[i
     return at
 
 
-def _record(host: _Host, plan: Plan, config: FirmwareConfig, t0_us: int, duration_us: int) -> RunRecord:
+def _record(host: PortHost, plan: Plan, config: FirmwareConfig, t0_us: int, duration_us: int) -> RunRecord:
     """The run as the checks see it: board times relative to the scenario's start."""
     if host.offset_us is None:
         raise HilError(f"no telemetry from {host.port} during the run")
@@ -749,7 +406,7 @@ def _record(host: _Host, plan: Plan, config: FirmwareConfig, t0_us: int, duratio
         config=config,
         duration_us=duration_us,
         samples=Samples.from_telemetry(tel, board_t0),
-        resolution_us=TELEMETRY_PERIOD_US,
+        resolution_us=config.telemetry_period_us,
         lateness_us=TICK_LATENESS_US,
         link_delay_us=LINK_ALLOWANCE_US,
         samples_through_link=True,
@@ -757,14 +414,14 @@ def _record(host: _Host, plan: Plan, config: FirmwareConfig, t0_us: int, duratio
         events=[(rel(e.time_us), e) for e in host.board_events],
         telemetry_sent_us=[rel(t) for t in host.board_telemetry_us],
         telemetry_received_us=[rel(m.time_us) for m in tel],
-        sent=[(t - t0_us, m) for t, m in host.sent if t >= t0_us],
+        sent=[(t - t0_us, m) for t, m in host.session.sent if t >= t0_us],
         rc_sent_us=[t - t0_us for t in host.rc_sent_us if t >= t0_us],
         reconnects_us=[t - t0_us for t in host.reconnects_us if t >= t0_us],
-        decode_errors=host.decode_errors,
+        decode_errors=host.session.stream.decode_errors,
     )
 
 
-def _counters(host: _Host, run: RunRecord, faults: FaultSet) -> dict[str, int]:
+def _counters(host: PortHost, run: RunRecord, faults: FaultSet) -> dict[str, int]:
     out: dict[str, int] = {}
     if host.telemetry:
         last = host.telemetry[-1]
@@ -780,16 +437,16 @@ def _counters(host: _Host, run: RunRecord, faults: FaultSet) -> dict[str, int]:
         ):
             out[name] = int(getattr(last, name))
         out["control_late_during_run"] = int(last.control_late - host.telemetry[0].control_late)
-    parser = host.parser
+    stream = host.session.stream
     rc_sent = sum(1 for t in run.rc_sent_us if t < run.duration_us)
     out.update(
         {
             "host_frames_sent": sum(1 for t, _ in run.sent if t < run.duration_us) + rc_sent,
             "host_rc_frames_sent": rc_sent,
             "host_telemetry_received": run.n,
-            "host_decode_errors": host.decode_errors,
-            "host_crc_errors": parser.header_crc_errors + parser.body_crc_errors,
-            "host_bytes_skipped": parser.bytes_skipped,
+            "host_decode_errors": stream.decode_errors,
+            "host_crc_errors": stream.crc_errors,
+            "host_bytes_skipped": stream.bytes_skipped,
         }
     )
     out.update({f"host_{k}": v for k, v in host.counters.items()})
@@ -798,7 +455,7 @@ def _counters(host: _Host, run: RunRecord, faults: FaultSet) -> dict[str, int]:
 
 
 def _play(
-    host: _Host,
+    host: PortHost,
     plan: Plan,
     faults: FaultSet,
     duration_us: int,
@@ -808,8 +465,8 @@ def _play(
     clock = host.clock
     t0 = clock.now_us()
     host.start_scenario(t0, faults)
-    host.rc_at = _radio(host, plan, faults, t0)
-    host.heartbeat_on = lambda now_us: not faults.heartbeat_blocked(now_us - t0)
+    host.session.rc_source = _radio(host, plan, faults, t0)
+    host.session.heartbeat_allowed = lambda now_us: not faults.heartbeat_blocked(now_us - t0)
     host.commands = sorted(((t0 + t, m) for t, m in plan.host), key=lambda item: item[0])
     total_ms = duration_us // 1000
     shown = 0
@@ -883,7 +540,7 @@ def run_scenario_on_port(
         recorder = Recorder(record, metadata=meta)
     with clock.running():
         try:
-            host = _Host(port, clock, recorder)
+            host = PortHost(port, clock, recorder)
             try:
                 try:
                     config = _prepare(host, plan, originals)

@@ -296,6 +296,10 @@ class HostSession:
                 self.send(VirtualRc(payload), now_us)
             self._next_rc_us = next_slot(slot_us, now_us, self.rc_period_us)
 
+    def restart_grids(self) -> None:
+        """Start the heartbeat and RC grids anew at the next :meth:`poll` (a scenario's time zero)."""
+        self._polled = False
+
     def next_rc_slot_us(self) -> int | None:
         """The time of the next RC slot (None before the first poll)."""
         return self._next_rc_us if self._polled else None
