@@ -22,11 +22,10 @@ SAFE mode. Invalid RC frames are counted and never acted on.
 from __future__ import annotations
 
 import math
-import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from controller.clock import Clock, RealTimeClock, monotonic_ns
+from controller.clock import Clock, StopSignal, monotonic_ns, run_periodic
 from controller.config import MOTOR_COUNT, PARAM_FIELDS, PARAMS, FirmwareConfig
 from controller.errors import ConfigError
 from controller.events import EventQueue
@@ -98,14 +97,6 @@ _FLAG_ARMED, _FLAG_HOST_REQUIRED, _FLAG_HOST_OK, _FLAG_RC_OK, _FLAG_SIM = (
 )
 _TELEMETRY_FLAGS = tuple(TelemetryFlags(bits) for bits in range(1 << 5))
 """Every combination of the five flags, by value (building an IntFlag per frame is slow)."""
-
-
-def _is_set(stop: threading.Event | Callable[[], bool] | None) -> bool:
-    if stop is None:
-        return False
-    if isinstance(stop, threading.Event):
-        return stop.is_set()
-    return bool(stop())
 
 
 class Firmware:
@@ -228,40 +219,28 @@ class Firmware:
         self.scheduler.start(first_deadline_us)
         self._booted = True
 
-    def run(
-        self,
-        clock: Clock,
-        duration_us: int | None = None,
-        stop: threading.Event | Callable[[], bool] | None = None,
-    ) -> None:
-        """The real-time loop: run due tasks, sleep to the next absolute deadline, repeat.
+    def run(self, clock: Clock, duration_us: int | None = None, stop: StopSignal = None) -> None:
+        """The real-time loop (:func:`~controller.clock.run_periodic`): run due tasks, sleep to the next
+        absolute deadline, repeat.
 
-        Inside ``clock.running()`` (SCHED_FIFO, GC frozen, ... for a :class:`RealTimeClock`). Returns
-        after ``duration_us`` or when ``stop`` is set / returns True (checked every tick), and sends
+        Returns after ``duration_us`` or when ``stop`` is set / returns True (checked every tick), and sends
         zero current once on the way out.
         """
-        with clock.running():
-            if isinstance(clock, RealTimeClock):
-                self.clock_kind = ClockKind.REALTIME_FIFO if clock.fifo_active else ClockKind.REALTIME_NORMAL
-            else:
-                self.clock_kind = ClockKind.LOCKSTEP
-            start = clock.now_us()
-            end = None if duration_us is None else start + duration_us
-            sched = self.scheduler
-            try:
-                while True:
-                    now = clock.now_us()
-                    if end is not None and now >= end:
-                        break
-                    if _is_set(stop):
-                        break
-                    sched.run_due(now)
-                    deadline = sched.next_deadline_us()
-                    if end is not None and deadline > end:
-                        deadline = end
-                    clock.sleep_until_us(deadline)
-            finally:
-                self._all_stop()
+        sched = self.scheduler
+        run_due, next_deadline_us = sched.run_due, sched.next_deadline_us
+
+        def begin(start_us: int) -> int:
+            self.clock_kind = clock.kind  # inside clock.running(): SCHED_FIFO is known by now
+            return start_us
+
+        def step(now_us: int) -> int:
+            run_due(now_us)
+            return next_deadline_us()
+
+        try:
+            run_periodic(clock, step, begin=begin, duration_us=duration_us, stop=stop)
+        finally:
+            self._all_stop()
 
     def _all_stop(self) -> None:
         if not self.bus.is_shutdown:
