@@ -36,6 +36,7 @@ __all__ = [
     "TASK_NAME_LEN",
     "VERSION_LEN",
     "AckResult",
+    "ArmBlocker",
     "BoardStatus",
     "ClockKind",
     "Command",
@@ -122,6 +123,24 @@ class Phase(IntEnum):
     HOST_LOST = 4
     ESTOP = 5
     """Latched until cleared and re-armed through SAFE."""
+
+
+class ArmBlocker(IntEnum):
+    """``Telemetry.arm_blocker``: what holds the arming gate shut (``NONE`` while armed)."""
+
+    NONE = 0
+    RC_INVALID = 1
+    """No valid RC frame within the RC timeout."""
+    LEVER_NOT_DOWN = 2
+    """The right lever has not been seen DOWN (SAFE) since the gate closed."""
+    ESTOP_LATCHED = 3
+    """An E-stop is latched until CLEAR_ESTOP."""
+    MOTOR_FAULT = 4
+    """A motor is silent."""
+    HOST_MISSING = 5
+    """The host heartbeat is required and missing."""
+    DISARMED = 6
+    """The host sent DISARM (until ARM)."""
 
 
 class GraspState(IntEnum):

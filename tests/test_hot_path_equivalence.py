@@ -1,6 +1,6 @@
 """The control tick's speed-written paths against plain reference versions of the same rules.
 
-The failsafe's single decision chain, the motor model's all-frames update and the batch current
+The failsafe's switch on its phase, the motor model's all-frames update and the batch current
 conversion were rewritten for speed (issue 5). Each is checked here against the straightforward form it
 replaced, over random event sequences: same phases, same events, same state.
 """
@@ -20,7 +20,26 @@ from protocol.messages import Phase
 
 
 class ReferenceFailsafe(Failsafe):
-    """The failsafe's update rule written as early returns, one per phase (the readable form)."""
+    """The failsafe's update rule as one chain of early returns over latch flags (its earlier form)."""
+
+    _motor_fault = False
+    _lost: Phase | None = None
+    _armed = False
+
+    def estop(self, now_us: int) -> None:
+        self._armed = False
+        super().estop(now_us)
+
+    def clear_estop(self, now_us: int) -> bool:
+        if self.estop_latched:
+            self._armed = False
+        return super().clear_estop(now_us)
+
+    def disarm(self, now_us: int) -> None:
+        self.host_disarmed = True
+        self._armed = False
+        if self.phase != Phase.ESTOP and not self._motor_fault:
+            self._set(now_us, Phase.GATE)
 
     def update(self, now_us: int) -> Phase:
         rc_ok = self._rc_seen and now_us - self._last_rc_us <= self._rc_timeout_us
