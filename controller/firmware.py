@@ -649,6 +649,7 @@ class Firmware:
             fs.motor_offline_events & u32,
             self.bus.can_errors & u32,
             ctl.lateness_p99_us,  # cached like exec_p99_us: refreshed with BoardStatus, not per tick
+            fs.arm_blocker(),  # computed here, at the telemetry rate, never by the control tick
         )
 
     def _task_telemetry(self, now_us: int) -> None:

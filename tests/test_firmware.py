@@ -23,6 +23,7 @@ from protocol.link import LinkParser, encode_frame
 from protocol.messages import (
     PARAM_INDEX_BY_NAME,
     AckResult,
+    ArmBlocker,
     BoardStatus,
     Command,
     CommandAck,
@@ -188,6 +189,18 @@ def test_telemetry_carries_the_control_lateness_p99() -> None:
     assert tel[-1].control_lateness_p99_us == 40
     assert tel[-1].control_lateness_max_us == 40 and tel[-1].control_late == 0
     assert rig.fw.build_telemetry(1_000_000).control_lateness_p99_us == 40
+
+
+def test_telemetry_says_which_arming_blocker_holds_the_gate() -> None:
+    rig = Rig(link=True, start=frame(right=Lever.MIDDLE))
+    rig.tick(20)
+    assert rig.fw.build_telemetry(rig.now_us).arm_blocker == ArmBlocker.LEVER_NOT_DOWN
+    rig.arm()
+    rig.tick(20)
+    assert [m for m in rig.drain() if isinstance(m, Telemetry)][-1].arm_blocker == ArmBlocker.NONE
+    rig.send(Command(CommandCode.DISARM))
+    rig.tick(20)
+    assert [m for m in rig.drain() if isinstance(m, Telemetry)][-1].arm_blocker == ArmBlocker.DISARMED
 
 
 def test_events_carry_board_time() -> None:
