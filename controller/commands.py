@@ -254,8 +254,8 @@ class CommandServer:
             values = (a0, a1, a2)
             if not all(math.isfinite(v) and v >= 0.0 for v in values):
                 return AckResult.DENIED, "tensions must be finite and >= 0"
-            config = self._params.config
-            lo, hi = config.pretension_n, config.tension_max_n
+            mapping = self._params.config.mapping
+            lo, hi = mapping.pretension_n, mapping.tension_max_n
             clamped = [min(hi, max(lo, v)) for v in values]
             self._modes.direct_tensions_n[:] = clamped
             return AckResult.ACCEPTED, "clamped" if clamped != list(values) else "ok"

@@ -89,10 +89,11 @@ class Failsafe:
 
     def configure(self, config: FirmwareConfig) -> None:
         """Take new timeouts and the host requirement."""
-        self._rc_timeout_us = config.rc_timeout_us
-        self._motor_timeout_us = config.motor_timeout_us
-        self._host_timeout_us = config.host_timeout_us
-        self.host_required = config.host_required
+        c = config.failsafe
+        self._rc_timeout_us = c.rc_timeout_us
+        self._motor_timeout_us = c.motor_timeout_us
+        self._host_timeout_us = c.host_timeout_us
+        self.host_required = c.host_required
 
     @property
     def armed(self) -> bool:

@@ -312,7 +312,7 @@ class Firmware:
         self.mapper.configure(config)
         self.slew.configure(config)
         self.grasp.configure(config)
-        self.bus.current_limit_raw = config.current_limit_raw
+        self.bus.current_limit_raw = config.motor.current_limit_raw
 
     def set_param(self, now_us: int, name: str, value: float) -> float:
         """Set a runtime parameter (wire name) if valid; return the value in force afterwards.

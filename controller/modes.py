@@ -75,7 +75,7 @@ class ModeSelector:
         self._listener = listener
         self.mode = Mode.SAFE
         self.direct_requested = False
-        self.direct_tensions_n = [config.pretension_n] * MOTOR_COUNT
+        self.direct_tensions_n = [config.mapping.pretension_n] * MOTOR_COUNT
         self._prev_left_lever = 0
         self._prev_grasp_state = GraspState.IDLE
 

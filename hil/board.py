@@ -239,7 +239,7 @@ class VirtualBoard:
             lambda: self.now_us,
             faults=self.faults,
             recorder=recorder,
-            current_limit_raw=cfg.firmware.current_limit_raw,
+            current_limit_raw=cfg.firmware.motor.current_limit_raw,
         )
         self.radio: VirtualRadio | None = None
         self.uart: MemoryUart | None = None

@@ -45,7 +45,7 @@ from typing import Any, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from controller.config import FirmwareConfig
+from controller.config import FirmwareConfig, MappingConfig
 from protocol.c610 import MotorFeedback
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, CommandCode, GraspState, Mode
@@ -382,11 +382,9 @@ def grasp_firmware(**changes: Any) -> FirmwareConfig:
     (the trial starts packed and only has to hold it) and a reach that has run its ramp down without
     contact fails 0.6 s later instead of after 4 s."""
     base = FirmwareConfig()
-    ramp_s = (base.grasp_pack_n - base.grasp_reach_n) / base.grasp_reach_rate_n_per_s
-    cfg = dataclasses.replace(
-        base, grasp_pack_rate_n_per_s=60.0, grasp_reach_timeout_us=int((ramp_s + 0.6) * S)
-    )
-    return dataclasses.replace(cfg, **changes) if changes else cfg
+    ramp_s = (base.grasp.pack_n - base.grasp.reach_n) / base.grasp.reach_rate_n_per_s
+    cfg = base.replaced(grasp_pack_rate_n_per_s=60.0, grasp_reach_timeout_us=int((ramp_s + 0.6) * S))
+    return cfg.replaced(**changes) if changes else cfg
 
 
 def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspOutcome:
@@ -399,7 +397,7 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
     """
     design = design or SpiralDesign.paper_prototype()
     fw = setup.firmware or grasp_firmware()
-    fw = dataclasses.replace(fw, grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
+    fw = fw.replaced(grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
     obj = ObjectConfig(
         _OBJ, radius_m=setup.diameter_m / 2, length_m=setup.length_m, pos_m=FAR_M, mass_kg=setup.mass_kg
     )
@@ -738,7 +736,7 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRu
         dtheta_rad=base.dtheta_rad,
         cables=cables,
     )
-    fw = FirmwareConfig(tension_max_n=p.tension_max_n)
+    fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=p.tension_max_n))
     rig = _direct_rig(design, fw, seed=seed)
     env = Envelope.of(rig.plant)
     rng = np.random.default_rng([seed, cables, round(taper_deg * 100)])
@@ -897,7 +895,7 @@ def packing(
     logarithmic spiral to the joints; record in which order the joints closed (Note S3, Fig. S5C)."""
     design = design or SpiralDesign.paper_prototype()
     p = params or PackingParams()
-    fw = FirmwareConfig(tension_max_n=max(20.0, p.tension_end_n))
+    fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=max(20.0, p.tension_end_n)))
     rig = _direct_rig(design, fw, seed=seed)
     plant = rig.plant
     limit = design.dtheta_rad - math.radians(p.limit_tol_deg)
@@ -905,7 +903,7 @@ def packing(
     closed_at = np.full(n_joints, math.nan)
     ramp_ms = int(p.ramp_s * 1000)
     total = ramp_ms + int(p.hold_s * 1000)
-    pretension = fw.pretension_n
+    pretension = fw.mapping.pretension_n
     ramp_t: list[float] = []
     closed_n: list[int] = []
     pack_t = math.nan
@@ -1203,7 +1201,7 @@ class LoadResult:
                 for o in self.outcomes
                 if o.setup.diameter_m == d
                 and o.setup.firmware is not None
-                and o.setup.firmware.grasp_wrap_n == force
+                and o.setup.firmware.grasp.wrap_n == force
                 and not math.isnan(o.load_n)
             ]
             best = max(held) if held else math.nan
@@ -1341,13 +1339,13 @@ def _dynamic_run(args: tuple[str, float, DynamicParams, int]) -> DynamicRun:
     else:
         obj = ObjectConfig(_OBJ, radius_m=0.01, length_m=0.06, pos_m=FAR_M, mass_kg=0.01)
     # A step, not a ramp: the slew limiter opened, the ceiling at the 3 A current limit.
-    fw = FirmwareConfig(tension_max_n=54.0, slew_n_per_s=100_000.0)
+    fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=54.0, slew_n_per_s=100_000.0))
     rig = _direct_rig(SpiralDesign.paper_prototype(), fw, objects=(obj,), seed=seed)
     plant = rig.plant
     if pen:
         plant.hold_object(_OBJ, _world(*p.pen))
         rig.run(200 * MS)
-        rig.set_tensions([value, fw.pretension_n, fw.pretension_n])
+        rig.set_tensions([value, fw.mapping.pretension_n, fw.mapping.pretension_n])
     else:
         plant.hold_object(_OBJ)
         rig.run(300 * MS)

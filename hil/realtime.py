@@ -218,7 +218,7 @@ class PortRun:
     @property
     def limit_raw(self) -> int:
         """The current limit in raw units."""
-        return self.config.current_limit_raw
+        return self.config.motor.current_limit_raw
 
     def window(self, start_us: float, end_us: float | None = None) -> npt.NDArray[np.bool_]:
         """Mask of the samples with ``start_us <= t < end_us``."""
@@ -316,7 +316,11 @@ def _rc_gap_check(run: PortRun) -> Check:
     times = run.board_rc_us or run.rc_sent_us
     seen = [t for t in times if 0 <= t < run.duration_us]
     gaps = [b - a for a, b in itertools.pairwise(seen) if not any(a < e and b > s for s, e in cuts)]
-    bound = run.config.rc_timeout_us if run.board_rc_us else run.config.rc_timeout_us - LINK_ALLOWANCE_US
+    bound = (
+        run.config.failsafe.rc_timeout_us
+        if run.board_rc_us
+        else run.config.failsafe.rc_timeout_us - LINK_ALLOWANCE_US
+    )
     return Check(
         f"{RC_GAP_CHECK} (longer: the host or the link stalled; the run is void)",
         float(max(gaps, default=0)),
@@ -328,7 +332,7 @@ def _rc_gap_check(run: PortRun) -> Check:
 
 def _rc_acted_us(run: PortRun) -> int:
     """Latest board time after the last valid frame at which the board must have cut the current."""
-    return run.config.rc_timeout_us + TICK_US + TICK_LATENESS_US
+    return run.config.failsafe.rc_timeout_us + TICK_US + TICK_LATENESS_US
 
 
 def _rc_zero_checks(run: PortRun, last: float) -> list[Check]:
@@ -378,7 +382,7 @@ def _startup_gate(run: PortRun) -> list[Check]:
 
 def _manual_teleop(run: PortRun) -> list[Check]:
     cfg = run.config
-    angles = np.radians(np.asarray(cfg.cable_angles_deg, dtype=np.float64))
+    angles = np.radians(np.asarray(cfg.mapping.cable_angles_deg, dtype=np.float64))
     unit = np.stack([np.cos(angles), np.sin(angles)], axis=1)
     steps = list(run.plan.radio)
     checks: list[Check] = []
@@ -399,8 +403,8 @@ def _manual_teleop(run: PortRun) -> list[Check]:
         moved = float(np.hypot(*resultant))
         want = math.atan2(ch1, ch0)
         err = abs(math.remainder(math.atan2(resultant[1], resultant[0]) - want, 2 * math.pi))
-        deflection = (math.hypot(ch0, ch1) - cfg.stick_deadband) / (660 - cfg.stick_deadband)
-        asked = cfg.bend_max_n * min(1.0, deflection)
+        deflection = (math.hypot(ch0, ch1) - cfg.mapping.stick_deadband) / (660 - cfg.mapping.stick_deadband)
+        asked = cfg.mapping.bend_max_n * min(1.0, deflection)
         checks.append(Check(f"bending tension with {label}", moved, asked / 2, ">=", "N"))
         checks.append(
             Check(f"bending tension direction error with {label}", math.degrees(err), 5, "<=", "deg")
@@ -420,7 +424,7 @@ def _manual_teleop(run: PortRun) -> list[Check]:
         Check(
             "largest target tension",
             float(run.target_n.max()) if run.n else math.nan,
-            cfg.tension_max_n + _SETTLED_N,
+            cfg.mapping.tension_max_n + _SETTLED_N,
             "<=",
             "N",
         )
@@ -519,7 +523,7 @@ def _counter_rise(run: PortRun, counter: npt.NDArray[np.int64], start_us: int, e
 
 def _link_noise(run: PortRun) -> list[Check]:
     cfg = run.config
-    lo, hi = cfg.pretension_n, cfg.tension_max_n
+    lo, hi = cfg.mapping.pretension_n, cfg.mapping.tension_max_n
     sent = [
         tuple(min(hi, max(lo, v)) for v in m.args)
         for _, m in run.sent
@@ -589,7 +593,7 @@ def _rearmed(run: PortRun) -> Check:
 
 def _host_loss(run: PortRun) -> list[Check]:
     start, end, rearm, checks = _host_gone_common(run, FaultKind.HOST_LOSS)
-    acted = run.config.host_timeout_us + TICK_US + LINK_ALLOWANCE_US + TICK_LATENESS_US
+    acted = run.config.failsafe.host_timeout_us + TICK_US + LINK_ALLOWANCE_US + TICK_LATENESS_US
     last_hb = run.last_sent_before(Heartbeat, start)
     lost = np.count_nonzero(run.phase[run.window(start, end)] == Phase.HOST_LOST)
     checks += [
@@ -658,7 +662,7 @@ def _link_disconnect(run: PortRun) -> list[Check]:
 
 def _overcurrent(run: PortRun) -> list[Check]:
     cfg = run.config
-    asked = cfg.common_max_n * cfg.spool_radius_m / cfg.torque_constant_nm_per_a * 1000
+    asked = cfg.mapping.common_max_n * cfg.motor.spool_radius_m / cfg.motor.torque_constant_nm_per_a * 1000
     return [
         Check("current the mapping asks for", asked, run.limit_raw, ">=", "raw"),
         Check("largest |current| sent", run.max_current(0), run.limit_raw, "<=", "raw"),
@@ -715,11 +719,10 @@ def _lockstep_only_reason(name: str, faults: Sequence[Fault]) -> str | None:
             f"scenario {name!r} has no real-time checks (its checks need the simulated plant); "
             "run it without --port"
         )
-    default = FirmwareConfig()
+    default = FirmwareConfig().to_dict()
     settable = set(PARAM_FIELDS.values())
-    for cfg_field in dataclasses.fields(FirmwareConfig):
-        key = cfg_field.name
-        if key not in settable and getattr(plan.firmware, key) != getattr(default, key):
+    for key, value in plan.firmware.to_dict().items():
+        if key not in settable and value != default[key]:
             return f"scenario {name!r} changes {key}, which a board takes only at start-up; use lockstep"
     return None
 
@@ -1196,11 +1199,12 @@ def _set_params(host: _Host, values: Sequence[tuple[str, float]], changed: list[
 def _config(plan_config: FirmwareConfig, params: dict[str, float]) -> FirmwareConfig:
     """The plan's configuration with the board's parameter values (calibration is the board's)."""
     changes: dict[str, Any] = {}
+    current = plan_config.to_dict()
     for name, value in params.items():
         fname = PARAM_FIELDS.get(name)
         if fname is None:
             continue
-        default = getattr(plan_config, fname)
+        default = current[fname]
         if isinstance(default, bool):
             changes[fname] = value != 0.0
         elif isinstance(default, int):
@@ -1208,7 +1212,7 @@ def _config(plan_config: FirmwareConfig, params: dict[str, float]) -> FirmwareCo
         else:
             changes[fname] = _float(value)
     try:
-        return dataclasses.replace(plan_config, **changes)
+        return plan_config.replaced(**changes)
     except ConfigError as exc:
         raise HilError(f"the board reports an inconsistent configuration: {exc}") from exc
 

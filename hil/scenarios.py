@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.config import FirmwareConfig
+from controller.config import FailsafeConfig, FirmwareConfig, MappingConfig
 from controller.rc import DbusSerialSource
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, CommandCode, Mode, Phase, Telemetry
@@ -130,7 +130,7 @@ class Run:
     @property
     def limit_raw(self) -> int:
         """The firmware's current limit in raw units."""
-        return self.config.current_limit_raw
+        return self.config.motor.current_limit_raw
 
     def max_current(self, start_us: int, end_us: int | None = None) -> float:
         """Largest |current| sent to any ESC on ``start_us <= t < end_us`` (0 for an empty window)."""
@@ -254,7 +254,13 @@ def _manual_teleop_check(run: Run) -> list[Check]:
         Check("least cable tension with the curl stick up", float(p.tension_n[curl].min()), 2.0, ">=", "N")
     )
     checks.append(
-        Check("largest target tension", float(p.target_n[: p.n].max()), run.config.tension_max_n, "<=", "N")
+        Check(
+            "largest target tension",
+            float(p.target_n[: p.n].max()),
+            run.config.mapping.tension_max_n,
+            "<=",
+            "N",
+        )
     )
     checks.append(Check("largest |current|", run.max_current(0), run.limit_raw, "<=", "raw"))
     return checks
@@ -379,7 +385,7 @@ def _link_noise_plan() -> Plan:
             Fault(FaultKind.LINK_BIT_FLIP, 0, rate=0.005),
         ],
         host=host,
-        firmware=FirmwareConfig(host_required=True),
+        firmware=FirmwareConfig(failsafe=FailsafeConfig(host_required=True)),
         on_tick=_track_direct_tensions,
     )
 
@@ -396,7 +402,7 @@ def _link_noise_check(run: Run) -> list[Check]:
         for _, cmd in run.host.sent
         if isinstance(cmd, Command) and cmd.code == CommandCode.SET_TENSIONS
     }
-    sent.add(tuple([round(run.config.pretension_n, 6)] * 3))
+    sent.add(tuple([round(run.config.mapping.pretension_n, 6)] * 3))
     applied: set[tuple[float, ...]] = run.extra.get("direct", set())
     telem_t = np.array([m.time_us for m in run.host.telemetry], dtype=np.int64)
     per_window = [
@@ -420,7 +426,7 @@ def _host_gone_plan(kind: FaultKind) -> Callable[[], Plan]:
         return Plan(
             radio=[(0, SAFE), (200 * MS, pull), (3200 * MS, SAFE), (3500 * MS, pull)],
             faults=[Fault(kind, 1500 * MS, 2500 * MS)],
-            firmware=FirmwareConfig(host_required=True),
+            firmware=FirmwareConfig(failsafe=FailsafeConfig(host_required=True)),
         )
 
     return plan
@@ -432,7 +438,7 @@ def _last_heartbeat_before(run: Run, t_us: int) -> int:
 
 
 def _host_gone_check(run: Run, *, telemetry_during: bool) -> list[Check]:
-    timeout = run.config.host_timeout_us
+    timeout = run.config.failsafe.host_timeout_us
     last_hb = _last_heartbeat_before(run, 1500 * MS) + TICK_US  # the wire delivers it on the next tick
     telem = [m for m in run.host.telemetry if 1500 * MS <= m.time_us < 2500 * MS]
     checks = [
@@ -464,19 +470,19 @@ def _host_gone_check(run: Run, *, telemetry_during: bool) -> list[Check]:
 def _overcurrent_plan() -> Plan:
     # A configuration that asks for more tension than the motors may carry: 150 N on a 10 mm spool at
     # 0.18 N·m/A is 8.3 A, far above the 3 A limit.
-    cfg = FirmwareConfig(common_max_n=150.0, tension_max_n=200.0, slew_n_per_s=1000.0)
+    cfg = FirmwareConfig(mapping=MappingConfig(common_max_n=150.0, tension_max_n=200.0, slew_n_per_s=1000.0))
     return Plan(radio=_arm(ch3=660), firmware=cfg)
 
 
 def _overcurrent_check(run: Run) -> list[Check]:
     cfg = run.config
-    asked = cfg.common_max_n * cfg.spool_radius_m / cfg.torque_constant_nm_per_a * 1000
+    asked = cfg.mapping.common_max_n * cfg.motor.spool_radius_m / cfg.motor.torque_constant_nm_per_a * 1000
     applied_a = run.extra.get("applied_a_max", math.nan)
     return [
         Check("current the mapping asks for", asked, run.limit_raw, ">=", "raw"),
         Check("largest |current| sent", run.max_current(0), run.limit_raw, "<=", "raw"),
         Check("the clamp engaged (largest |current| sent)", run.max_current(0), run.limit_raw, ">=", "raw"),
-        Check("largest current a drive delivered", applied_a, cfg.current_limit_a + 1e-9, "<=", "A"),
+        Check("largest current a drive delivered", applied_a, cfg.motor.current_limit_a + 1e-9, "<=", "A"),
     ]
 
 

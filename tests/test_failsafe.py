@@ -117,9 +117,9 @@ def test_rc_regained_stays_latched_until_rearmed_then_resumes_from_the_floor() -
     rig.set_rc(MANUAL_CURL)
     rig.until(lambda: any(c > 0 for c in rig.currents), 20)
     # then the tensions restart at the floor and ramp (slew-limited), not jump to the stick value
-    pretension = rig.config.pretension_n
+    pretension = rig.config.mapping.pretension_n
     first = rig.fw.tensions_n
-    assert all(abs(t - pretension) <= rig.config.slew_n_per_s * 1e-3 + 1e-9 for t in first)
+    assert all(abs(t - pretension) <= rig.config.mapping.slew_n_per_s * 1e-3 + 1e-9 for t in first)
 
 
 def test_invalid_frames_are_counted_and_never_acted_on() -> None:
@@ -221,7 +221,7 @@ def test_host_not_required_ignores_missing_heartbeat() -> None:
 
 
 def test_gate_waits_for_host_when_required() -> None:
-    rig = Rig(FirmwareConfig(host_required=True), link=True)
+    rig = Rig(FirmwareConfig().replaced(host_required=True), link=True)
     rig.tick(100)
     assert rig.fw.phase == Phase.GATE
     rig.send(Heartbeat(0, 0))
@@ -294,7 +294,7 @@ def test_phase_events_carry_board_time() -> None:
 
 
 def test_arm_blocker_names_what_holds_the_gate() -> None:
-    fs = Failsafe(FirmwareConfig(host_required=True), EventQueue(64))
+    fs = Failsafe(FirmwareConfig().replaced(host_required=True), EventQueue(64))
     fs.update(0)
     assert fs.arm_blocker() == ArmBlocker.MOTOR_FAULT  # nothing seen yet: motors come first
     fs.on_motor_frames(1_000, [(1, None), (2, None), (3, None)])

@@ -27,7 +27,7 @@ def test_a_slower_rc_timeout_fails_rc_loss(monkeypatch: pytest.MonkeyPatch) -> N
 
     def slow_plan() -> scenarios.Plan:
         plan = original.plan()
-        return dataclasses.replace(plan, firmware=FirmwareConfig(rc_timeout_us=60_000))
+        return dataclasses.replace(plan, firmware=FirmwareConfig().replaced(rc_timeout_us=60_000))
 
     monkeypatch.setitem(scenarios.SCENARIOS, "rc-loss", dataclasses.replace(original, plan=slow_plan))
     result = run_scenario("rc-loss")

@@ -41,7 +41,7 @@ def test_params_set_applies_valid_values_and_keeps_the_old_one_otherwise() -> No
     applied: list[FirmwareConfig] = []
     params = Params(FirmwareConfig(), events, applied.append)
     assert params.set(5, "PRETENSION_N", 1.0) == 1.0
-    assert params.config.pretension_n == 1.0 and applied == [params.config]
+    assert params.config.mapping.pretension_n == 1.0 and applied == [params.config]
     assert params.set(6, "PRETENSION_N", -1.0) == 1.0  # rejected: the old value stays
     assert len(applied) == 1
     texts = [e.text for e in events.pop_all() if e.kind == EventKind.PARAM]

@@ -56,7 +56,7 @@ def test_safe_unless_phase_ok_and_a_frame() -> None:
     modes, _, _, _ = _selector()
     assert modes.select(0, Phase.GATE, _rc(Lever.MIDDLE)) is Mode.SAFE
     assert modes.select(0, Phase.OK, None) is Mode.SAFE
-    assert modes.direct_tensions_n == [FirmwareConfig().pretension_n] * 3
+    assert modes.direct_tensions_n == [FirmwareConfig().mapping.pretension_n] * 3
 
 
 def test_right_lever_picks_safe_manual_grasp_and_logs_each_change() -> None:
