@@ -31,9 +31,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from controller.errors import ConfigError
-from protocol.c610 import CURRENT_RAW_MAX, RAW_PER_AMP
+from protocol.c610 import CURRENT_RAW_MAX, M2006_GEAR_RATIO, RAW_PER_AMP
 
 __all__ = [
+    "C610_MAX_A",
     "CONTROL_PERIOD_US",
     "MOTOR_COUNT",
     "PARAMS",
@@ -51,7 +52,8 @@ MOTOR_COUNT = 3
 CONTROL_PERIOD_US = 1_000
 """The control tick (1 kHz, the C-board's chassis/gimbal loop rate): the default of every 1 ms period."""
 
-_C610_MAX_A = CURRENT_RAW_MAX / RAW_PER_AMP  # C610: -10000..10000 raw = -10..10 A
+C610_MAX_A = CURRENT_RAW_MAX / RAW_PER_AMP
+"""The largest current a C610 takes (-10000..10000 raw = -10..10 A)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,7 +72,7 @@ class MotorDriveConfig:
 
     spool_radius_m: float = 0.010
     torque_constant_nm_per_a: float = 0.18  # DJI M2006 P36 spec sheet (disputed: see module notes)
-    gear_ratio: float = 36.0
+    gear_ratio: float = float(M2006_GEAR_RATIO)
     current_limit_a: float = 3.0
     motor_signs: tuple[int, int, int] = (1, 1, 1)
     speed_filter_tau_us: int = 20_000
@@ -254,7 +256,7 @@ class FirmwareConfig:
         _require("spool_radius_m", 0.001 <= v["spool_radius_m"] <= 0.1, "must be 1..100 mm")
         _require("torque_constant_nm_per_a", 0.01 <= v["torque_constant_nm_per_a"] <= 5.0, "must be 0.01..5")
         _require("gear_ratio", 1.0 <= v["gear_ratio"] <= 1000.0, "must be 1..1000")
-        _require("current_limit_a", 0.0 < v["current_limit_a"] <= _C610_MAX_A, "must be in (0, 10] A (C610)")
+        _require("current_limit_a", 0.0 < v["current_limit_a"] <= C610_MAX_A, "must be in (0, 10] A (C610)")
         tension_max_n = v["tension_max_n"]
         _require("pretension_n", 0.0 <= v["pretension_n"] <= tension_max_n, "must be 0..tension_max_n")
         _require("tension_max_n", 0.0 < tension_max_n <= 1000.0, "must be in (0, 1000] N")

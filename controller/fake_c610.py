@@ -26,6 +26,7 @@ from collections.abc import Iterable
 from types import TracebackType
 from typing import Any
 
+from controller.config import CONTROL_PERIOD_US
 from protocol.c610 import (
     ANGLE_COUNTS,
     COMMAND_ID_LOW,
@@ -162,7 +163,7 @@ class C610TrioServer(_Worker):
     Use as a context manager; the bus given is shut down on exit.
     """
 
-    def __init__(self, bus: Any, trio: FakeC610Trio | None = None, *, dt_us: int = 1000) -> None:
+    def __init__(self, bus: Any, trio: FakeC610Trio | None = None, *, dt_us: int = CONTROL_PERIOD_US) -> None:
         """Serve ``trio`` (default: a fresh one) on the python-can ``bus``; each command steps ``dt_us``."""
         super().__init__("c610-trio")
         import can
@@ -203,7 +204,7 @@ class SlcanAdapterEmulator(_Worker):
         is_open: the host sent ``O`` (and not ``C`` since).
     """
 
-    def __init__(self, fd: int, trio: FakeC610Trio | None = None, *, dt_us: int = 1000) -> None:
+    def __init__(self, fd: int, trio: FakeC610Trio | None = None, *, dt_us: int = CONTROL_PERIOD_US) -> None:
         """Serve on the pty master ``fd``."""
         super().__init__("slcan-adapter")
         self.fd = fd

@@ -21,6 +21,7 @@ import numpy.typing as npt
 from controller.transport import Transport
 from protocol.link import LinkParser
 from protocol.messages import (
+    HEARTBEAT_PERIOD_US,
     CommandAck,
     Event,
     Heartbeat,
@@ -33,9 +34,6 @@ from protocol.messages import (
 
 from .board import VirtualBoard
 from .faults import FaultSet
-
-HEARTBEAT_PERIOD_US = 100_000
-"""The host's heartbeat period (10 Hz, as spirob-host sends)."""
 
 
 class ScriptedHost:

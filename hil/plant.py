@@ -29,6 +29,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from controller.config import CONTROL_PERIOD_US
 from hil.errors import PlantDivergedError
 from hil.mjcf import ModelConfig, ObjectConfig, build_mjcf, cable_layout, unit_geometry
 from hil.spiral import SpiralDesign
@@ -56,7 +57,7 @@ class PlantConfig:
     """
 
     model: ModelConfig = field(default_factory=ModelConfig)
-    control_period_us: int = 1000
+    control_period_us: int = CONTROL_PERIOD_US
     max_joint_speed_rad_s: float = 5.0e3
     max_spool_speed_m_s: float = 50.0
 

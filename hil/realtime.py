@@ -60,12 +60,13 @@ import numpy as np
 import numpy.typing as npt
 
 from controller.clock import RealTimeClock
-from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig
+from controller.config import CONTROL_PERIOD_US, PARAM_FIELDS, PARAMS, FirmwareConfig
 from controller.errors import ConfigError, PortError
 from controller.transport import SerialTransport
 from protocol.dbus import FRAME_LEN, FRAME_PERIOD_US, Lever, RcFrame
 from protocol.link import LinkFrame, LinkParser
 from protocol.messages import (
+    HEARTBEAT_PERIOD_US,
     PARAM_LIST_ALL,
     AckResult,
     Command,
@@ -90,7 +91,6 @@ from protocol.messages import (
 from . import recording
 from .errors import HilError
 from .faults import Fault, FaultKind, FaultSet
-from .harness import HEARTBEAT_PERIOD_US
 from .radio import RadioScript
 from .recording import Recorder
 from .scenarios import MS, SCENARIOS, TICK_US, Check, Plan, ScenarioResult, telemetry_json
@@ -111,7 +111,7 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-TELEMETRY_PERIOD_US: Final = 10_000
+TELEMETRY_PERIOD_US: Final = FirmwareConfig().telemetry_period_us
 """The board's telemetry period (100 Hz): currents, phases and modes are seen once per period, so a
 bound on "zero current within X" is widened by it."""
 LINK_ALLOWANCE_US: Final = 2_000
@@ -125,7 +125,7 @@ timing checks, and its ``control_late`` counter says why."""
 SETTLE_US: Final = 100_000
 """After the scenario's duration the host keeps playing its last state this long, so the telemetry of
 the last moments arrives, then puts the board in SAFE."""
-LOOP_PERIOD_US: Final = 1_000
+LOOP_PERIOD_US: Final = CONTROL_PERIOD_US
 """The host loop's period: RC, heartbeat and command times are quantised to it."""
 
 BOARD_ONLY_FAULTS: Final = frozenset(

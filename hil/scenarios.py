@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.config import FailsafeConfig, FirmwareConfig, MappingConfig
+from controller.config import CONTROL_PERIOD_US, FailsafeConfig, FirmwareConfig, MappingConfig
 from controller.rc import DbusSerialSource
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, CommandCode, Mode, Phase, Telemetry
@@ -40,7 +40,7 @@ from .radio import RadioScript
 from .recording import Recorder
 from .spiral import SpiralDesign
 
-TICK_US = 1000
+TICK_US = CONTROL_PERIOD_US
 MS = 1000
 S = 1_000_000
 

@@ -26,6 +26,7 @@ from protocol.link import LinkFrame, encode_frame
 __all__ = [
     "ACK_TEXT_MAX",
     "EVENT_TEXT_MAX",
+    "HEARTBEAT_PERIOD_US",
     "HOST_TO_BOARD_MAX_PAYLOAD",
     "MAX_SIM_BODIES",
     "MAX_TASKS",
@@ -906,6 +907,10 @@ class CommandAck(Message):
 
 
 # --- host -> board --------------------------------------------------------------------------------
+
+
+HEARTBEAT_PERIOD_US = 100_000
+"""The host's ``Heartbeat`` period (10 Hz; the board's default host timeout is five of them)."""
 
 
 @_register
