@@ -198,11 +198,11 @@ class Firmware:
         self._booted = True
 
     def run(self, clock: Clock, duration_us: int | None = None, stop: StopSignal = None) -> None:
-        """The real-time loop (:func:`~controller.clock.run_periodic`): run due tasks, sleep to the next
-        absolute deadline, repeat.
+        """The real-time loop: run due tasks, sleep to the next absolute deadline, repeat.
 
-        Returns after ``duration_us`` or when ``stop`` is set / returns True (checked every tick), and sends
-        zero current once on the way out.
+        The loop is :func:`~controller.clock.run_periodic`, inside ``clock.running()``. Returns after
+        ``duration_us`` or when ``stop`` is set / returns True (checked every tick), and sends zero
+        current once on the way out.
         """
         sched = self.scheduler
         run_due, next_deadline_us = sched.run_due, sched.next_deadline_us
