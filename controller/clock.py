@@ -1,8 +1,10 @@
 """Clocks behind one interface: integer microseconds, absolute deadlines.
 
 The firmware never reads a clock itself: its tasks receive ``now_us``. A clock is only used by whoever
-drives the firmware — :meth:`controller.firmware.Firmware.run` (real time) or a lockstep simulation that
-calls :meth:`~controller.firmware.Firmware.run_due` after each plant step. This is the only module of
+drives the firmware — :func:`run_periodic`, the one real-time loop (behind
+:meth:`controller.firmware.Firmware.run` and ``hil.board.run_realtime``), or a lockstep simulation that
+calls :meth:`~controller.firmware.Firmware.run_due` after each plant step. A clock says its own
+:attr:`Clock.kind`, so no caller tests which class it has. This is the only module of
 ``controller`` that calls ``time.*``.
 
 Real-time facts this module rests on (measured on the project's 2-core machine, docs/realtime.md):
@@ -23,13 +25,15 @@ import itertools
 import logging
 import os
 import sys
+import threading
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 
 from controller.errors import ClockError
+from protocol.messages import ClockKind
 
-__all__ = ["Clock", "LockstepClock", "RealTimeClock", "monotonic_ns", "zero_ns"]
+__all__ = ["Clock", "LockstepClock", "RealTimeClock", "StopSignal", "monotonic_ns", "run_periodic", "zero_ns"]
 
 _log = logging.getLogger(__name__)
 
@@ -64,9 +68,66 @@ class Clock(ABC):
         Returns at once if the deadline has passed.
         """
 
+    @property
+    @abstractmethod
+    def kind(self) -> ClockKind:
+        """How a loop on this clock is timed (reported in ``BoardStatus``); final once :meth:`running`."""
+
     def running(self) -> contextlib.AbstractContextManager[None]:
         """Context held by a real-time loop for its whole run (default: nothing to set up)."""
         return contextlib.nullcontext()
+
+
+StopSignal = threading.Event | Callable[[], bool] | None
+"""What ends a periodic loop early: an event that gets set, or a callable that returns True."""
+
+
+def _is_set(stop: StopSignal) -> bool:
+    if stop is None:
+        return False
+    if isinstance(stop, threading.Event):
+        return stop.is_set()
+    return bool(stop())
+
+
+def run_periodic(
+    clock: Clock,
+    step: Callable[[int], int],
+    *,
+    begin: Callable[[int], int] | None = None,
+    duration_us: int | None = None,
+    stop: StopSignal = None,
+) -> None:
+    """The one real-time loop: sleep to an absolute deadline, run ``step``, repeat.
+
+    Everything runs inside ``clock.running()`` (SCHED_FIFO, GC frozen, ... for a
+    :class:`RealTimeClock`). Deadlines are absolute, so a late wake-up never pushes the next one back;
+    what to do about a missed deadline (skip, never burst) is the step's business, as it knows its grid.
+
+    Args:
+        clock: the time source.
+        step: called with the time at each deadline; returns the next absolute deadline (µs).
+        begin: called once with the loop's start time, inside ``clock.running()``; returns the first
+            deadline (default: the start time, so the first step runs at once).
+        duration_us: stop at start + this (no step runs at or after it); None = no limit.
+        stop: checked before every step; the loop returns when it is set / returns True.
+    """
+    with clock.running():
+        start = clock.now_us()
+        end = None if duration_us is None else start + duration_us
+        deadline = start if begin is None else begin(start)
+        sleep_until = clock.sleep_until_us
+        now_us = clock.now_us
+        while True:
+            if end is not None and deadline > end:
+                deadline = end
+            sleep_until(deadline)
+            now = now_us()
+            if end is not None and now >= end:
+                break
+            if _is_set(stop):
+                break
+            deadline = step(now)
 
 
 class _Timespec(ctypes.Structure):
@@ -139,6 +200,11 @@ class RealTimeClock(Clock):
                 prctl.argtypes = [ctypes.c_int] + [ctypes.c_ulong] * 4
                 prctl.restype = ctypes.c_int
                 self._prctl = prctl
+
+    @property
+    def kind(self) -> ClockKind:
+        """``REALTIME_FIFO`` while SCHED_FIFO is in force, else ``REALTIME_NORMAL``."""
+        return ClockKind.REALTIME_FIFO if self.fifo_active else ClockKind.REALTIME_NORMAL
 
     def now_us(self) -> int:
         """CLOCK_MONOTONIC in integer µs."""
@@ -240,6 +306,11 @@ class LockstepClock(Clock):
         if start_us < 0:
             raise ValueError(f"start_us must be >= 0, got {start_us}")
         self._now_us = int(start_us)
+
+    @property
+    def kind(self) -> ClockKind:
+        """Always ``LOCKSTEP``."""
+        return ClockKind.LOCKSTEP
 
     def now_us(self) -> int:
         """Current simulated time in µs."""

@@ -20,8 +20,10 @@ Phases (``protocol.messages.Phase``) and transitions:
 - any -> ``ESTOP`` on the ESTOP command. Latched: CLEAR_ESTOP moves to ``GATE``, which needs the
   right lever DOWN again.
 
-Priority when several hold: ESTOP > MOTOR_FAULT > RC_LOST > HOST_LOST. Invalid RC frames never reach
-this module (the control task rejects and counts them).
+:meth:`Failsafe.update` is a switch on the phase, each case owning its exits. A fault latched when an
+E-stop or DISARM takes over holds again once they are gone (GATE shows it). Priority when several
+hold: ESTOP > MOTOR_FAULT > RC_LOST > HOST_LOST. :meth:`Failsafe.arm_blocker` names what holds the
+gate. Invalid RC frames never reach this module (the control task rejects and counts them).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from collections.abc import Iterable
 from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.events import EventQueue
 from protocol.dbus import Lever
-from protocol.messages import EventKind, Phase
+from protocol.messages import ArmBlocker, EventKind, Phase
 
 __all__ = ["Failsafe"]
 
@@ -70,9 +72,7 @@ class Failsafe:
         self.phase = Phase.GATE
         self.estop_latched = False
         self.host_disarmed = False
-        self._motor_fault = False
-        self._lost: Phase | None = None  # RC_LOST or HOST_LOST, latched until re-armed through SAFE
-        self._armed = False
+        self._latched: Phase | None = None  # MOTOR_FAULT, RC_LOST or HOST_LOST until re-armed through SAFE
         self.motors_online = 0
         self.motor_offline_events = 0
         self.rc_ok = False
@@ -89,10 +89,11 @@ class Failsafe:
 
     def configure(self, config: FirmwareConfig) -> None:
         """Take new timeouts and the host requirement."""
-        self._rc_timeout_us = config.rc_timeout_us
-        self._motor_timeout_us = config.motor_timeout_us
-        self._host_timeout_us = config.host_timeout_us
-        self.host_required = config.host_required
+        c = config.failsafe
+        self._rc_timeout_us = c.rc_timeout_us
+        self._motor_timeout_us = c.motor_timeout_us
+        self._host_timeout_us = c.host_timeout_us
+        self.host_required = c.host_required
 
     @property
     def armed(self) -> bool:
@@ -123,7 +124,6 @@ class Failsafe:
     def estop(self, now_us: int) -> None:
         """E-stop: zero current now, latched until :meth:`clear_estop` and a pass through SAFE."""
         self.estop_latched = True
-        self._armed = False
         self._set(now_us, Phase.ESTOP)
 
     def clear_estop(self, now_us: int) -> bool:
@@ -131,15 +131,13 @@ class Failsafe:
         if not self.estop_latched:
             return False
         self.estop_latched = False
-        self._armed = False
         self._set(now_us, Phase.GATE)
         return True
 
     def disarm(self, now_us: int) -> None:
         """Host DISARM: back to the gate until ARM (and the right lever DOWN)."""
         self.host_disarmed = True
-        self._armed = False
-        if self.phase != Phase.ESTOP and not self._motor_fault:
+        if self.phase is not _ESTOP and self._latched is not _MOTOR_FAULT:
             self._set(now_us, Phase.GATE)
 
     def arm(self) -> bool:
@@ -154,7 +152,8 @@ class Failsafe:
     def update(self, now_us: int) -> Phase:
         """Apply the timeouts at ``now_us`` and return the phase for this tick.
 
-        Runs every control tick: written as one decision chain with a single phase change at the end.
+        Runs every control tick: a switch on the phase, each case deciding its own exits, with a single
+        phase change at the end.
         """
         rc_ok = self._rc_seen and now_us - self._last_rc_us <= self._rc_timeout_us
         self.rc_ok = rc_ok
@@ -171,35 +170,65 @@ class Failsafe:
             self._motors_changed(now_us, self.motors_online, mask)
         motors_ok = mask == self._all_motors
         lever_down = rc_ok and self._right_lever == _DOWN
+        host_fine = host_ok or not self.host_required
 
-        if self.estop_latched:
-            phase = _ESTOP
-        elif self._motor_fault and not (motors_ok and lever_down):
-            phase = _MOTOR_FAULT
-        else:
-            self._motor_fault = False  # (if it was set: re-armed through SAFE; the gate below decides)
-            host_fine = host_ok or not self.host_required
-            lost = self._lost
-            if lost is not None and not ((rc_ok if lost is _RC_LOST else host_fine) and lever_down):
-                phase = lost
-            else:
-                self._lost = None  # (if it was set: re-armed through SAFE; the gate below decides)
-                if not self._armed:
-                    if rc_ok and lever_down and motors_ok and host_fine and not self.host_disarmed:
-                        self._armed = True
-                        phase = _OK
-                    else:
-                        phase = _GATE
-                elif not motors_ok:
-                    self._motor_fault = True
-                    self._armed = False
-                    phase = _MOTOR_FAULT
-                elif not rc_ok or not host_fine:
-                    phase = self._lost = _RC_LOST if not rc_ok else _HOST_LOST
-                    self._armed = False
-                else:
-                    phase = _OK
+        phase = self.phase
+        if phase is _GATE and self._latched is not None:
+            phase = self._latched  # a fault latched before an E-stop or DISARM holds again
+        match phase:
+            case Phase.OK:
+                if not motors_ok:
+                    phase = self._latched = _MOTOR_FAULT
+                elif not rc_ok:
+                    phase = self._latched = _RC_LOST
+                elif not host_fine:
+                    phase = self._latched = _HOST_LOST
+            case Phase.GATE:
+                phase = self._gate(rc_ok, lever_down, motors_ok, host_fine)
+            case Phase.MOTOR_FAULT:  # every motor back, and re-armed through SAFE
+                if motors_ok and lever_down:
+                    self._latched = None
+                    phase = self._gate(rc_ok, lever_down, motors_ok, host_fine)
+            case Phase.RC_LOST:  # valid frames back, showing the lever DOWN
+                if rc_ok and lever_down:
+                    self._latched = None
+                    phase = self._gate(rc_ok, lever_down, motors_ok, host_fine)
+            case Phase.HOST_LOST:  # heartbeats back (or no longer required), and the lever DOWN
+                if host_fine and lever_down:
+                    self._latched = None
+                    phase = self._gate(rc_ok, lever_down, motors_ok, host_fine)
+            case Phase.ESTOP:  # left only by CLEAR_ESTOP (:meth:`clear_estop`), to GATE
+                pass
         return self._set(now_us, phase)
+
+    def _gate(self, rc_ok: bool, lever_down: bool, motors_ok: bool, host_fine: bool) -> Phase:
+        """The arming gate: ``OK`` when every condition holds, else ``GATE``."""
+        if rc_ok and lever_down and motors_ok and host_fine and not self.host_disarmed:
+            return _OK
+        return _GATE
+
+    def arm_blocker(self) -> ArmBlocker:
+        """What holds the arming gate shut as of the last :meth:`update` (``NONE`` in phase ``OK``).
+
+        The first of: E-stop latched, a motor silent, RC invalid, host heartbeat missing (when
+        required), host DISARM, right lever not seen DOWN. Not called by the control tick: the telemetry
+        builder asks for it.
+        """
+        if self.phase is _OK:
+            return ArmBlocker.NONE
+        if self.estop_latched:
+            return ArmBlocker.ESTOP_LATCHED
+        if self.motors_online != self._all_motors:
+            return ArmBlocker.MOTOR_FAULT
+        if not self.rc_ok:
+            return ArmBlocker.RC_INVALID
+        if self.host_required and not self.host_ok:
+            return ArmBlocker.HOST_MISSING
+        if self.host_disarmed:
+            return ArmBlocker.DISARMED
+        if self._right_lever != _DOWN:
+            return ArmBlocker.LEVER_NOT_DOWN
+        return ArmBlocker.NONE  # every condition holds: the gate opens on the next tick
 
     def _set(self, now_us: int, phase: Phase) -> Phase:
         if phase is not self.phase:

@@ -1,4 +1,4 @@
-"""The firmware: a declared task table over the RC input, failsafe, modes, mapping, motor model and bus.
+"""The firmware: a declared task table and thin task bodies (Betaflight's ``fc/tasks.c``).
 
 Task table (rates are the config's defaults; tasks due on the same tick run in this order)::
 
@@ -10,9 +10,14 @@ Task table (rates are the config's defaults; tasks due on the same tick run in t
     status      2 Hz     BoardStatus (per-task statistics) out                        (with a link)
     sim_poses   50 Hz    SimPoses out                               (with a link and a pose provider)
 
-Two ways to drive it: :meth:`Firmware.run` is the real-time loop (any :class:`~controller.clock.Clock`);
-a lockstep simulation calls :meth:`Firmware.run_due` with the simulated time after every 1 ms plant
-step. Tasks receive ``now_us`` and never read a clock.
+Each body calls into a module: RC intake (``controller.rc.RcInput``), the failsafe
+(``controller.failsafe``), mode selection (``controller.modes``), the cable mapping and slew
+(``controller.mapping``), the motor model and bus; the command and parameter server
+(``controller.commands``); telemetry building (``controller.telemetry``).
+
+Two ways to drive it: :meth:`Firmware.run` is the real-time loop (:func:`controller.clock.run_periodic`
+on any :class:`~controller.clock.Clock`); a lockstep simulation calls :meth:`Firmware.run_due` with the
+simulated time after every 1 ms plant step. Tasks receive ``now_us`` and never read a clock.
 
 Safety rules (see ``controller.failsafe``): no current before the start-up gate; zero current on the
 first tick after RC (30 ms), a motor (10 ms) or a required host heartbeat is lost, on E-stop, and in
@@ -21,91 +26,31 @@ SAFE mode. Invalid RC frames are counted and never acted on.
 
 from __future__ import annotations
 
-import math
-import threading
-from collections.abc import Callable, Sequence
-from typing import Any
+from collections.abc import Callable
 
-from controller.clock import Clock, RealTimeClock, monotonic_ns
-from controller.config import MOTOR_COUNT, PARAM_FIELDS, PARAMS, FirmwareConfig
-from controller.errors import ConfigError
+from controller.clock import Clock, StopSignal, monotonic_ns, run_periodic
+from controller.commands import CommandServer, GraspAcks, Params
+from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
 from controller.mapping import CableMapper, TensionSlew
+from controller.modes import ModeSelector
 from controller.motor_model import MotorModel
 from controller.motorbus import MotorBus
-from controller.rc import LinkRcSource, RcSource
+from controller.rc import RcInput, RcSource
 from controller.scheduler import Scheduler, TaskSpec
+from controller.telemetry import FIRMWARE_VERSION, PoseProvider, TelemetryBuilder
 from controller.transport import Transport
-from protocol.c610 import FEEDBACK_FORMAT, FEEDBACK_ID_BASE
-from protocol.dbus import Lever, RcFrame
-from protocol.errors import DecodeError
-from protocol.link import LinkFrame
-from protocol.messages import (
-    PARAM_INDEX_BY_NAME,
-    PARAM_LIST_ALL,
-    AckResult,
-    BoardStatus,
-    ClockKind,
-    Command,
-    CommandAck,
-    CommandCode,
-    EventKind,
-    GraspState,
-    Heartbeat,
-    Message,
-    Mode,
-    MotorFrames,
-    ParamRequest,
-    ParamSet,
-    ParamValue,
-    Phase,
-    RawRc,
-    SimPoses,
-    TaskStats,
-    Telemetry,
-    TelemetryFlags,
-    VirtualRc,
-    decode,
-    truncate_utf8,
-)
+from protocol.dbus import RcFrame
+from protocol.messages import ClockKind, EventKind, GraspState, Mode, Phase, TaskStats, Telemetry
 
 __all__ = ["FIRMWARE_VERSION", "Firmware", "PoseProvider"]
 
-FIRMWARE_VERSION = "spirob-fw 0.1.0"
-"""Reported in ``BoardStatus`` (at most 16 ASCII characters)."""
-
-PoseProvider = Callable[[], Any]
-"""Returns a ``SimPoses``, or ``(positions_m, quats_wxyz)`` to be stamped with board time, or None."""
-
-_RAW_RC_QUEUE = 16  # DBUS frames held for RawRc between telemetry ticks (14 ms apart: 1 normally)
 _MAX_DT_US = 20_000  # a stalled loop never makes the slew limiter jump further than this
-_GRASP_STICK_MIN = 0.5  # right stick deflection (of full scale) that picks the grasp direction
-_ZERO_FRAME = (0, bytes(8))
-_ACK_TEXT_MAX = 48
 # Enum members the control tick compares by identity (no class attribute lookup per tick).
-_SAFE, _MANUAL, _DIRECT, _GRASP = Mode.SAFE, Mode.MANUAL, Mode.DIRECT, Mode.GRASP
-_PHASE_OK = Phase.OK
-_LEVER_MIDDLE, _LEVER_UP = Lever.MIDDLE, Lever.UP
-_FLAG_ARMED, _FLAG_HOST_REQUIRED, _FLAG_HOST_OK, _FLAG_RC_OK, _FLAG_SIM = (
-    int(TelemetryFlags.ARMED),
-    int(TelemetryFlags.HOST_REQUIRED),
-    int(TelemetryFlags.HOST_OK),
-    int(TelemetryFlags.RC_OK),
-    int(TelemetryFlags.SIM),
-)
-_TELEMETRY_FLAGS = tuple(TelemetryFlags(bits) for bits in range(1 << 5))
-"""Every combination of the five flags, by value (building an IntFlag per frame is slow)."""
-
-
-def _is_set(stop: threading.Event | Callable[[], bool] | None) -> bool:
-    if stop is None:
-        return False
-    if isinstance(stop, threading.Event):
-        return stop.is_set()
-    return bool(stop())
+_SAFE, _MANUAL, _DIRECT = Mode.SAFE, Mode.MANUAL, Mode.DIRECT
 
 
 class Firmware:
@@ -124,7 +69,7 @@ class Firmware:
     Read-only state for observers: :attr:`mode`, :attr:`phase`, :attr:`grasp_state`,
     :attr:`commanded_currents`, :attr:`tensions_n`, :attr:`stats`, :attr:`counters`, :attr:`rc_frame`,
     :attr:`config`, and the component objects (:attr:`failsafe`, :attr:`motors`, :attr:`grasp`,
-    :attr:`scheduler`, :attr:`events`).
+    :attr:`modes`, :attr:`scheduler`, :attr:`events`, :attr:`link`).
     """
 
     def __init__(
@@ -151,30 +96,53 @@ class Firmware:
         self.mapper = CableMapper(config)
         self.slew = TensionSlew(config)
         self.grasp = GraspMachine(config, self.events)
+        self.rc_input = RcInput(self.failsafe.on_rc_frame, keep_raw=self.link is not None)
+        self.acks = GraspAcks(self.link is not None)
+        self.modes = ModeSelector(
+            config, self.failsafe, self.grasp, self.mapper, self.motors, self.events, self.acks
+        )
+        self.params = Params(config, self.events, self._apply_config)
+        self._apply_config(config)
+        self.commands = (
+            CommandServer(
+                self.link,
+                rc,
+                self.rc_input,
+                self.failsafe,
+                self.modes,
+                self.grasp,
+                self.mapper,
+                self.params,
+                self.acks,
+                self.events,
+            )
+            if self.link is not None
+            else None
+        )
         self.clock_kind = ClockKind.LOCKSTEP
-        self.mode = Mode.SAFE
-        self.rc_frame: RcFrame | None = None
-        self.rc_frames_ok = 0
-        self.rc_rejected = 0
-        self.virtual_rc_ignored = 0
-        self.direct_requested = False
-        self.direct_tensions_n = [config.pretension_n] * MOTOR_COUNT
         self.commanded_currents: tuple[int, ...] = (0,) * MOTOR_COUNT
         self._raw = [0] * MOTOR_COUNT
         self._zero = (0,) * MOTOR_COUNT
         self._last_control_us: int | None = None
-        self._prev_left_lever = 0
-        self._raw_rc: list[tuple[int, RcFrame]] = []
-        self._tx_pending: list[Message] = []
-        self._grasp_ack_seq = -1  # link seq of a host GRASP awaiting its final ack
-        self._release_ack_seq = -1
-        self._prev_grasp_state = GraspState.IDLE
         self._last_rc_ok = False
         self._last_host_ok = False
-        self.config = config
-        self._apply_config(config)
+        # The control tick's calls into the modules, bound once (no attribute lookups per tick).
+        self._select_mode = self.modes.select
+        self._grasp_targets = self.modes.grasp_targets
         self.scheduler = Scheduler(self._task_table(), exec_timer_ns or monotonic_ns)
-        self._control_task = self.scheduler["control"]
+        self.telemetry = TelemetryBuilder(
+            failsafe=self.failsafe,
+            motors=self.motors,
+            slew=self.slew,
+            grasp=self.grasp,
+            modes=self.modes,
+            bus=bus,
+            rc=rc,
+            rc_input=self.rc_input,
+            scheduler=self.scheduler,
+            events=self.events,
+            link=self.link,
+        )
         self._booted = False
 
     # --- the task table ---------------------------------------------------------------------------
@@ -182,6 +150,7 @@ class Firmware:
     def _task_table(self) -> tuple[TaskSpec, ...]:
         """The task table: one row per task; offsets (in control ticks) stagger the slow tasks."""
         c = self.config
+        serve = self.commands.serve if self.commands is not None else None  # the body itself, no wrapper
         have = {
             "": True,
             "link": self.link is not None,
@@ -190,7 +159,7 @@ class Firmware:
         # fmt: off
         rows = (
             # name        period                 body                  offset  needs
-            ("link_rx",   c.link_period_us,      self._task_link_rx,   0,      "link"),
+            ("link_rx",   c.link_period_us,      serve,                0,      "link"),
             ("control",   c.control_period_us,   self._task_control,   0,      ""),
             ("detect",    c.detect_period_us,    self._task_detect,    2,      ""),
             ("telemetry", c.telemetry_period_us, self._task_telemetry, 5,      "link"),
@@ -202,7 +171,7 @@ class Firmware:
         return tuple(
             TaskSpec(name, period, body, (offset * tick) % period)
             for name, period, body, offset, needs in rows
-            if have[needs]
+            if have[needs] and body is not None
         )
 
     # --- driving ----------------------------------------------------------------------------------
@@ -228,40 +197,28 @@ class Firmware:
         self.scheduler.start(first_deadline_us)
         self._booted = True
 
-    def run(
-        self,
-        clock: Clock,
-        duration_us: int | None = None,
-        stop: threading.Event | Callable[[], bool] | None = None,
-    ) -> None:
+    def run(self, clock: Clock, duration_us: int | None = None, stop: StopSignal = None) -> None:
         """The real-time loop: run due tasks, sleep to the next absolute deadline, repeat.
 
-        Inside ``clock.running()`` (SCHED_FIFO, GC frozen, ... for a :class:`RealTimeClock`). Returns
-        after ``duration_us`` or when ``stop`` is set / returns True (checked every tick), and sends
-        zero current once on the way out.
+        The loop is :func:`~controller.clock.run_periodic`, inside ``clock.running()``. Returns after
+        ``duration_us`` or when ``stop`` is set / returns True (checked every tick), and sends zero
+        current once on the way out.
         """
-        with clock.running():
-            if isinstance(clock, RealTimeClock):
-                self.clock_kind = ClockKind.REALTIME_FIFO if clock.fifo_active else ClockKind.REALTIME_NORMAL
-            else:
-                self.clock_kind = ClockKind.LOCKSTEP
-            start = clock.now_us()
-            end = None if duration_us is None else start + duration_us
-            sched = self.scheduler
-            try:
-                while True:
-                    now = clock.now_us()
-                    if end is not None and now >= end:
-                        break
-                    if _is_set(stop):
-                        break
-                    sched.run_due(now)
-                    deadline = sched.next_deadline_us()
-                    if end is not None and deadline > end:
-                        deadline = end
-                    clock.sleep_until_us(deadline)
-            finally:
-                self._all_stop()
+        sched = self.scheduler
+        run_due, next_deadline_us = sched.run_due, sched.next_deadline_us
+
+        def begin(start_us: int) -> int:
+            self.clock_kind = clock.kind  # inside clock.running(): SCHED_FIFO is known by now
+            return start_us
+
+        def step(now_us: int) -> int:
+            run_due(now_us)
+            return next_deadline_us()
+
+        try:
+            run_periodic(clock, step, begin=begin, duration_us=duration_us, stop=stop)
+        finally:
+            self._all_stop()
 
     def _all_stop(self) -> None:
         if not self.bus.is_shutdown:
@@ -269,6 +226,16 @@ class Firmware:
         self.slew.reset()
 
     # --- observers --------------------------------------------------------------------------------
+
+    @property
+    def config(self) -> FirmwareConfig:
+        """The configuration in force (``ParamSet`` and :meth:`set_param` replace it)."""
+        return self.params.config
+
+    @property
+    def mode(self) -> Mode:
+        """Operating mode of the last control tick."""
+        return self.modes.mode
 
     @property
     def phase(self) -> Phase:
@@ -279,6 +246,31 @@ class Firmware:
     def grasp_state(self) -> GraspState:
         """Grasp state machine state."""
         return self.grasp.state
+
+    @property
+    def rc_frame(self) -> RcFrame | None:
+        """The last valid RC frame (None before the first)."""
+        return self.rc_input.frame
+
+    @property
+    def rc_frames_ok(self) -> int:
+        """Valid RC frames accepted."""
+        return self.rc_input.frames_ok
+
+    @property
+    def rc_rejected(self) -> int:
+        """RC frames rejected as invalid."""
+        return self.rc_input.rejected
+
+    @property
+    def virtual_rc_ignored(self) -> int:
+        """``VirtualRc`` frames received while the radio is the RC source."""
+        return self.commands.virtual_rc_ignored if self.commands else 0
+
+    @property
+    def direct_tensions_n(self) -> list[float]:
+        """The host's DIRECT tensions (``SET_TENSIONS``, clamped)."""
+        return self.modes.direct_tensions_n
 
     @property
     def tensions_n(self) -> tuple[float, ...]:
@@ -295,8 +287,8 @@ class Firmware:
         """Error and traffic counters by name (the telemetry counters and a few more)."""
         link = self.link
         return {
-            "rc_frames_ok": self.rc_frames_ok,
-            "rc_rejected": self.rc_rejected,
+            "rc_frames_ok": self.rc_input.frames_ok,
+            "rc_rejected": self.rc_input.rejected,
             "dbus_bytes_dropped": self.rc.bytes_dropped,
             "virtual_rc_ignored": self.virtual_rc_ignored,
             "link_frames_ok": link.parser.frames_ok if link else 0,
@@ -308,16 +300,19 @@ class Firmware:
             "events_dropped": self.events.dropped,
         }
 
+    def build_telemetry(self, now_us: int) -> Telemetry:
+        """The ``Telemetry`` message for the present state (also usable without a link)."""
+        return self.telemetry.build(now_us, self.commanded_currents)
+
     # --- configuration ----------------------------------------------------------------------------
 
     def _apply_config(self, config: FirmwareConfig) -> None:
-        self.config = config
         self.failsafe.configure(config)
         self.motors.configure(config)
         self.mapper.configure(config)
         self.slew.configure(config)
         self.grasp.configure(config)
-        self.bus.current_limit_raw = config.current_limit_raw
+        self.bus.current_limit_raw = config.motor.current_limit_raw
 
     def set_param(self, now_us: int, name: str, value: float) -> float:
         """Set a runtime parameter (wire name) if valid; return the value in force afterwards.
@@ -325,23 +320,13 @@ class Firmware:
         Raises:
             ConfigError: unknown name (an invalid value is not an error: the old value stays).
         """
-        if name not in PARAM_FIELDS:
-            raise ConfigError(f"unknown parameter {name!r}")
-        try:
-            new = self.config.with_param(name, value)
-        except ConfigError as exc:
-            self.events.push(now_us, EventKind.PARAM, PARAMS.index(name), value, f"rejected: {exc}")
-            return self.config.get_param(name)
-        self._apply_config(new)
-        now_value = new.get_param(name)
-        self.events.push(now_us, EventKind.PARAM, PARAMS.index(name), now_value, f"{name} = {now_value:g}")
-        return now_value
+        return self.params.set(now_us, name, value)
 
     # --- tasks ------------------------------------------------------------------------------------
 
     def _task_control(self, now_us: int) -> None:
         last = self._last_control_us
-        dt = self.config.control_period_us if last is None else now_us - last
+        dt = self.params.config.control_period_us if last is None else now_us - last
         if dt > _MAX_DT_US:
             dt = _MAX_DT_US
         self._last_control_us = now_us
@@ -349,121 +334,31 @@ class Firmware:
 
         frames = self.rc.poll(now_us)
         if frames:
-            self._take_rc(now_us, frames)
+            self.rc_input.take(now_us, frames)
         feedback = self.bus.read_feedback()
         if feedback:
             self.motors.update_frames(feedback, now_us)
             fs.on_motor_frames(now_us, feedback)
 
         phase = fs.update(now_us)
-        mode = self._select_mode(now_us, phase)
+        rc = self.rc_input.frame
+        mode = self._select_mode(now_us, phase, rc)
 
         if mode is _SAFE:
             self.slew.reset()
             self.commanded_currents = self.bus.send_currents(self._zero)
             return
-        rc = self.rc_frame
         if rc is None:  # cannot happen: phase OK needs a valid frame
             self.commanded_currents = self.bus.send_currents(self._zero)
             return
         if mode is _MANUAL:
             targets = self.mapper.manual(rc.channels)
         elif mode is _DIRECT:
-            targets = self.mapper.direct(self.direct_tensions_n)
+            targets = self.mapper.direct(self.modes.direct_tensions_n)
         else:
             targets = self._grasp_targets(now_us, dt, rc)
         tensions = self.slew.step(targets, dt)
         self.commanded_currents = self.bus.send_currents(self.motors.tensions_to_raw(tensions, self._raw))
-
-    def _take_rc(self, now_us: int, frames: list[RcFrame]) -> None:
-        keep_raw = self.link is not None
-        for f in frames:
-            if keep_raw:
-                q = self._raw_rc
-                if len(q) >= _RAW_RC_QUEUE:
-                    del q[0]
-                q.append((now_us, f))
-            if f.is_valid():
-                self.rc_frames_ok += 1
-                self.rc_frame = f
-                self.failsafe.on_rc_frame(now_us, f.right_lever)
-            else:
-                self.rc_rejected += 1
-
-    def _select_mode(self, now_us: int, phase: Phase) -> Mode:
-        rc = self.rc_frame
-        if phase is not _PHASE_OK or rc is None:
-            mode = _SAFE
-        else:
-            lever = rc.right_lever
-            if lever == _LEVER_MIDDLE:
-                if self.direct_requested and not self.failsafe.host_ok:
-                    self.direct_requested = False
-                    self.events.push(now_us, EventKind.INFO, 0, 0.0, "DIRECT ended: no host heartbeat")
-                mode = _DIRECT if self.direct_requested else _MANUAL
-            elif lever == _LEVER_UP:
-                mode = _GRASP
-            else:
-                mode = _SAFE
-        if mode is not self.mode:
-            self._mode_changed(now_us, self.mode, mode)
-        return mode
-
-    def _mode_changed(self, now_us: int, old: Mode, new: Mode) -> None:
-        self.mode = new
-        if new != Mode.DIRECT and new != Mode.MANUAL:
-            self.direct_requested = False  # DIRECT only while the lever stays MIDDLE
-        if old == Mode.GRASP:
-            self.grasp.reset(now_us)
-            self._finish_grasp_acks(AckResult.FAILED, "grasp mode left")
-        if new == Mode.GRASP:
-            self.grasp.reset(now_us)
-            self._prev_left_lever = self.rc_frame.left_lever if self.rc_frame else 0
-            self._prev_grasp_state = self.grasp.state
-        self.events.push(now_us, EventKind.MODE, int(new), 0.0, f"mode {new.name}")
-
-    def _grasp_targets(self, now_us: int, dt: int, rc: RcFrame) -> list[float]:
-        grasp = self.grasp
-        left = rc.left_lever
-        if left != self._prev_left_lever:
-            self._prev_left_lever = left
-            if left == Lever.UP:
-                grasp.request_grasp(now_us, self.mapper.stick_direction(rc.channels, _GRASP_STICK_MIN))
-            elif left == Lever.DOWN:
-                grasp.request_release(now_us)
-        curl = grasp.step(now_us, dt, self.motors.cable_speed_m_s, self.motors.tension_est_n)
-        if grasp.state != self._prev_grasp_state:
-            self._prev_grasp_state = grasp.state
-            self._grasp_progress(now_us, grasp.state)
-        return self.mapper.curl(curl, grasp.direction_rad)
-
-    def _grasp_progress(self, now_us: int, state: GraspState) -> None:
-        """Final acks for host GRASP / RELEASE commands (MAVLink DO_GRIPPER needs them)."""
-        if self._grasp_ack_seq >= 0:
-            if state == GraspState.HOLD:
-                self._ack_later(CommandCode.GRASP, AckResult.ACCEPTED, self._grasp_ack_seq, "holding")
-                self._grasp_ack_seq = -1
-            elif state in (GraspState.FAILED, GraspState.RELEASE):
-                self._ack_later(CommandCode.GRASP, AckResult.FAILED, self._grasp_ack_seq, state.name.lower())
-                self._grasp_ack_seq = -1
-        if self._release_ack_seq >= 0 and state == GraspState.IDLE:
-            self._ack_later(CommandCode.RELEASE, AckResult.ACCEPTED, self._release_ack_seq, "released")
-            self._release_ack_seq = -1
-
-    def _finish_grasp_ack(self, result: AckResult, text: str) -> None:
-        if self._grasp_ack_seq >= 0:
-            self._ack_later(CommandCode.GRASP, result, self._grasp_ack_seq, text)
-            self._grasp_ack_seq = -1
-
-    def _finish_grasp_acks(self, result: AckResult, text: str) -> None:
-        self._finish_grasp_ack(result, text)
-        if self._release_ack_seq >= 0:
-            self._ack_later(CommandCode.RELEASE, result, self._release_ack_seq, text)
-            self._release_ack_seq = -1
-
-    def _ack_later(self, code: int, result: AckResult, seq: int, text: str) -> None:
-        if self.link is not None:
-            self._tx_pending.append(CommandAck(code, result, seq, truncate_utf8(text, _ACK_TEXT_MAX)))
 
     def _task_detect(self, now_us: int) -> None:
         fs = self.failsafe
@@ -479,241 +374,12 @@ class Firmware:
             text = "host heartbeat ok" if host_ok else "host heartbeat lost"
             self.events.push(now_us, EventKind.INFO, 1, float(host_ok), text)
 
-    # --- link tasks -------------------------------------------------------------------------------
-
-    def _task_link_rx(self, now_us: int) -> None:
-        link = self.link
-        if link is None:
-            return
-        if self._tx_pending:
-            for msg in self._tx_pending:
-                link.send(msg)
-            self._tx_pending.clear()
-        for frame in link.receive():
-            try:
-                msg = decode(frame)
-            except DecodeError:
-                link.decode_errors += 1
-                self._unsupported_command(frame)
-                continue
-            self._dispatch(link, now_us, frame.seq, msg)
-
-    def _dispatch(self, link: BoardLink, now_us: int, seq: int, msg: Message) -> None:
-        if isinstance(msg, Heartbeat):
-            self.failsafe.on_heartbeat(now_us)
-        elif isinstance(msg, VirtualRc):
-            if isinstance(self.rc, LinkRcSource):
-                self.rc.push(msg.data, now_us)
-            else:
-                self.virtual_rc_ignored += 1
-        elif isinstance(msg, Command):
-            result, text = self._command(now_us, seq, msg)
-            link.send(CommandAck(msg.code, result, seq, truncate_utf8(text, _ACK_TEXT_MAX)))
-        elif isinstance(msg, ParamRequest):
-            self._param_request(msg)
-        elif isinstance(msg, ParamSet):
-            if msg.name in PARAM_FIELDS:
-                value = self.set_param(now_us, msg.name, msg.value)
-                link.send(ParamValue(PARAMS.index(msg.name), len(PARAMS), msg.name, value))
-            else:
-                self.events.push(now_us, EventKind.PARAM, -1, msg.value, f"unknown parameter {msg.name}")
-        else:  # a board -> host message sent to the board
-            link.decode_errors += 1
-
-    def _unsupported_command(self, frame: LinkFrame) -> None:
-        if frame.cmd_id == Command.CMD_ID and len(frame.payload) == Command.FORMAT.size:
-            self._send(CommandAck(frame.payload[0], AckResult.UNSUPPORTED, frame.seq, "unknown command code"))
-
-    def _send(self, msg: Message) -> None:
-        if self.link is not None:
-            self.link.send(msg)
-
-    def _param_request(self, req: ParamRequest) -> None:
-        count = len(PARAMS)
-        if req.index == PARAM_LIST_ALL:
-            names: Sequence[str] = PARAMS
-        elif req.index == PARAM_INDEX_BY_NAME:
-            names = (req.name,) if req.name in PARAM_FIELDS else ()
-        else:
-            names = (PARAMS[req.index],) if req.index < count else ()
-        for name in names:
-            self._send(ParamValue(PARAMS.index(name), count, name, self.config.get_param(name)))
-
-    def _command(self, now_us: int, seq: int, cmd: Command) -> tuple[AckResult, str]:
-        code = cmd.code
-        a0, a1, a2 = cmd.args
-        fs = self.failsafe
-        if code == CommandCode.ESTOP:
-            fs.estop(now_us)
-            return AckResult.ACCEPTED, "E-stop latched"
-        if code == CommandCode.CLEAR_ESTOP:
-            if fs.clear_estop(now_us):
-                return AckResult.ACCEPTED, "E-stop cleared: re-arm through SAFE"
-            return AckResult.ACCEPTED, "no E-stop was latched"
-        if code == CommandCode.ARM:
-            if fs.arm():
-                return AckResult.ACCEPTED, "armed: gate opens with the right lever DOWN"
-            return AckResult.REJECTED, "E-stop latched: clear it first"
-        if code == CommandCode.DISARM:
-            fs.disarm(now_us)
-            return AckResult.ACCEPTED, "disarmed"
-        if code == CommandCode.REQUIRE_HOST:
-            if a0 not in (0.0, 1.0):
-                return AckResult.DENIED, "args[0] must be 0 or 1"
-            self.set_param(now_us, "HOST_REQUIRED", a0)
-            return AckResult.ACCEPTED, "host required" if a0 else "host not required"
-        if code == CommandCode.SET_TENSIONS:
-            values = (a0, a1, a2)
-            if not all(math.isfinite(v) and v >= 0.0 for v in values):
-                return AckResult.DENIED, "tensions must be finite and >= 0"
-            lo, hi = self.config.pretension_n, self.config.tension_max_n
-            clamped = [min(hi, max(lo, v)) for v in values]
-            self.direct_tensions_n[:] = clamped
-            return AckResult.ACCEPTED, "clamped" if clamped != list(values) else "ok"
-        if code == CommandCode.SET_MODE:
-            return self._set_mode(now_us, a0)
-        if code in (CommandCode.GRASP, CommandCode.RELEASE, CommandCode.HOLD):
-            return self._grasp_command(now_us, seq, code, a0)
-        return AckResult.UNSUPPORTED, "unsupported"
-
-    def _set_mode(self, now_us: int, value: float) -> tuple[AckResult, str]:
-        if value == Mode.MANUAL:
-            self.direct_requested = False
-            return AckResult.ACCEPTED, "manual (sticks)"
-        if value == Mode.DIRECT:
-            rc = self.rc_frame
-            if self.failsafe.phase != Phase.OK or rc is None or rc.right_lever != Lever.MIDDLE:
-                return AckResult.REJECTED, "DIRECT needs phase OK and the right lever MIDDLE"
-            if not self.failsafe.host_ok:
-                return AckResult.REJECTED, "DIRECT needs the host heartbeat"
-            self.direct_requested = True
-            return AckResult.ACCEPTED, "direct tensions"
-        return AckResult.DENIED, "only MANUAL or DIRECT: the right lever selects SAFE and GRASP"
-
-    def _grasp_command(self, now_us: int, seq: int, code: CommandCode, arg: float) -> tuple[AckResult, str]:
-        if self.mode != Mode.GRASP:
-            return AckResult.REJECTED, "right lever must be UP (GRASP)"
-        grasp = self.grasp
-        if code == CommandCode.GRASP:
-            direction = None
-            if math.isfinite(arg):
-                direction = arg
-            elif self.rc_frame is not None:
-                direction = self.mapper.stick_direction(self.rc_frame.channels, _GRASP_STICK_MIN)
-            result = grasp.request_grasp(now_us, direction)
-            if result != AckResult.ACCEPTED:
-                return result, "grasp already running"
-            self._finish_grasp_ack(AckResult.FAILED, "superseded")
-            self._grasp_ack_seq = seq
-            return AckResult.IN_PROGRESS, "grasping"
-        if code == CommandCode.RELEASE:
-            grasp.request_release(now_us)
-            self._finish_grasp_ack(AckResult.FAILED, "released")
-            if grasp.state == GraspState.IDLE:
-                return AckResult.ACCEPTED, "idle"
-            self._release_ack_seq = seq
-            return AckResult.IN_PROGRESS, "releasing"
-        result = grasp.request_hold(now_us)
-        if result == AckResult.ACCEPTED:
-            self._finish_grasp_ack(AckResult.ACCEPTED, "holding")
-            return result, "holding"
-        return result, f"cannot hold in {grasp.state.name}"
-
-    # --- telemetry --------------------------------------------------------------------------------
-
-    def build_telemetry(self, now_us: int) -> Telemetry:
-        """The ``Telemetry`` message for the present state (also usable without a link)."""
-        fs = self.failsafe
-        m = self.motors
-        # Straight-line code (no enum arithmetic, no generator expressions): this runs every 10 ms,
-        # always with cold caches right after a plant step in a lockstep simulation.
-        flags = (
-            (_FLAG_ARMED if fs.phase is _PHASE_OK else 0)
-            | (_FLAG_HOST_REQUIRED if fs.host_required else 0)
-            | (_FLAG_HOST_OK if fs.host_ok else 0)
-            | (_FLAG_RC_OK if fs.rc_ok else 0)
-            | (_FLAG_SIM if self.bus.simulated else 0)
-        )
-        rc = self.rc_frame
-        ctl = self._control_task
-        link = self.link
-        t = self.slew.tensions_n
-        est = m.tension_est_n
-        length = m.cable_length_m
-        u32 = 0xFFFF_FFFF
-        return Telemetry(
-            now_us,
-            self.mode,
-            fs.phase,
-            self.grasp.state,
-            _TELEMETRY_FLAGS[flags],
-            fs.motors_online,
-            rc.channels if rc else (0, 0, 0, 0),
-            rc.right_lever if rc else 0,
-            rc.left_lever if rc else 0,
-            (m.angle[0], m.angle[1], m.angle[2]),
-            (m.speed_rpm[0], m.speed_rpm[1], m.speed_rpm[2]),
-            (m.current[0], m.current[1], m.current[2]),
-            (self.commanded_currents[0], self.commanded_currents[1], self.commanded_currents[2]),
-            (t[0], t[1], t[2]),
-            (est[0], est[1], est[2]),
-            (length[0], length[1], length[2]),
-            ctl.late & u32,
-            ctl.exec_p99_us,
-            ctl.exec_max_us,
-            min(ctl.lateness_max_us, u32),
-            self.rc_frames_ok & u32,
-            self.rc_rejected & u32,
-            self.rc.bytes_dropped & u32,
-            (link.parser.frames_ok if link else 0) & u32,
-            (link.crc_errors if link else 0) & u32,
-            fs.motor_offline_events & u32,
-            self.bus.can_errors & u32,
-            ctl.lateness_p99_us,  # cached like exec_p99_us: refreshed with BoardStatus, not per tick
-        )
-
     def _task_telemetry(self, now_us: int) -> None:
-        link = self.link
-        if link is None:
-            return
-        link.send(self.build_telemetry(now_us))
-        m = self.motors
-        pack = FEEDBACK_FORMAT.pack
-        seen = m.seen
-        angle, speed, current, temperature = m.angle, m.speed_rpm, m.current, m.temperature
-        frames = [_ZERO_FRAME, _ZERO_FRAME, _ZERO_FRAME]
-        for i in range(MOTOR_COUNT):
-            if seen[i]:
-                frames[i] = (FEEDBACK_ID_BASE + 1 + i, pack(angle[i], speed[i], current[i], temperature[i]))
-        link.send(MotorFrames(now_us, (frames[0], frames[1], frames[2])))
-        raw_rc = self._raw_rc
-        if raw_rc:
-            for t_us, frame in raw_rc:
-                link.send(RawRc(t_us, frame.pack()))  # the received bytes, kept by RcFrame.unpack
-            raw_rc.clear()
-        if len(self.events):
-            for event in self.events.pop_all():
-                link.send(event)
-        link.transport.flush()
+        self.telemetry.send(now_us, self.commanded_currents)
 
     def _task_status(self, now_us: int) -> None:
-        self._send(BoardStatus(now_us, FIRMWARE_VERSION, self.clock_kind, self.scheduler.stats()))
+        self.telemetry.send_status(now_us, self.clock_kind)
 
     def _task_poses(self, now_us: int) -> None:
-        provider = self._poses
-        if provider is None:
-            return
-        poses = provider()
-        if poses is None:
-            return
-        if isinstance(poses, SimPoses):
-            self._send(poses)
-        else:
-            positions, quats = poses
-            self._send(
-                SimPoses(
-                    now_us,
-                    tuple((float(p[0]), float(p[1]), float(p[2])) for p in positions),
-                    tuple((float(q[0]), float(q[1]), float(q[2]), float(q[3])) for q in quats),
-                )
-            )
+        if self._poses is not None:
+            self.telemetry.send_poses(now_us, self._poses)

@@ -95,26 +95,26 @@ class GraspMachine:
 
     def configure(self, config: FirmwareConfig) -> None:
         """Take new grasp parameters."""
-        c = config
-        self.strategy_on = c.grasp_strategy_on
-        self._angles_rad = tuple(math.radians(a) for a in c.cable_angles_deg)
-        self._default_dir_rad = math.radians(c.grasp_direction_deg)
-        self._pack_n = c.grasp_pack_n
-        self._pack_rate = c.grasp_pack_rate_n_per_s / 1e6
-        self._reach_n = c.grasp_reach_n
-        self._wrap_n = c.grasp_wrap_n
-        self._takeup_n = c.grasp_takeup_n
-        self._takeup_m_s = c.grasp_takeup_speed_m_per_s
-        self._reach_rate = c.grasp_reach_rate_n_per_s / 1e6
-        self._wrap_rate = c.grasp_wrap_rate_n_per_s / 1e6
-        self._release_rate = c.grasp_release_rate_n_per_s / 1e6
-        self._stall_m_s = c.grasp_contact_speed_m_per_s
-        self._slow_ratio = c.grasp_contact_slow_ratio
-        self._dwell_us = c.grasp_contact_dwell_us
-        self._grace_us = c.grasp_contact_grace_us
-        self._min_tension_n = c.grasp_contact_min_tension_n
-        self._timeout_us = c.grasp_reach_timeout_us
-        self._release_dwell_us = c.grasp_release_dwell_us
+        g = config.grasp
+        self.strategy_on = g.strategy_on
+        self._angles_rad = tuple(math.radians(a) for a in config.mapping.cable_angles_deg)
+        self._default_dir_rad = math.radians(g.direction_deg)
+        self._pack_n = g.pack_n
+        self._pack_rate = g.pack_rate_n_per_s / 1e6
+        self._reach_n = g.reach_n
+        self._wrap_n = g.wrap_n
+        self._takeup_n = g.takeup_n
+        self._takeup_m_s = g.takeup_speed_m_per_s
+        self._reach_rate = g.reach_rate_n_per_s / 1e6
+        self._wrap_rate = g.wrap_rate_n_per_s / 1e6
+        self._release_rate = g.release_rate_n_per_s / 1e6
+        self._stall_m_s = g.contact_speed_m_per_s
+        self._slow_ratio = g.contact_slow_ratio
+        self._dwell_us = g.contact_dwell_us
+        self._grace_us = g.contact_grace_us
+        self._min_tension_n = g.contact_min_tension_n
+        self._timeout_us = g.reach_timeout_us
+        self._release_dwell_us = g.release_dwell_us
 
     @property
     def idle_curl_n(self) -> float:

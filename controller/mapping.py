@@ -52,12 +52,13 @@ class CableMapper:
 
     def configure(self, config: FirmwareConfig) -> None:
         """Take new limits (called at start-up and when a parameter changes)."""
-        self._angles_rad = tuple(math.radians(a) for a in config.cable_angles_deg)
-        self._pretension_n = config.pretension_n
-        self._tension_max_n = config.tension_max_n
-        self._common_per_count = config.common_max_n / _CH_LIMIT
-        self._bend_max_n = config.bend_max_n
-        self._deadband = config.stick_deadband
+        m = config.mapping
+        self._angles_rad = tuple(math.radians(a) for a in m.cable_angles_deg)
+        self._pretension_n = m.pretension_n
+        self._tension_max_n = m.tension_max_n
+        self._common_per_count = m.common_max_n / _CH_LIMIT
+        self._bend_max_n = m.bend_max_n
+        self._deadband = m.stick_deadband
         self._k = 2.0 / MOTOR_COUNT
 
     def _clamp(self, value: float) -> float:
@@ -140,8 +141,8 @@ class TensionSlew:
 
     def configure(self, config: FirmwareConfig) -> None:
         """Take a new rate limit and floor."""
-        self._rate_n_per_us = config.slew_n_per_s / 1e6
-        self._pretension_n = config.pretension_n
+        self._rate_n_per_us = config.mapping.slew_n_per_s / 1e6
+        self._pretension_n = config.mapping.pretension_n
 
     def reset(self) -> None:
         """Go inactive: tensions 0."""

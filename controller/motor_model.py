@@ -56,15 +56,16 @@ class MotorModel:
 
     def configure(self, config: FirmwareConfig) -> None:
         """Recompute the conversion constants (start-up and parameter changes)."""
-        r = config.spool_radius_m
-        kt = config.torque_constant_nm_per_a
-        self._signs = tuple(config.motor_signs)
+        motor = config.motor
+        r = motor.spool_radius_m
+        kt = motor.torque_constant_nm_per_a
+        self._signs = tuple(motor.motor_signs)
         self._raw_per_n = r / kt * RAW_PER_AMP
         self._n_per_raw = kt / r / RAW_PER_AMP
-        self._limit_raw = config.current_limit_raw
-        self._m_per_count = r * 2.0 * math.pi / (ANGLE_COUNTS * config.gear_ratio)
-        self._m_s_per_rpm = r * 2.0 * math.pi / (60.0 * config.gear_ratio)
-        self._tau_us = config.speed_filter_tau_us
+        self._limit_raw = motor.current_limit_raw
+        self._m_per_count = r * 2.0 * math.pi / (ANGLE_COUNTS * motor.gear_ratio)
+        self._m_s_per_rpm = r * 2.0 * math.pi / (60.0 * motor.gear_ratio)
+        self._tau_us = motor.speed_filter_tau_us
 
     def tension_to_raw(self, index: int, tension_n: float) -> int:
         """Raw C610 current for cable ``index`` (0-based) to pull ``tension_n`` (< 0 treated as 0).

@@ -23,6 +23,7 @@ from collections.abc import Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from controller.config import CONTROL_PERIOD_US
 from controller.errors import BusError, PortError
 from protocol.c610 import (
     COMMAND_ID_LOW,
@@ -309,7 +310,11 @@ class FakeMotorBus(MotorBus):
     """
 
     def __init__(
-        self, trio: FakeC610Trio | None = None, *, dt_us: int = 1000, current_limit_raw: int = CURRENT_RAW_MAX
+        self,
+        trio: FakeC610Trio | None = None,
+        *,
+        dt_us: int = CONTROL_PERIOD_US,
+        current_limit_raw: int = CURRENT_RAW_MAX,
     ) -> None:
         """Create the bus around ``trio`` (default: a fresh ``FakeC610Trio()``)."""
         super().__init__(current_limit_raw=current_limit_raw)

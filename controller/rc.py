@@ -1,21 +1,21 @@
 """RC input sources: the DR16's DBUS UART, the board link's virtual RC frames, or a script.
 
 Every source returns decoded :class:`~protocol.dbus.RcFrame` objects *as received*, valid or not: the
-control task decides (``RcFrame.is_valid``), rejects and counts. ``poll(now_us)`` is called on every
-control tick and never blocks.
+control task's :class:`RcInput` decides (``RcFrame.is_valid``), rejects and counts. ``poll(now_us)`` is
+called on every control tick and never blocks.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from types import TracebackType
 from typing import Protocol
 
 from controller.errors import PortError
 from protocol.dbus import FRAME_PERIOD_US, IDLE_GAP_US, DbusFramer, RcFrame
 
-__all__ = ["DbusSerialSource", "LinkRcSource", "RcSource", "ScriptedRcSource", "Uart"]
+__all__ = ["DbusSerialSource", "LinkRcSource", "RcInput", "RcSource", "ScriptedRcSource", "Uart"]
 
 DBUS_BAUDRATE = 100_000
 """DR16 DBUS: 100 000 baud, 8 data bits, even parity, 1 stop bit (inverted in hardware on the C-board)."""
@@ -44,6 +44,51 @@ class Uart(Protocol):
     def close(self) -> None:
         """Release the port."""
         ...
+
+
+RAW_RC_QUEUE = 16
+"""DBUS frames held for ``RawRc`` between telemetry ticks (14 ms apart: 1 normally)."""
+
+
+class RcInput:
+    """The control task's RC intake: valid frames accepted, invalid ones counted and never acted on.
+
+    Args:
+        on_valid: told ``(now_us, right_lever)`` of every valid frame (the failsafe's RC event).
+        keep_raw: keep every frame, valid or not, for ``RawRc`` (with a host link).
+
+    Attributes:
+        frame: the last valid frame (None before the first).
+        frames_ok: valid frames accepted.
+        rejected: invalid frames rejected.
+        raw: ``(now_us, frame)`` of frames received since the telemetry task last sent them (at most
+            :data:`RAW_RC_QUEUE`, oldest dropped).
+    """
+
+    def __init__(self, on_valid: Callable[[int, int], None], *, keep_raw: bool) -> None:
+        """Nothing received yet."""
+        self._on_valid = on_valid
+        self._keep_raw = keep_raw
+        self.frame: RcFrame | None = None
+        self.frames_ok = 0
+        self.rejected = 0
+        self.raw: list[tuple[int, RcFrame]] = []
+
+    def take(self, now_us: int, frames: list[RcFrame]) -> None:
+        """Accept or reject the frames a source returned at ``now_us``."""
+        keep_raw = self._keep_raw
+        for f in frames:
+            if keep_raw:
+                q = self.raw
+                if len(q) >= RAW_RC_QUEUE:
+                    del q[0]
+                q.append((now_us, f))
+            if f.is_valid():
+                self.frames_ok += 1
+                self.frame = f
+                self._on_valid(now_us, f.right_lever)
+            else:
+                self.rejected += 1
 
 
 class RcSource(ABC):

@@ -37,13 +37,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from controller.clock import Clock, RealTimeClock, monotonic_ns, zero_ns
+from controller.clock import Clock, RealTimeClock, monotonic_ns, run_periodic, zero_ns
 from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource, Uart
 from controller.transport import Transport
 from protocol.dbus import RcFrame
-from protocol.messages import ClockKind, SimPoses
+from protocol.messages import SimPoses
 
 from . import recording
 from .errors import HilError
@@ -244,7 +244,7 @@ class VirtualBoard:
             lambda: self.now_us,
             faults=self.faults,
             recorder=recorder,
-            current_limit_raw=cfg.firmware.current_limit_raw,
+            current_limit_raw=cfg.firmware.motor.current_limit_raw,
         )
         self.radio: VirtualRadio | None = None
         self.uart: MemoryUart | None = None
@@ -271,7 +271,6 @@ class VirtualBoard:
             poses=self._poses,
             exec_timer_ns=exec_timer_ns,
         )
-        self.firmware.clock_kind = ClockKind.LOCKSTEP
         self.ticks = 0
         if recorder is not None:
             recorder.write_json("/board/config", 0, cfg.describe())
@@ -359,30 +358,31 @@ def run_realtime(
     period, as a real arm would not, but the firmware sees true time). Zero current on the way out.
     """
     period = board.period_us
-    with clock.running():
-        if isinstance(clock, RealTimeClock):
-            board.firmware.clock_kind = (
-                ClockKind.REALTIME_FIFO if clock.fifo_active else ClockKind.REALTIME_NORMAL
-            )
-        start = clock.now_us()
-        offset = start - board.plant.time_us
-        end = None if duration_us is None else start + duration_us
-        deadline = start + period
+    offset = 0  # clock time minus plant time, fixed at the start
+    deadline = 0
+
+    def begin(start_us: int) -> int:
+        nonlocal offset, deadline
+        board.firmware.clock_kind = clock.kind
+        offset = start_us - board.plant.time_us
+        deadline = start_us + period
         if not board.firmware.scheduler.started:
             board.firmware.start(deadline - offset)  # the firmware's task grid is this loop's grid
-        try:
-            while stop is None or not stop.is_set():
-                clock.sleep_until_us(deadline)
-                now = clock.now_us()
-                if end is not None and now >= end:
-                    break
-                board.tick(now - offset)
-                deadline += period
-                if now - deadline >= period:  # more than a whole period late: skip, do not burst
-                    deadline += ((now - deadline) // period) * period
-        finally:
-            board.bus.send_currents((0, 0, 0))
-            board.bus.deliver_command()
+        return deadline
+
+    def step(now_us: int) -> int:
+        nonlocal deadline
+        board.tick(now_us - offset)
+        deadline += period
+        if now_us - deadline >= period:  # more than a whole period late: skip, do not burst
+            deadline += ((now_us - deadline) // period) * period
+        return deadline
+
+    try:
+        run_periodic(clock, step, begin=begin, duration_us=duration_us, stop=stop)
+    finally:
+        board.bus.send_currents((0, 0, 0))
+        board.bus.deliver_command()
 
 
 # --- a board in its own process -------------------------------------------------------------------

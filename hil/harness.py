@@ -17,11 +17,11 @@ from protocol.messages import (
     ParamValue,
     Telemetry,
 )
-from protocol.session import HEARTBEAT_PERIOD_US, HostSession
+from protocol.session import HostSession
 
 from .faults import FaultSet
 
-__all__ = ["HEARTBEAT_PERIOD_US", "ScriptedHost"]
+__all__ = ["ScriptedHost"]
 
 
 class ScriptedHost:

@@ -30,6 +30,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from controller.config import C610_MAX_A, MotorDriveConfig
 from hil.spiral import SpiralDesign
 
 __all__ = [
@@ -136,12 +137,18 @@ class ArmConfig:
         _finite("geom_friction", self.geom_friction, allow_equal=True)
 
 
+_DRIVE = MotorDriveConfig()
+"""The firmware's drive constants: the one source of the torque constant, gear ratio and spool radius."""
+
+
 @dataclass(frozen=True)
 class MotorConfig:
     """DJI M2006 P36 + C610 + spool, one per cable (DJI's M2006 P36 and C610 documents).
 
     Attributes:
-        torque_constant_nm_per_a: output-shaft torque per amp. Default 0.18 N·m/A: DJI's M2006 P36 figure
+        torque_constant_nm_per_a: output-shaft torque per amp; default the firmware's
+            (``controller.config.MotorDriveConfig``), as are ``gear_ratio`` and ``spool_radius_m``, so
+            the plant and the firmware's tension estimate agree. 0.18 N·m/A: DJI's M2006 P36 figure
             on its product page. DJI also states "1 N·m rated at 3 A" (about
             0.33 N·m/A); the C610 manual's curve is the better reference. The firmware must estimate
             tension with the same constant as the plant.
@@ -150,7 +157,8 @@ class MotorConfig:
             estimate for a Ø10 × 15 mm steel/NdFeB inner rotor (1.3 kg seen at the cable with a 10 mm
             spool).
         spool_radius_m: cable spool radius (10 mm, the prototype's).
-        current_limit_a: largest |current| the plant accepts (C610: 10 A peak = raw 10000).
+        current_limit_a: largest |current| the plant accepts (C610: 10 A peak = raw 10000, from
+            ``protocol.c610``).
         no_load_speed_rad_s: output speed at zero torque (500 rpm, DJI's M2006 P36 figure).
         stall_current_a: current the drive could push at standstill; with the no-load speed it sets the
             torque-speed line ``I_avail = I_stall · (1 − ω/ω_nl)``. 18 A puts DJI's rated point (3 A at
@@ -160,11 +168,11 @@ class MotorConfig:
         temperature_c: temperature reported in every feedback frame.
     """
 
-    torque_constant_nm_per_a: float = 0.18
-    gear_ratio: float = 36.0
+    torque_constant_nm_per_a: float = _DRIVE.torque_constant_nm_per_a
+    gear_ratio: float = _DRIVE.gear_ratio
     rotor_inertia_kg_m2: float = 1.0e-7
-    spool_radius_m: float = 0.010
-    current_limit_a: float = 10.0
+    spool_radius_m: float = _DRIVE.spool_radius_m
+    current_limit_a: float = C610_MAX_A
     no_load_speed_rad_s: float = 500.0 * 2.0 * math.pi / 60.0
     stall_current_a: float = 18.0
     output_friction_nm: float = 0.01
@@ -194,7 +202,7 @@ class MotorConfig:
         _finite("spool_radius_m", self.spool_radius_m)
         _finite("current_limit_a", self.current_limit_a)
         _check(
-            self.current_limit_a <= 10.0,
+            self.current_limit_a <= C610_MAX_A,
             f"current_limit_a must be <= 10 A (C610), got {self.current_limit_a!r}",
         )
         _finite("no_load_speed_rad_s", self.no_load_speed_rad_s)

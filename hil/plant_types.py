@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from controller.config import CONTROL_PERIOD_US
 from hil.mjcf import ModelConfig
 
 __all__ = ["BodyPoses", "Contact", "PlantConfig", "Pose"]
@@ -34,7 +35,7 @@ class PlantConfig:
     """
 
     model: ModelConfig = field(default_factory=ModelConfig)
-    control_period_us: int = 1000
+    control_period_us: int = CONTROL_PERIOD_US
     max_joint_speed_rad_s: float = 5.0e3
     max_spool_speed_m_s: float = 50.0
 

@@ -149,11 +149,10 @@ def _lockstep_only_reason(name: str, faults: Sequence[Fault]) -> str | None:
             return f"fault {f.kind} can only be injected in a lockstep run (the board side injects it)"
     if scenario.needs_plant or plan.objects or plan.start_packed:
         return f"scenario {name!r} needs the simulated plant (its scene or its checks); run it without --port"
-    default = FirmwareConfig()
+    default = FirmwareConfig().to_dict()
     settable = set(PARAM_FIELDS.values())
-    for cfg_field in dataclasses.fields(FirmwareConfig):
-        key = cfg_field.name
-        if key not in settable and getattr(plan.firmware, key) != getattr(default, key):
+    for key, value in plan.firmware.to_dict().items():
+        if key not in settable and value != default[key]:
             return f"scenario {name!r} changes {key}, which a board takes only at start-up; use lockstep"
     return None
 
@@ -322,11 +321,12 @@ def _set_params(
 def _config(plan_config: FirmwareConfig, params: dict[str, float]) -> FirmwareConfig:
     """The plan's configuration with the board's parameter values (calibration is the board's)."""
     changes: dict[str, Any] = {}
+    current = plan_config.to_dict()
     for name, value in params.items():
         fname = PARAM_FIELDS.get(name)
         if fname is None:
             continue
-        default = getattr(plan_config, fname)
+        default = current[fname]
         if isinstance(default, bool):
             changes[fname] = value != 0.0
         elif isinstance(default, int):
@@ -334,7 +334,7 @@ def _config(plan_config: FirmwareConfig, params: dict[str, float]) -> FirmwareCo
         else:
             changes[fname] = _float(value)
     try:
-        return dataclasses.replace(plan_config, **changes)
+        return plan_config.replaced(**changes)
     except ConfigError as exc:
         raise HilError(f"the board reports an inconsistent configuration: {exc}") from exc
 

@@ -238,7 +238,7 @@ class RunRecord:
     @property
     def limit_raw(self) -> int:
         """The firmware's current limit in raw units."""
-        return self.config.current_limit_raw
+        return self.config.motor.current_limit_raw
 
     def window(self, start_us: float, end_us: float | None = None) -> npt.NDArray[np.bool_]:
         """Mask of the samples with ``start_us <= t < end_us`` (empty for a NaN bound)."""

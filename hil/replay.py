@@ -113,7 +113,7 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
             "recording can be replayed (spirob-hil run ... --record without --port)"
         )
     config, rc_kind = _firmware_from(meta)
-    bus = ReplayBus(config.current_limit_raw)
+    bus = ReplayBus(config.motor.current_limit_raw)
     link = WireEnd()
     uart: MemoryUart | None = None
     rc: RcSource

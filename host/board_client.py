@@ -44,10 +44,12 @@ from typing import Any, Literal
 
 import serial
 
+from controller.config import FailsafeConfig
 from controller.transport import set_tcp_nodelay
 from protocol.dbus import FRAME_LEN, FRAME_PERIOD_US, RcFrame
 from protocol.link import LinkParser
 from protocol.messages import (
+    HEARTBEAT_PERIOD_US,
     MESSAGES,
     Command,
     CommandAck,
@@ -74,7 +76,7 @@ __all__ = [
 
 _log = logging.getLogger(__name__)
 
-RC_TIMEOUT_US = 30_000
+RC_TIMEOUT_US = FailsafeConfig().rc_timeout_us
 """The board's RC-lost timeout (DJI detect task: 30 ms); a longer gap between virtual RC frames is a loss."""
 
 MessageListener = Callable[[Message], None]
@@ -123,7 +125,7 @@ class BoardClientConfig:
         open_timeout_s: how long :meth:`BoardClient.start` waits for the port to open.
     """
 
-    heartbeat_period_us: int = 100_000
+    heartbeat_period_us: int = HEARTBEAT_PERIOD_US
     rc_period_us: int = FRAME_PERIOD_US
     reconnect_period_us: int = 500_000
     rate_window_us: int = 1_000_000

@@ -26,6 +26,7 @@ from protocol.link import LinkFrame, encode_frame
 __all__ = [
     "ACK_TEXT_MAX",
     "EVENT_TEXT_MAX",
+    "HEARTBEAT_PERIOD_US",
     "HOST_TO_BOARD_MAX_PAYLOAD",
     "MAX_SIM_BODIES",
     "MAX_TASKS",
@@ -36,6 +37,7 @@ __all__ = [
     "TASK_NAME_LEN",
     "VERSION_LEN",
     "AckResult",
+    "ArmBlocker",
     "BoardStatus",
     "ClockKind",
     "Command",
@@ -122,6 +124,24 @@ class Phase(IntEnum):
     HOST_LOST = 4
     ESTOP = 5
     """Latched until cleared and re-armed through SAFE."""
+
+
+class ArmBlocker(IntEnum):
+    """``Telemetry.arm_blocker``: what holds the arming gate shut (``NONE`` while armed)."""
+
+    NONE = 0
+    RC_INVALID = 1
+    """No valid RC frame within the RC timeout."""
+    LEVER_NOT_DOWN = 2
+    """The right lever has not been seen DOWN (SAFE) since the gate closed."""
+    ESTOP_LATCHED = 3
+    """An E-stop is latched until CLEAR_ESTOP."""
+    MOTOR_FAULT = 4
+    """A motor is silent."""
+    HOST_MISSING = 5
+    """The host heartbeat is required and missing."""
+    DISARMED = 6
+    """The host sent DISARM (until ARM)."""
 
 
 class GraspState(IntEnum):
@@ -355,7 +375,7 @@ def encode(msg: Message, seq: int) -> bytes:
 @_register
 @dataclass(frozen=True, slots=True)
 class Telemetry(Message):
-    """Board state at the telemetry rate (100 Hz). 125 bytes.
+    """Board state at the telemetry rate (100 Hz). 126 bytes.
 
     Attributes:
         time_us: board time.
@@ -389,11 +409,13 @@ class Telemetry(Message):
         control_lateness_p99_us: control-task start lateness, 99th percentile (recent window, like
             ``control_exec_p99_us``; saturates at 65535 on the wire). Last on the wire so the earlier
             offsets stay where they were.
+        arm_blocker: ``ArmBlocker``: what holds the arming gate shut (``NONE`` while armed). Appended
+            after ``control_lateness_p99_us`` for the same reason.
     """
 
     CMD_ID: ClassVar[int] = 0x0101
     DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
-    FORMAT: ClassVar[struct.Struct] = struct.Struct("<QBBBBB4hBB3H3h3h3h3f3f3fIHHI7IH")
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<QBBBBB4hBB3H3h3h3h3f3f3fIHHI7IHB")
 
     time_us: int
     mode: Mode = Mode.SAFE
@@ -423,6 +445,7 @@ class Telemetry(Message):
     motor_offline_events: int = 0
     can_errors: int = 0
     control_lateness_p99_us: int = 0
+    arm_blocker: ArmBlocker = ArmBlocker.NONE
 
     def pack(self) -> bytes:
         """Encode the payload: one ``struct.pack`` call (this runs on the firmware's telemetry task)."""
@@ -456,6 +479,7 @@ class Telemetry(Message):
                 self.motor_offline_events,
                 self.can_errors,
                 min(self.control_lateness_p99_us, _U16_MAX),
+                self.arm_blocker,
             )
         except (struct.error, OverflowError) as exc:
             raise _pack_error("Telemetry", exc) from exc
@@ -482,7 +506,19 @@ class Telemetry(Message):
             v[24:27],
             v[27:30],
             v[30:33],
-            *v[33:45],
+            v[33],
+            v[34],
+            v[35],
+            v[36],
+            v[37],
+            v[38],
+            v[39],
+            v[40],
+            v[41],
+            v[42],
+            v[43],
+            v[44],
+            _enum(ArmBlocker, v[45], "arm_blocker"),
         )
 
 
@@ -871,6 +907,10 @@ class CommandAck(Message):
 
 
 # --- host -> board --------------------------------------------------------------------------------
+
+
+HEARTBEAT_PERIOD_US = 100_000
+"""The host's ``Heartbeat`` period (10 Hz; the board's default host timeout is five of them)."""
 
 
 @_register

@@ -32,6 +32,7 @@ from typing import NewType
 
 from protocol.dbus import FRAME_PERIOD_US
 from protocol.messages import (
+    HEARTBEAT_PERIOD_US,
     PARAM_INDEX_BY_NAME,
     PARAM_LIST_ALL,
     AckResult,
@@ -59,8 +60,6 @@ __all__ = [
     "next_slot",
 ]
 
-HEARTBEAT_PERIOD_US = 100_000
-"""The host's heartbeat period (10 Hz; the board's host timeout is 500 ms)."""
 ACKS_KEPT = 1024
 """Commands whose acks are remembered; older tokens are forgotten (``ack`` then returns None)."""
 

@@ -35,7 +35,9 @@ def test_control_period_mismatch_is_refused() -> None:
     from controller.config import FirmwareConfig
 
     with pytest.raises(ValueError, match="control period"):
-        VirtualBoard(BoardConfig(firmware=FirmwareConfig(control_period_us=2000, link_period_us=2000)))
+        VirtualBoard(
+            BoardConfig(firmware=FirmwareConfig().replaced(control_period_us=2000, link_period_us=2000))
+        )
 
 
 def test_link_wire_carries_both_ways() -> None:

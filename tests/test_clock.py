@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import gc
+import threading
 
 import pytest
 
-from controller.clock import LockstepClock, RealTimeClock
+from controller.clock import LockstepClock, RealTimeClock, run_periodic
 from controller.errors import ClockError
+from protocol.messages import ClockKind
 
 
 def test_lockstep_advances_only_when_told() -> None:
@@ -50,6 +52,45 @@ def test_realtime_running_restores_gc_and_scheduler() -> None:
         assert not gc.isenabled()
     assert gc.isenabled()
     assert not c.fifo_active
+    assert c.kind is ClockKind.REALTIME_NORMAL
+
+
+def test_the_clock_says_its_own_kind() -> None:
+    assert LockstepClock().kind is ClockKind.LOCKSTEP
+    c = RealTimeClock(fifo=True, spin_us=0)
+    with c.running():
+        assert c.kind is (ClockKind.REALTIME_FIFO if c.fifo_active else ClockKind.REALTIME_NORMAL)
+
+
+def test_run_periodic_steps_on_the_deadlines_the_step_returns_until_the_end() -> None:
+    c = LockstepClock(1000)
+    seen: list[int] = []
+
+    def step(now_us: int) -> int:
+        seen.append(now_us)
+        return now_us + 300
+
+    run_periodic(c, step, duration_us=1000)
+    assert seen == [1000, 1300, 1600, 1900]  # none at or after the end (2000)
+    assert c.now_us() == 2000
+
+
+def test_run_periodic_begin_sets_the_first_deadline_and_stop_ends_the_loop() -> None:
+    c = LockstepClock()
+    stop = threading.Event()
+    seen: list[int] = []
+
+    def step(now_us: int) -> int:
+        seen.append(now_us)
+        if len(seen) == 3:
+            stop.set()
+        return now_us + 100
+
+    run_periodic(c, step, begin=lambda start_us: start_us + 50, stop=stop)
+    assert seen == [50, 150, 250]
+    seen.clear()
+    run_periodic(c, step, stop=lambda: True)  # set before the first step: no step runs
+    assert seen == []
 
 
 def test_realtime_clock_validates_arguments() -> None:

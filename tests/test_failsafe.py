@@ -11,7 +11,7 @@ from controller.config import FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from protocol.dbus import Lever, RcFrame
-from protocol.messages import Command, CommandCode, EventKind, Heartbeat, Phase
+from protocol.messages import ArmBlocker, Command, CommandCode, EventKind, Heartbeat, Phase
 
 ZERO = (0, 0, 0)
 MANUAL_CURL = frame(right=Lever.MIDDLE, ch3=400)
@@ -117,9 +117,9 @@ def test_rc_regained_stays_latched_until_rearmed_then_resumes_from_the_floor() -
     rig.set_rc(MANUAL_CURL)
     rig.until(lambda: any(c > 0 for c in rig.currents), 20)
     # then the tensions restart at the floor and ramp (slew-limited), not jump to the stick value
-    pretension = rig.config.pretension_n
+    pretension = rig.config.mapping.pretension_n
     first = rig.fw.tensions_n
-    assert all(abs(t - pretension) <= rig.config.slew_n_per_s * 1e-3 + 1e-9 for t in first)
+    assert all(abs(t - pretension) <= rig.config.mapping.slew_n_per_s * 1e-3 + 1e-9 for t in first)
 
 
 def test_invalid_frames_are_counted_and_never_acted_on() -> None:
@@ -221,7 +221,7 @@ def test_host_not_required_ignores_missing_heartbeat() -> None:
 
 
 def test_gate_waits_for_host_when_required() -> None:
-    rig = Rig(FirmwareConfig(host_required=True), link=True)
+    rig = Rig(FirmwareConfig().replaced(host_required=True), link=True)
     rig.tick(100)
     assert rig.fw.phase == Phase.GATE
     rig.send(Heartbeat(0, 0))
@@ -291,3 +291,28 @@ def test_phase_events_carry_board_time() -> None:
     assert (5_000, EventKind.PHASE, Phase.OK) in got
     assert (40_000, EventKind.PHASE, Phase.MOTOR_FAULT) in got
     assert sum(1 for _, k, _ in got if k == EventKind.FAULT) == 3
+
+
+def test_arm_blocker_names_what_holds_the_gate() -> None:
+    fs = Failsafe(FirmwareConfig().replaced(host_required=True), EventQueue(64))
+    fs.update(0)
+    assert fs.arm_blocker() == ArmBlocker.MOTOR_FAULT  # nothing seen yet: motors come first
+    fs.on_motor_frames(1_000, [(1, None), (2, None), (3, None)])
+    fs.update(1_000)
+    assert fs.arm_blocker() == ArmBlocker.RC_INVALID
+    fs.on_rc_frame(2_000, Lever.MIDDLE)
+    fs.update(2_000)
+    assert fs.arm_blocker() == ArmBlocker.HOST_MISSING
+    fs.on_heartbeat(3_000)
+    fs.disarm(3_000)
+    fs.update(3_000)
+    assert fs.arm_blocker() == ArmBlocker.DISARMED
+    assert fs.arm()
+    fs.update(3_000)
+    assert fs.arm_blocker() == ArmBlocker.LEVER_NOT_DOWN
+    fs.on_motor_frames(4_000, [(1, None), (2, None), (3, None)])
+    fs.on_rc_frame(4_000, Lever.DOWN)
+    assert fs.update(4_000) == Phase.OK
+    assert fs.arm_blocker() == ArmBlocker.NONE
+    fs.estop(4_000)
+    assert fs.arm_blocker() == ArmBlocker.ESTOP_LATCHED

@@ -23,6 +23,7 @@ from protocol.link import LinkParser, encode_frame
 from protocol.messages import (
     PARAM_INDEX_BY_NAME,
     AckResult,
+    ArmBlocker,
     BoardStatus,
     Command,
     CommandAck,
@@ -61,8 +62,8 @@ def test_manual_common_tension_reaches_the_current_the_model_predicts() -> None:
     rig.set_rc(frame(right=Lever.MIDDLE, ch3=660))
     settle(rig)
     c = rig.config
-    tension = c.pretension_n + c.common_max_n * (660 - c.stick_deadband) / 660
-    raw = round(tension * c.spool_radius_m / c.torque_constant_nm_per_a * 1000)
+    tension = c.mapping.pretension_n + c.mapping.common_max_n * (660 - c.mapping.stick_deadband) / 660
+    raw = round(tension * c.motor.spool_radius_m / c.motor.torque_constant_nm_per_a * 1000)
     assert rig.fw.mode == Mode.MANUAL
     assert rig.currents == (raw, raw, raw)
     assert rig.fw.tensions_n == pytest.approx((tension,) * 3)
@@ -112,7 +113,7 @@ def test_direct_mode_follows_host_tensions_while_the_lever_is_middle() -> None:
         rig.send(Heartbeat(0, 0))
         rig.tick(10)
     assert rig.fw.mode == Mode.DIRECT
-    assert rig.fw.tensions_n == pytest.approx((2.0, 4.0, rig.config.tension_max_n))
+    assert rig.fw.tensions_n == pytest.approx((2.0, 4.0, rig.config.mapping.tension_max_n))
     # the radio stays master: the lever leaves MIDDLE, DIRECT ends for good
     rig.set_rc(frame(right=Lever.UP))
     rig.until(lambda: rig.fw.mode == Mode.GRASP, 30)
@@ -121,7 +122,7 @@ def test_direct_mode_follows_host_tensions_while_the_lever_is_middle() -> None:
 
 
 def test_direct_mode_ends_when_the_host_goes_silent() -> None:
-    cfg = FirmwareConfig(host_timeout_us=50_000)
+    cfg = FirmwareConfig().replaced(host_timeout_us=50_000)
     rig = Rig(cfg, link=True)
     rig.send(Heartbeat(0, 0))
     rig.arm()
@@ -190,6 +191,18 @@ def test_telemetry_carries_the_control_lateness_p99() -> None:
     assert rig.fw.build_telemetry(1_000_000).control_lateness_p99_us == 40
 
 
+def test_telemetry_says_which_arming_blocker_holds_the_gate() -> None:
+    rig = Rig(link=True, start=frame(right=Lever.MIDDLE))
+    rig.tick(20)
+    assert rig.fw.build_telemetry(rig.now_us).arm_blocker == ArmBlocker.LEVER_NOT_DOWN
+    rig.arm()
+    rig.tick(20)
+    assert [m for m in rig.drain() if isinstance(m, Telemetry)][-1].arm_blocker == ArmBlocker.NONE
+    rig.send(Command(CommandCode.DISARM))
+    rig.tick(20)
+    assert [m for m in rig.drain() if isinstance(m, Telemetry)][-1].arm_blocker == ArmBlocker.DISARMED
+
+
 def test_events_carry_board_time() -> None:
     rig = Rig(link=True)
     rig.arm()
@@ -242,8 +255,8 @@ def test_parameters_get_and_set() -> None:
     msgs = rig.drain()
     echoed = [(v.name, v.value) for v in msgs if isinstance(v, ParamValue)]
     assert echoed == [("PRETENSION_N", 1.25), ("CURRENT_LIMIT_A", 3.0)]
-    assert rig.fw.config.pretension_n == 1.25
-    assert rig.fw.config.current_limit_a == 3.0
+    assert rig.fw.config.mapping.pretension_n == 1.25
+    assert rig.fw.config.motor.current_limit_a == 3.0
     params = [e for e in msgs if isinstance(e, Event) and e.kind == EventKind.PARAM]
     assert [p.text.split(":")[0] for p in params] == [
         "PRETENSION_N = 1.25",
@@ -278,7 +291,7 @@ def test_require_host_command() -> None:
     rig.arm()
     rig.send(Command(CommandCode.REQUIRE_HOST, (1.0, 0.0, 0.0)))
     rig.tick(2)
-    assert rig.fw.phase == Phase.HOST_LOST and rig.fw.config.host_required
+    assert rig.fw.phase == Phase.HOST_LOST and rig.fw.config.failsafe.host_required
     rig.send(Command(CommandCode.REQUIRE_HOST, (0.0, 0.0, 0.0)))
     rig.tick(2)
     assert rig.fw.phase == Phase.OK

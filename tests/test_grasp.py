@@ -45,25 +45,25 @@ def start_reach(g: GraspMachine, t: int = 0, direction: float | None = 0.0) -> i
 def test_idle_packs_then_reach_ramps_down_then_contact_wraps_and_holds() -> None:
     g, c = machine()
     t = run(g, 0, 2000, speed=STALLED)
-    assert g.state == GraspState.IDLE and g.curl_n == c.grasp_pack_n
+    assert g.state == GraspState.IDLE and g.curl_n == c.grasp.pack_n
     assert g.direction_rad == 0.0 and g.target_rad == 0.0
     assert g.request_grasp(t, 0.0) == AckResult.ACCEPTED
     t = run(g, t, 1, speed=STALLED)
     assert g.state == GraspState.IDLE  # settling first: the pack-side cable must be still for the dwell
-    t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=STALLED)
+    t = run(g, t, c.grasp.contact_dwell_us // 1000 + 1, speed=STALLED)
     assert g.state == GraspState.REACH
     t0_curl = g.curl_n
     t = run(g, t, 300)  # unrolling: tension falls at the reach rate
-    assert g.curl_n == pytest.approx(t0_curl - c.grasp_reach_rate_n_per_s * 0.300, abs=1e-6)
+    assert g.curl_n == pytest.approx(t0_curl - c.grasp.reach_rate_n_per_s * 0.300, abs=1e-6)
     assert g.state == GraspState.REACH and g.direction_rad == 0.0
     # contact: the pack-side cable stalls while the ramp still runs, for the dwell time
-    t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=STALLED)
+    t = run(g, t, c.grasp.contact_dwell_us // 1000 + 1, speed=STALLED)
     assert g.state == GraspState.WRAP
     # the wrap pulls the cables on the coil's outer face, from 0 N
     assert g.direction_rad == pytest.approx(math.pi) and g.target_rad == 0.0
     assert g.curl_n < 0.1
     t = run(g, t, 3000, speed=STALLED)
-    assert g.state == GraspState.HOLD and g.curl_n == c.grasp_wrap_n
+    assert g.state == GraspState.HOLD and g.curl_n == c.grasp.wrap_n
     assert g.request_release(t) == AckResult.ACCEPTED
     assert g.state == GraspState.RELEASE
     t = run(g, t, 3000, speed=STALLED)
@@ -78,11 +78,11 @@ def test_a_slowdown_of_the_pay_out_is_contact_a_steady_or_faster_one_is_not() ->
     t = run(g, t, 300, speed=fast)
     t = run(g, t, 300, speed=faster)  # speeding up: free space
     assert g.state == GraspState.REACH and g.peak_payout_m_s == pytest.approx(0.08)
-    slowed = [-0.08 * (c.grasp_contact_slow_ratio + 0.05)] * 3
+    slowed = [-0.08 * (c.grasp.contact_slow_ratio + 0.05)] * 3
     t = run(g, t, 300, speed=slowed)  # just above the ratio: still unrolling freely
     assert g.state == GraspState.REACH
-    blocked = [-0.08 * (c.grasp_contact_slow_ratio - 0.1)] * 3  # well above the absolute stall speed
-    t = run(g, t, c.grasp_contact_dwell_us // 1000 - 5, speed=blocked)
+    blocked = [-0.08 * (c.grasp.contact_slow_ratio - 0.1)] * 3  # well above the absolute stall speed
+    t = run(g, t, c.grasp.contact_dwell_us // 1000 - 5, speed=blocked)
     assert g.state == GraspState.REACH  # not for the whole dwell yet
     t = run(g, t, 10, speed=blocked)
     assert g.state == GraspState.WRAP
@@ -94,7 +94,7 @@ def test_the_pack_side_is_the_target_side() -> None:
     t = run(g, t, 300, speed=[0.0, -0.05, 0.0])
     t = run(g, t, 40, speed=[-0.05, 0.0, -0.05])  # the other cables moving do not count
     assert g.state == GraspState.REACH
-    t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=[-0.05, 0.0, -0.05])
+    t = run(g, t, c.grasp.contact_dwell_us // 1000 + 1, speed=[-0.05, 0.0, -0.05])
     assert g.state == GraspState.WRAP
     assert g.direction_rad == pytest.approx(math.radians(-60.0))
 
@@ -102,7 +102,7 @@ def test_the_pack_side_is_the_target_side() -> None:
 def test_no_contact_during_the_grace_period_or_when_slack() -> None:
     g, c = machine()
     t = start_reach(g)
-    t = run(g, t, c.grasp_contact_grace_us // 1000 - 1, speed=STALLED)  # not moving yet: ignored
+    t = run(g, t, c.grasp.contact_grace_us // 1000 - 1, speed=STALLED)  # not moving yet: ignored
     assert g.state == GraspState.REACH
     t = run(g, t, 200, speed=STALLED, tension=[0.0, 0.0, 0.0])  # stalled but slack: no contact
     assert g.state == GraspState.REACH
@@ -116,13 +116,13 @@ def test_reach_without_contact_fails_at_timeout() -> None:
         t = run(g, t, 1, speed=MOVING)
         assert t - start <= 2_000_000 + 2000
     assert g.state == GraspState.FAILED
-    assert g.curl_n == c.grasp_reach_n
+    assert g.curl_n == c.grasp.reach_n
     # a stall after the ramp has ended is not contact (the arm is simply unrolled)
     g2, c2 = machine()
     t = start_reach(g2)
-    ramp_ms = math.ceil((c2.grasp_pack_n - c2.grasp_reach_n) / c2.grasp_reach_rate_n_per_s * 1000)
+    ramp_ms = math.ceil((c2.grasp.pack_n - c2.grasp.reach_n) / c2.grasp.reach_rate_n_per_s * 1000)
     t = run(g2, t, ramp_ms + 10, speed=MOVING)
-    assert g2.curl_n == c2.grasp_reach_n
+    assert g2.curl_n == c2.grasp.reach_n
     t = run(g2, t, 500, speed=STALLED)
     assert g2.state == GraspState.REACH
 
@@ -135,9 +135,9 @@ def test_strategy_off_is_a_plain_ramp_from_straight() -> None:
     t = run(g, t, 1)
     assert g.state == GraspState.WRAP
     t = run(g, t, 3000)  # the cable still moves: the arm is still closing
-    assert g.state == GraspState.WRAP and g.curl_n == c.grasp_wrap_n
-    t = run(g, t, c.grasp_contact_dwell_us // 1000 + 1, speed=STALLED)  # closed: hold
-    assert g.state == GraspState.HOLD and g.curl_n == c.grasp_wrap_n
+    assert g.state == GraspState.WRAP and g.curl_n == c.grasp.wrap_n
+    t = run(g, t, c.grasp.contact_dwell_us // 1000 + 1, speed=STALLED)  # closed: hold
+    assert g.state == GraspState.HOLD and g.curl_n == c.grasp.wrap_n
 
 
 def test_requests_in_wrong_states() -> None:
@@ -165,16 +165,16 @@ def test_grasp_after_failure_repacks_first() -> None:
 def test_a_new_target_side_repacks_from_zero() -> None:
     g, c = machine()
     t = run(g, 0, 2000, speed=STALLED)
-    assert g.curl_n == c.grasp_pack_n
+    assert g.curl_n == c.grasp.pack_n
     g.request_grasp(t, math.pi / 2)
     assert g.curl_n == 0.0 and g.direction_rad == math.pi / 2  # no jump of the full pack to another side
 
 
 def test_reach_floor_must_release_most_of_the_pack() -> None:
     with pytest.raises(ConfigError, match="grasp_reach_n"):
-        FirmwareConfig(grasp_pack_n=18.0, grasp_reach_n=9.0)
+        FirmwareConfig().replaced(grasp_pack_n=18.0, grasp_reach_n=9.0)
     with pytest.raises(ConfigError, match="grasp_contact_slow_ratio"):
-        FirmwareConfig(grasp_contact_slow_ratio=1.0)
+        FirmwareConfig().replaced(grasp_contact_slow_ratio=1.0)
 
 
 # --- through the firmware -------------------------------------------------------------------------
@@ -202,7 +202,7 @@ def test_left_lever_edges_trigger_grasp_and_release_in_grasp_mode() -> None:
 
 
 def test_host_grasp_command_acks_in_progress_then_result() -> None:
-    rig = Rig(FirmwareConfig(grasp_reach_timeout_us=1_000_000), link=True)
+    rig = Rig(FirmwareConfig().replaced(grasp_reach_timeout_us=1_000_000), link=True)
     rig.arm()
     seq = rig.send(Command(CommandCode.GRASP, (math.nan, 0.0, 0.0)))
     rig.tick(5)

@@ -1,6 +1,6 @@
 """The control tick's speed-written paths against plain reference versions of the same rules.
 
-The failsafe's single decision chain, the motor model's all-frames update and the batch current
+The failsafe's switch on its phase, the motor model's all-frames update and the batch current
 conversion were rewritten for speed (issue 5). Each is checked here against the straightforward form it
 replaced, over random event sequences: same phases, same events, same state.
 """
@@ -20,7 +20,26 @@ from protocol.messages import Phase
 
 
 class ReferenceFailsafe(Failsafe):
-    """The failsafe's update rule written as early returns, one per phase (the readable form)."""
+    """The failsafe's update rule as one chain of early returns over latch flags (its earlier form)."""
+
+    _motor_fault = False
+    _lost: Phase | None = None
+    _armed = False
+
+    def estop(self, now_us: int) -> None:
+        self._armed = False
+        super().estop(now_us)
+
+    def clear_estop(self, now_us: int) -> bool:
+        if self.estop_latched:
+            self._armed = False
+        return super().clear_estop(now_us)
+
+    def disarm(self, now_us: int) -> None:
+        self.host_disarmed = True
+        self._armed = False
+        if self.phase != Phase.ESTOP and not self._motor_fault:
+            self._set(now_us, Phase.GATE)
 
     def update(self, now_us: int) -> Phase:
         rc_ok = self._rc_seen and now_us - self._last_rc_us <= self._rc_timeout_us
@@ -133,7 +152,7 @@ def _drive(fs: Failsafe, events: EventQueue, ticks: list[Tick]) -> list[object]:
 def test_failsafe_decision_chain_matches_the_early_return_reference(
     host_required: bool, ticks: list[Tick]
 ) -> None:
-    config = FirmwareConfig(host_required=host_required)
+    config = FirmwareConfig().replaced(host_required=host_required)
     fast_events, ref_events = EventQueue(256), EventQueue(256)
     fast = Failsafe(config, fast_events)
     ref = ReferenceFailsafe(config, ref_events)
@@ -159,7 +178,7 @@ _FRAME = st.builds(
 def test_motor_model_all_frames_update_matches_the_one_frame_reference(
     ticks: list[tuple[list[tuple[int, MotorFeedback]], int]], tau_us: int
 ) -> None:
-    config = FirmwareConfig(motor_signs=(1, -1, 1), speed_filter_tau_us=tau_us)
+    config = FirmwareConfig().replaced(motor_signs=(1, -1, 1), speed_filter_tau_us=tau_us)
     batch, single = MotorModel(config), ReferenceMotorModel(config)
     now = 0
     for frames, dt in ticks:
@@ -175,7 +194,7 @@ def test_motor_model_all_frames_update_matches_the_one_frame_reference(
 
 @given(st.lists(st.floats(-100.0, 400.0), min_size=MOTOR_COUNT, max_size=MOTOR_COUNT), st.floats(0.5, 10.0))
 def test_batch_current_conversion_matches_per_cable(tensions: list[float], limit_a: float) -> None:
-    model = MotorModel(FirmwareConfig(motor_signs=(-1, 1, -1), current_limit_a=limit_a))
+    model = MotorModel(FirmwareConfig().replaced(motor_signs=(-1, 1, -1), current_limit_a=limit_a))
     out = [99] * MOTOR_COUNT
     assert model.tensions_to_raw(tensions, out) is out
     assert out == [model.tension_to_raw(i, t) for i, t in enumerate(tensions)]

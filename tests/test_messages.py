@@ -24,6 +24,7 @@ from protocol.messages import (
     MAX_TASKS,
     MESSAGES,
     AckResult,
+    ArmBlocker,
     BoardStatus,
     ClockKind,
     Command,
@@ -121,6 +122,7 @@ STRATEGIES: dict[type[Message], st.SearchStrategy[Any]] = {
         motor_offline_events=u32,
         can_errors=u32,
         control_lateness_p99_us=u16,
+        arm_blocker=st.sampled_from(ArmBlocker),
     ),
     RawRc: st.builds(RawRc, u64, st.binary(min_size=18, max_size=18)),
     MotorFrames: st.builds(
@@ -256,9 +258,10 @@ def test_golden_telemetry_payload() -> None:
         motor_offline_events=5,
         can_errors=6,
         control_lateness_p99_us=29,
+        arm_blocker=ArmBlocker.LEVER_NOT_DOWN,
     )
     payload = msg.pack()
-    assert len(payload) == 125
+    assert len(payload) == 126
     expected = (
         bytes.fromhex("40420f0000000000")  # time_us
         + bytes([1, 1, 0, 0b1001, 0b111])  # mode, phase, grasp_state, flags, motors_online
@@ -273,7 +276,8 @@ def test_golden_telemetry_payload() -> None:
         + bytes.fromhex("0000803e00000000000000be")
         + bytes.fromhex("0700000028002c01d2040000")
         + b"".join(struct.pack("<I", n) for n in (10, 1, 2, 3, 4, 5, 6))
-        + bytes.fromhex("1d00")  # control_lateness_p99_us, u16, last
+        + bytes.fromhex("1d00")  # control_lateness_p99_us, u16
+        + bytes([2])  # arm_blocker, last
     )
     assert payload == expected
     assert Telemetry.unpack(payload) == msg
@@ -394,8 +398,9 @@ def _sample(cls: type[Message]) -> Message:
 @pytest.mark.parametrize(
     ("cls", "payload"),
     [
-        (Telemetry, bytes(8) + b"\x09" + bytes(114)),  # mode 9
-        (Telemetry, bytes(9) + b"\x06" + bytes(113)),  # phase 6
+        (Telemetry, bytes(8) + b"\x09" + bytes(115)),  # mode 9
+        (Telemetry, bytes(9) + b"\x06" + bytes(114)),  # phase 6
+        (Telemetry, bytes(125) + b"\x07"),  # arm_blocker 7
         (Command, bytes(13)),  # code 0
         (Event, bytes(8) + b"\xc8" + bytes(9)),  # kind 200
         (Event, bytes(17) + b"\x41" + bytes(65)),  # text longer than 64

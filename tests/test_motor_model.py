@@ -18,7 +18,7 @@ def fb(angle: int, speed: int = 0, current: int = 0) -> MotorFeedback:
 
 
 def test_tension_to_current_through_spool_and_torque_constant() -> None:
-    cfg = FirmwareConfig(spool_radius_m=0.010, torque_constant_nm_per_a=0.18)
+    cfg = FirmwareConfig().replaced(spool_radius_m=0.010, torque_constant_nm_per_a=0.18)
     m = MotorModel(cfg)
     # 9 N * 0.01 m = 0.09 N·m; / 0.18 N·m/A = 0.5 A = 500 raw
     assert m.tension_to_raw(0, 9.0) == 500
@@ -28,12 +28,12 @@ def test_tension_to_current_through_spool_and_torque_constant() -> None:
 
 
 def test_current_clamped_to_limit() -> None:
-    m = MotorModel(FirmwareConfig(current_limit_a=3.0))
+    m = MotorModel(FirmwareConfig().replaced(current_limit_a=3.0))
     assert m.tension_to_raw(0, 1000.0) == 3000
 
 
 def test_mirrored_motor_sign() -> None:
-    m = MotorModel(FirmwareConfig(motor_signs=(1, -1, 1)))
+    m = MotorModel(FirmwareConfig().replaced(motor_signs=(1, -1, 1)))
     assert m.tension_to_raw(1, 9.0) == -500
     assert m.raw_to_tension(1, -500) == pytest.approx(9.0)
 
@@ -48,7 +48,7 @@ def test_unwrap_forward_across_8191_to_0() -> None:
 
 
 def test_unwrap_multi_turn_and_cable_length() -> None:
-    cfg = FirmwareConfig(spool_radius_m=0.01, gear_ratio=36.0)
+    cfg = FirmwareConfig().replaced(spool_radius_m=0.01, gear_ratio=36.0)
     m = MotorModel(cfg)
     angle = 0
     m.update(0, fb(angle), 0)
@@ -78,13 +78,13 @@ def test_unwrap_recovers_any_path_of_small_steps(start: int, steps: list[int]) -
 
 
 def test_measured_current_estimates_tension_and_speed_is_filtered() -> None:
-    cfg = FirmwareConfig(speed_filter_tau_us=0)
+    cfg = FirmwareConfig().replaced(speed_filter_tau_us=0)
     m = MotorModel(cfg)
     m.update(0, fb(0, speed=3600, current=1000), 0)
     assert m.tension_est_n[0] == pytest.approx(1.0 * 0.18 / 0.01)
     # 3600 rotor rpm = 100 output rpm -> 10.47 rad/s * 0.01 m
     assert m.cable_speed_m_s[0] == pytest.approx(100 * 2 * math.pi / 60 * 0.01)
-    m2 = MotorModel(FirmwareConfig(speed_filter_tau_us=20_000))
+    m2 = MotorModel(FirmwareConfig().replaced(speed_filter_tau_us=20_000))
     m2.update(0, fb(0, speed=0), 0)
     m2.update(0, fb(0, speed=3600), 1000)
     assert 0 < m2.cable_speed_m_s[0] < m.cable_speed_m_s[0] / 10

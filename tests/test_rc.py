@@ -9,7 +9,7 @@ from collections.abc import Iterator
 import pytest
 
 from controller.errors import PortError
-from controller.rc import DbusSerialSource, LinkRcSource, ScriptedRcSource, Uart
+from controller.rc import RAW_RC_QUEUE, DbusSerialSource, LinkRcSource, RcInput, ScriptedRcSource, Uart
 from protocol.dbus import Lever, RcFrame
 
 GOOD = RcFrame((100, -200, 300, -400), Lever.MIDDLE, Lever.UP)
@@ -125,3 +125,19 @@ def test_link_source_takes_pushed_bytes() -> None:
         src.push(GOOD.pack(), 3000)
     assert len(src.poll(4000)) == 2
     assert src.frames_dropped == 2
+
+
+def test_rc_input_accepts_valid_frames_counts_invalid_ones_and_keeps_raw() -> None:
+    seen: list[tuple[int, int]] = []
+    rc = RcInput(lambda now_us, lever: seen.append((now_us, lever)), keep_raw=True)
+    good = RcFrame((0, 0, 0, 0), Lever.MIDDLE, Lever.DOWN)
+    bad = RcFrame((700, 0, 0, 0), Lever.DOWN, Lever.DOWN)
+    rc.take(5, [good, bad])
+    assert (rc.frame, rc.frames_ok, rc.rejected) == (good, 1, 1)
+    assert seen == [(5, Lever.MIDDLE)]  # the invalid frame never reaches the failsafe
+    assert rc.raw == [(5, good), (5, bad)]
+    rc.take(6, [bad] * RAW_RC_QUEUE)
+    assert len(rc.raw) == RAW_RC_QUEUE and rc.raw[0] == (6, bad)  # oldest dropped
+    quiet = RcInput(lambda now_us, lever: None, keep_raw=False)
+    quiet.take(7, [good])
+    assert quiet.raw == [] and quiet.frames_ok == 1

@@ -26,7 +26,9 @@ def test_a_slower_rc_timeout_fails_rc_loss(monkeypatch: pytest.MonkeyPatch) -> N
     # The same scenario against a firmware that waits 60 ms before declaring RC lost must fail.
     class SlowRcLoss(RcLoss):
         def plan(self) -> scenarios.Plan:
-            return dataclasses.replace(super().plan(), firmware=FirmwareConfig(rc_timeout_us=60_000))
+            return dataclasses.replace(
+                super().plan(), firmware=FirmwareConfig().replaced(rc_timeout_us=60_000)
+            )
 
     monkeypatch.setitem(scenarios.SCENARIOS, "rc-loss", SlowRcLoss)
     result = run_scenario("rc-loss")

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.config import FirmwareConfig
+from controller.config import FirmwareConfig, MappingConfig
 
 from ..mjcf import ObjectConfig
 from ..spiral import SpiralDesign
@@ -91,13 +91,13 @@ def _dynamic_run(args: tuple[str, float, DynamicParams, int]) -> DynamicRun:
     else:
         obj = ObjectConfig(OBJ, radius_m=0.01, length_m=0.06, pos_m=FAR_M, mass_kg=0.01)
     # A step, not a ramp: the slew limiter opened, the ceiling at the 3 A current limit.
-    fw = FirmwareConfig(tension_max_n=54.0, slew_n_per_s=100_000.0)
+    fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=54.0, slew_n_per_s=100_000.0))
     rig = direct_rig(SpiralDesign.paper_prototype(), fw, objects=(obj,), seed=seed)
     plant = rig.plant
     if pen:
         plant.hold_object(OBJ, world_m(*p.pen))
         rig.run(200 * MS)
-        rig.set_tensions([value, fw.pretension_n, fw.pretension_n])
+        rig.set_tensions([value, fw.mapping.pretension_n, fw.mapping.pretension_n])
     else:
         plant.hold_object(OBJ)
         rig.run(300 * MS)

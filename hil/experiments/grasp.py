@@ -103,11 +103,9 @@ def grasp_firmware(**changes: Any) -> FirmwareConfig:
     (the trial starts packed and only has to hold it) and a reach that has run its ramp down without
     contact fails 0.6 s later instead of after 4 s."""
     base = FirmwareConfig()
-    ramp_s = (base.grasp_pack_n - base.grasp_reach_n) / base.grasp_reach_rate_n_per_s
-    cfg = dataclasses.replace(
-        base, grasp_pack_rate_n_per_s=60.0, grasp_reach_timeout_us=int((ramp_s + 0.6) * S)
-    )
-    return dataclasses.replace(cfg, **changes) if changes else cfg
+    ramp_s = (base.grasp.pack_n - base.grasp.reach_n) / base.grasp.reach_rate_n_per_s
+    cfg = base.replaced(grasp_pack_rate_n_per_s=60.0, grasp_reach_timeout_us=int((ramp_s + 0.6) * S))
+    return cfg.replaced(**changes) if changes else cfg
 
 
 def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspOutcome:
@@ -120,7 +118,7 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
     """
     design = design or SpiralDesign.paper_prototype()
     fw = setup.firmware or grasp_firmware()
-    fw = dataclasses.replace(fw, grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
+    fw = fw.replaced(grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
     obj = ObjectConfig(
         OBJ, radius_m=setup.diameter_m / 2, length_m=setup.length_m, pos_m=FAR_M, mass_kg=setup.mass_kg
     )

@@ -49,7 +49,7 @@ class LoadResult:
                 for o in self.outcomes
                 if o.setup.diameter_m == d
                 and o.setup.firmware is not None
-                and o.setup.firmware.grasp_wrap_n == force
+                and o.setup.firmware.grasp.wrap_n == force
                 and not math.isnan(o.load_n)
             ]
             best = max(held) if held else math.nan

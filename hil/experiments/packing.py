@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from controller.config import FirmwareConfig
+from controller.config import FirmwareConfig, MappingConfig
 
 from ..spiral import SpiralDesign
 from .common import BASE_Z_M, Progress, Row, pyplot, save_figure, sized
@@ -88,7 +88,7 @@ def packing(
     logarithmic spiral to the joints; record in which order the joints closed (Note S3, Fig. S5C)."""
     design = design or SpiralDesign.paper_prototype()
     p = params or PackingParams()
-    fw = FirmwareConfig(tension_max_n=max(20.0, p.tension_end_n))
+    fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=max(20.0, p.tension_end_n)))
     rig = direct_rig(design, fw, seed=seed)
     plant = rig.plant
     limit = design.dtheta_rad - math.radians(p.limit_tol_deg)
@@ -96,7 +96,7 @@ def packing(
     closed_at = np.full(n_joints, math.nan)
     ramp_ms = int(p.ramp_s * 1000)
     total = ramp_ms + int(p.hold_s * 1000)
-    pretension = fw.pretension_n
+    pretension = fw.mapping.pretension_n
     ramp_t: list[float] = []
     closed_n: list[int] = []
     pack_t = math.nan

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from controller.config import FirmwareConfig
+from controller.config import FirmwareConfig, MappingConfig
 
 from ..spiral import SpiralDesign
 from .common import BASE_Z_M, Progress, Row, pct, pyplot, save_figure, sized
@@ -127,7 +127,7 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRu
         dtheta_rad=base.dtheta_rad,
         cables=cables,
     )
-    fw = FirmwareConfig(tension_max_n=p.tension_max_n)
+    fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=p.tension_max_n))
     rig = direct_rig(design, fw, seed=seed)
     env = Envelope.of(rig.plant)
     rng = np.random.default_rng([seed, cables, round(taper_deg * 100)])

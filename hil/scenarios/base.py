@@ -137,7 +137,7 @@ def rearm_pull_us(plan: Plan) -> int:
 
 def rc_acted_us(run: RunRecord) -> int:
     """Latest time after the last valid RC frame by which the board must have cut the current."""
-    return REQUIRED.rc_timeout_us + TICK_US + run.lateness_us
+    return REQUIRED.failsafe.rc_timeout_us + TICK_US + run.lateness_us
 
 
 def rc_zero_checks(run: RunRecord, last_rc_us: float) -> list[Check]:
@@ -185,7 +185,11 @@ def rc_gap_check(run: RunRecord, plan: Plan) -> Check:
     times = board_times or run.rc_sent_us
     seen = [t for t in times if 0 <= t < run.duration_us]
     gaps = [b - a for a, b in itertools.pairwise(seen) if not any(a < e and b > s for s, e in cuts)]
-    bound = REQUIRED.rc_timeout_us if board_times else REQUIRED.rc_timeout_us - run.link_delay_us
+    bound = (
+        REQUIRED.failsafe.rc_timeout_us
+        if board_times
+        else REQUIRED.failsafe.rc_timeout_us - run.link_delay_us
+    )
     return Check(
         f"{RC_GAP_CHECK} (longer: the host or the link stalled; the run is void)",
         float(max(gaps, default=0)) if seen else math.nan,

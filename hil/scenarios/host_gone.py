@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from controller.config import FirmwareConfig
+from controller.config import FailsafeConfig, FirmwareConfig
 from protocol.dbus import Lever
 from protocol.messages import EventKind, Heartbeat, Phase
 
@@ -20,13 +20,13 @@ def _plan(kind: FaultKind) -> Plan:
     return Plan(
         radio=[(0, SAFE), (200 * MS, pull), (3200 * MS, SAFE), (3500 * MS, pull)],
         faults=[Fault(kind, 1500 * MS, 2500 * MS)],
-        firmware=FirmwareConfig(host_required=True),
+        firmware=FirmwareConfig(failsafe=FailsafeConfig(host_required=True)),
     )
 
 
 def _host_acted_us(run: RunRecord) -> int:
     """Latest time after the last heartbeat the host sent by which the board must have cut the current."""
-    return REQUIRED.host_timeout_us + TICK_US + run.link_delay_us + run.lateness_us
+    return REQUIRED.failsafe.host_timeout_us + TICK_US + run.link_delay_us + run.lateness_us
 
 
 def _cut_and_latched(run: RunRecord, last_hb: float, rearm: float) -> list[Check]:

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from controller.config import FirmwareConfig
+from controller.config import FailsafeConfig, FirmwareConfig
 from protocol.messages import Command, CommandCode, Mode
 
 from ..faults import Fault, FaultKind
@@ -38,13 +38,13 @@ class LinkNoise(Scenario):
                 Fault(FaultKind.LINK_BIT_FLIP, 0, rate=0.005),
             ],
             host=host,
-            firmware=FirmwareConfig(host_required=True),
+            firmware=FirmwareConfig(failsafe=FailsafeConfig(host_required=True)),
         )
 
     def checks(self, run: RunRecord, plan: Plan) -> list[Check]:
         cfg = run.config
         s = run.samples
-        lo, hi = cfg.pretension_n, cfg.tension_max_n
+        lo, hi = cfg.mapping.pretension_n, cfg.mapping.tension_max_n
         sent = [
             tuple(min(hi, max(lo, v)) for v in m.args)
             for _, m in run.sent

@@ -37,7 +37,7 @@ class ManualTeleop(Scenario):
     def checks(self, run: RunRecord, plan: Plan) -> list[Check]:
         cfg = run.config
         s = run.samples
-        angles = np.radians(np.asarray(cfg.cable_angles_deg, dtype=np.float64))
+        angles = np.radians(np.asarray(cfg.mapping.cable_angles_deg, dtype=np.float64))
         unit = np.stack([np.cos(angles), np.sin(angles)], axis=1)
         steps = list(plan.radio)
         checks: list[Check] = []
@@ -57,8 +57,10 @@ class ManualTeleop(Scenario):
             tail = run.window(max(start, end - STEP_TAIL_US), end)
             resultant = (s.target_n[tail] @ unit).mean(axis=0) if tail.any() else np.full(2, np.nan)
             err = abs(math.remainder(math.atan2(resultant[1], resultant[0]) - want, 2 * math.pi))
-            deflection = (math.hypot(ch0, ch1) - cfg.stick_deadband) / (CH_LIMIT - cfg.stick_deadband)
-            asked = cfg.bend_max_n * min(1.0, deflection)
+            deflection = (math.hypot(ch0, ch1) - cfg.mapping.stick_deadband) / (
+                CH_LIMIT - cfg.mapping.stick_deadband
+            )
+            asked = cfg.mapping.bend_max_n * min(1.0, deflection)
             checks.append(
                 Check(f"bending tension with {label}", float(np.hypot(*resultant)), asked / 2, ">=", "N")
             )
@@ -107,7 +109,7 @@ class ManualTeleop(Scenario):
             Check(
                 "largest target tension",
                 float(s.target_n.max()) if run.n else math.nan,
-                cfg.tension_max_n + FLOAT32_TOLERANCE_N,
+                cfg.mapping.tension_max_n + FLOAT32_TOLERANCE_N,
                 "<=",
                 "N",
             )

@@ -26,7 +26,7 @@ class MotorSilence(Scenario):
     def checks(self, run: RunRecord, plan: Plan) -> list[Check]:
         start, end = fault_window(plan, FaultKind.MOTOR_SILENCE)
         last_fb = start - TICK_US  # the last tick whose feedback reached the board
-        acted = REQUIRED.motor_timeout_us + TICK_US + run.lateness_us
+        acted = REQUIRED.failsafe.motor_timeout_us + TICK_US + run.lateness_us
         rearm = run.first_rc_at_or_after(end, Lever.DOWN)
         return [
             current_before(run, start),

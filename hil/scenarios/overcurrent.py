@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from controller.config import FirmwareConfig
+from controller.config import FirmwareConfig, MappingConfig
 
 from ..record import Check, RunRecord
 from .base import MS, Plan, Scenario, arm_then
@@ -19,12 +19,16 @@ class Overcurrent(Scenario):
     duration_us = 1500 * MS
 
     def plan(self) -> Plan:
-        cfg = FirmwareConfig(common_max_n=150.0, tension_max_n=200.0, slew_n_per_s=1000.0)
+        cfg = FirmwareConfig(
+            mapping=MappingConfig(common_max_n=150.0, tension_max_n=200.0, slew_n_per_s=1000.0)
+        )
         return Plan(radio=arm_then(ch3=660), firmware=cfg)
 
     def checks(self, run: RunRecord, plan: Plan) -> list[Check]:
         cfg = run.config
-        asked = cfg.common_max_n * cfg.spool_radius_m / cfg.torque_constant_nm_per_a * 1000
+        asked = (
+            cfg.mapping.common_max_n * cfg.motor.spool_radius_m / cfg.motor.torque_constant_nm_per_a * 1000
+        )
         checks = [
             Check("current the mapping asks for", asked, run.limit_raw, ">=", "raw"),
             Check("largest |current| sent", run.max_current(0), run.limit_raw, "<=", "raw"),
@@ -38,7 +42,7 @@ class Overcurrent(Scenario):
                 Check(
                     "largest current a drive delivered",
                     float(applied.max()) if applied.size else math.nan,
-                    cfg.current_limit_a + 1e-9,
+                    cfg.motor.current_limit_a + 1e-9,
                     "<=",
                     "A",
                 )

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from protocol.dbus import FRAME_PERIOD_US, Lever, RcFrame
 from protocol.link import LinkParser
 from protocol.messages import (
+    HEARTBEAT_PERIOD_US,
     PARAM_INDEX_BY_NAME,
     AckResult,
     Command,
@@ -29,7 +30,7 @@ from protocol.messages import (
     decode,
     encode,
 )
-from protocol.session import HEARTBEAT_PERIOD_US, HostSession, next_slot
+from protocol.session import HostSession, next_slot
 
 SETTINGS = settings(max_examples=100, deadline=None)
 RC = RcFrame((0, 0, 0, 300), Lever.MIDDLE, Lever.DOWN).pack()

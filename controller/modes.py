@@ -1,0 +1,129 @@
+"""Mode selection and the tension targets of each mode (Betaflight's ``fc/rc_modes.c`` counterpart).
+
+The failsafe phase and the right lever own the mode; the host may only choose between MANUAL and
+DIRECT while the lever is MIDDLE (``SET_MODE``):
+
+- phase not ``OK`` (or no valid frame yet): SAFE, zero current.
+- right lever DOWN: SAFE. UP: GRASP (the grasp state machine, driven by the left lever or host commands).
+- right lever MIDDLE: MANUAL (sticks), or DIRECT (host tensions) while the host asked for it and its
+  heartbeat is fresh; DIRECT ends when the heartbeat is lost.
+
+Runs on the control tick: :meth:`ModeSelector.select` once per tick, :meth:`ModeSelector.grasp_targets`
+once per tick in GRASP. Neither allocates unless the mode or the grasp state changes.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.events import EventQueue
+from controller.failsafe import Failsafe
+from controller.grasp import GraspMachine
+from controller.mapping import CableMapper
+from controller.motor_model import MotorModel
+from protocol.dbus import Lever, RcFrame
+from protocol.messages import EventKind, GraspState, Mode, Phase
+
+__all__ = ["GRASP_STICK_MIN", "GraspListener", "ModeSelector"]
+
+GRASP_STICK_MIN = 0.5
+"""Right stick deflection (of full scale) that picks the grasp direction."""
+
+# Enum members the control tick compares by identity (no class attribute lookup per tick).
+_SAFE, _MANUAL, _DIRECT, _GRASP = Mode.SAFE, Mode.MANUAL, Mode.DIRECT, Mode.GRASP
+_PHASE_OK = Phase.OK
+_LEVER_MIDDLE, _LEVER_UP = Lever.MIDDLE, Lever.UP
+
+
+class GraspListener(Protocol):
+    """Told when the grasp state changes or GRASP mode is left (the command server's pending acks)."""
+
+    def grasp_progress(self, state: GraspState) -> None:
+        """The grasp state machine moved to ``state``."""
+
+    def grasp_left(self) -> None:
+        """GRASP mode was left: whatever the host awaits from the grasp has failed."""
+
+
+class ModeSelector:
+    """The operating mode, the host's DIRECT request and tensions, and the grasp lever edges.
+
+    Attributes:
+        mode: the mode of the last control tick.
+        direct_requested: the host asked for DIRECT (cleared when the lever leaves MIDDLE or the
+            heartbeat is lost).
+        direct_tensions_n: the host's per-cable tensions for DIRECT (clamped by ``SET_TENSIONS``).
+    """
+
+    def __init__(
+        self,
+        config: FirmwareConfig,
+        failsafe: Failsafe,
+        grasp: GraspMachine,
+        mapper: CableMapper,
+        motors: MotorModel,
+        events: EventQueue,
+        listener: GraspListener,
+    ) -> None:
+        """Start in SAFE, DIRECT tensions at the pretension."""
+        self._failsafe = failsafe
+        self._grasp = grasp
+        self._mapper = mapper
+        self._motors = motors
+        self._events = events
+        self._listener = listener
+        self.mode = Mode.SAFE
+        self.direct_requested = False
+        self.direct_tensions_n = [config.mapping.pretension_n] * MOTOR_COUNT
+        self._prev_left_lever = 0
+        self._prev_grasp_state = GraspState.IDLE
+
+    def select(self, now_us: int, phase: Phase, rc: RcFrame | None) -> Mode:
+        """The mode for this tick from the phase and the last valid frame ``rc`` (logs a change)."""
+        if phase is not _PHASE_OK or rc is None:
+            mode = _SAFE
+        else:
+            lever = rc.right_lever
+            if lever == _LEVER_MIDDLE:
+                if self.direct_requested and not self._failsafe.host_ok:
+                    self.direct_requested = False
+                    self._events.push(now_us, EventKind.INFO, 0, 0.0, "DIRECT ended: no host heartbeat")
+                mode = _DIRECT if self.direct_requested else _MANUAL
+            elif lever == _LEVER_UP:
+                mode = _GRASP
+            else:
+                mode = _SAFE
+        if mode is not self.mode:
+            self._changed(now_us, self.mode, mode, rc)
+        return mode
+
+    def _changed(self, now_us: int, old: Mode, new: Mode, rc: RcFrame | None) -> None:
+        self.mode = new
+        if new != Mode.DIRECT and new != Mode.MANUAL:
+            self.direct_requested = False  # DIRECT only while the lever stays MIDDLE
+        if old == Mode.GRASP:
+            self._grasp.reset(now_us)
+            self._listener.grasp_left()
+        if new == Mode.GRASP:
+            self._grasp.reset(now_us)
+            self._prev_left_lever = rc.left_lever if rc else 0
+            self._prev_grasp_state = self._grasp.state
+        self._events.push(now_us, EventKind.MODE, int(new), 0.0, f"mode {new.name}")
+
+    def grasp_targets(self, now_us: int, dt_us: int, rc: RcFrame) -> list[float]:
+        """GRASP's tension targets: left lever edges request grasp (UP) / release (DOWN), then one step."""
+        grasp = self._grasp
+        left = rc.left_lever
+        if left != self._prev_left_lever:
+            self._prev_left_lever = left
+            if left == Lever.UP:
+                grasp.request_grasp(now_us, self._mapper.stick_direction(rc.channels, GRASP_STICK_MIN))
+            elif left == Lever.DOWN:
+                grasp.request_release(now_us)
+        motors = self._motors
+        curl = grasp.step(now_us, dt_us, motors.cable_speed_m_s, motors.tension_est_n)
+        if grasp.state != self._prev_grasp_state:
+            self._prev_grasp_state = grasp.state
+            self._listener.grasp_progress(grasp.state)
+        return self._mapper.curl(curl, grasp.direction_rad)

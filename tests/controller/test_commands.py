@@ -1,0 +1,158 @@
+"""The command and parameter server: runtime parameters, owed grasp acks, host messages answered."""
+
+from __future__ import annotations
+
+import pytest
+
+from controller.commands import CommandServer, GraspAcks, Params
+from controller.config import PARAMS, FirmwareConfig
+from controller.errors import ConfigError
+from controller.events import EventQueue
+from controller.failsafe import Failsafe
+from controller.grasp import GraspMachine
+from controller.hostlink import BoardLink
+from controller.mapping import CableMapper
+from controller.modes import ModeSelector
+from controller.motor_model import MotorModel
+from controller.rc import RcInput, ScriptedRcSource
+from controller.transport import MemoryTransport
+from protocol.link import LinkParser, encode_frame
+from protocol.messages import (
+    AckResult,
+    Command,
+    CommandAck,
+    CommandCode,
+    EventKind,
+    GraspState,
+    Heartbeat,
+    Message,
+    ParamRequest,
+    ParamSet,
+    ParamValue,
+    Phase,
+    VirtualRc,
+    decode,
+    encode,
+)
+
+
+def test_params_set_applies_valid_values_and_keeps_the_old_one_otherwise() -> None:
+    events = EventQueue(16)
+    applied: list[FirmwareConfig] = []
+    params = Params(FirmwareConfig(), events, applied.append)
+    assert params.set(5, "PRETENSION_N", 1.0) == 1.0
+    assert params.config.mapping.pretension_n == 1.0 and applied == [params.config]
+    assert params.set(6, "PRETENSION_N", -1.0) == 1.0  # rejected: the old value stays
+    assert len(applied) == 1
+    texts = [e.text for e in events.pop_all() if e.kind == EventKind.PARAM]
+    assert texts[0] == "PRETENSION_N = 1" and texts[1].startswith("rejected")
+    with pytest.raises(ConfigError):
+        params.set(7, "NO_SUCH_PARAM", 1.0)
+
+
+def test_grasp_acks_final_answers_and_nothing_without_a_link() -> None:
+    acks = GraspAcks(True)
+    acks.grasp_seq, acks.release_seq = 4, 9
+    acks.grasp_progress(GraspState.HOLD)
+    acks.grasp_progress(GraspState.IDLE)
+    assert [(m.command, m.result, m.request_seq) for m in acks.pending if isinstance(m, CommandAck)] == [
+        (CommandCode.GRASP, AckResult.ACCEPTED, 4),
+        (CommandCode.RELEASE, AckResult.ACCEPTED, 9),
+    ]
+    acks.grasp_seq = 11
+    acks.grasp_left()
+    last = acks.pending[-1]
+    assert isinstance(last, CommandAck) and (last.request_seq, last.result) == (11, AckResult.FAILED)
+    silent = GraspAcks(False)
+    silent.grasp_seq = 1
+    silent.grasp_left()
+    assert silent.pending == [] and silent.grasp_seq == -1
+
+
+class Server:
+    def __init__(self) -> None:
+        config = FirmwareConfig()
+        self.events = EventQueue(64)
+        self.failsafe = Failsafe(config, self.events)
+        self.host, board = MemoryTransport.pair()
+        grasp = GraspMachine(config, self.events)
+        mapper = CableMapper(config)
+        self.acks = GraspAcks(True)
+        self.modes = ModeSelector(
+            config, self.failsafe, grasp, mapper, MotorModel(config), self.events, self.acks
+        )
+        self.params = Params(config, self.events, lambda c: None)
+        rc_input = RcInput(self.failsafe.on_rc_frame, keep_raw=False)
+        self.server = CommandServer(
+            BoardLink(board),
+            ScriptedRcSource(None),
+            rc_input,
+            self.failsafe,
+            self.modes,
+            grasp,
+            mapper,
+            self.params,
+            self.acks,
+            self.events,
+        )
+        self._parser = LinkParser()
+        self._seq = 0
+
+    def send(self, msg: Message) -> int:
+        seq = self._seq
+        self.host.write(encode(msg, seq))
+        self._seq += 1
+        return seq
+
+    def replies(self) -> list[Message]:
+        return [decode(f) for f in self._parser.feed(self.host.read())]
+
+
+def test_commands_are_acked_with_their_seq() -> None:
+    s = Server()
+    seq = s.send(Command(CommandCode.ESTOP))
+    s.send(Heartbeat(0, 0))
+    s.server.serve(1_000)
+    (ack,) = s.replies()
+    assert isinstance(ack, CommandAck) and (ack.command, ack.result, ack.request_seq) == (
+        CommandCode.ESTOP,
+        AckResult.ACCEPTED,
+        seq,
+    )
+    assert s.failsafe.phase == Phase.ESTOP and s.failsafe.estop_latched
+    s.send(Command(CommandCode.SET_TENSIONS, (100.0, 0.0, 2.0)))
+    s.server.serve(2_000)
+    (ack,) = s.replies()
+    assert isinstance(ack, CommandAck) and ack.text == "clamped"
+    assert s.modes.direct_tensions_n == [20.0, 0.5, 2.0]
+
+
+def test_parameters_and_virtual_rc_from_a_radio_board() -> None:
+    s = Server()
+    s.send(ParamRequest(PARAMS.index("SLEW_N_S")))
+    s.send(ParamSet("SLEW_N_S", 25.0))
+    s.send(VirtualRc(bytes(18)))
+    s.server.serve(1_000)
+    got = s.replies()
+    assert [(m.name, m.value) for m in got if isinstance(m, ParamValue)] == [
+        ("SLEW_N_S", 50.0),
+        ("SLEW_N_S", 25.0),
+    ]
+    assert s.server.virtual_rc_ignored == 1
+
+
+def test_owed_acks_go_out_first_and_unknown_codes_are_unsupported() -> None:
+    s = Server()
+    s.acks.grasp_seq = 3
+    s.acks.grasp_progress(GraspState.FAILED)
+    payload = bytearray(Command(CommandCode.ARM).pack())
+    payload[0] = 200  # no such command code
+    s.host.write(encode_frame(Command.CMD_ID, bytes(payload), 7))
+    s.server.serve(1_000)
+    first, second = s.replies()
+    assert isinstance(first, CommandAck) and (first.request_seq, first.result) == (3, AckResult.FAILED)
+    assert isinstance(second, CommandAck) and (second.request_seq, second.result) == (
+        7,
+        AckResult.UNSUPPORTED,
+    )
+    assert s.server.link.decode_errors == 1
