@@ -266,7 +266,7 @@ def test_mavlink_signing_timestamp_persists_across_restarts(peer: LinkPeer, tmp_
 
 
 def test_mavlink_signing_timestamp_path_flag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from host.cli import signing_timestamp_path
+    from host.options import signing_timestamp_path
 
     key = tmp_path / "key.bin"
     key.write_bytes(bytes(range(32)))

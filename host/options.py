@@ -1,0 +1,270 @@
+"""`spirob-host`'s argument parser and its validated options (kept apart from the app and ``main``).
+
+Also the start-up checks that only read the options: the signing timestamp file, loopback
+addresses and a free panel port.
+"""
+
+from __future__ import annotations
+
+import argparse
+import errno
+import ipaddress
+import os
+import socket
+from dataclasses import dataclass
+from pathlib import Path
+
+from controller.cli_kit import Parser, port_number, positive_duration
+from host.errors import HostError
+from host.model import new_token
+from protocol.dbus import Lever
+
+__all__ = [
+    "PROG",
+    "VIRTUAL_RC_LEVERS",
+    "HostOptions",
+    "build_parser",
+    "check_signing_timestamp_writable",
+    "check_ui_port_free",
+    "is_loopback",
+    "signing_timestamp_path",
+]
+
+PROG = "spirob-host"
+
+VIRTUAL_RC_LEVERS = {"safe": Lever.DOWN, "manual": Lever.MIDDLE, "grasp": Lever.UP}
+"""``--virtual-rc`` choices: the right lever position each one ends in (DOWN first, always)."""
+
+
+def _mav_id(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an id: {text!r}") from None
+    if not 1 <= v <= 255:
+        raise argparse.ArgumentTypeError(f"MAVLink ids are 1..255: {text!r}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The `spirob-host` argument parser (kept apart from :func:`main` so tests call it with argv)."""
+    p = Parser(
+        prog=PROG,
+        description="SpiRob teleop host: board link, browser panel (viser), recording, MAVLink drone link.",
+        epilog="With no --port, the virtual board (MuJoCo plant + firmware emulator) is started.",
+    )
+    src = p.add_argument_group("board")
+    src.add_argument(
+        "--port",
+        metavar="URL",
+        help="board link: a device (/dev/ttyACM0), a pty path or any pyserial URL (socket://HOST:PORT, "
+        "loop://, spy://...). Default: start the virtual board.",
+    )
+    src.add_argument(
+        "--virtual-rc",
+        choices=sorted(VIRTUAL_RC_LEVERS),
+        help="drive the virtual radio from the command line: right lever DOWN first (start-up gate), "
+        "then SAFE / MANUAL / GRASP; a browser tab can ask for control and gets it",
+    )
+    src.add_argument(
+        "--no-shadow",
+        action="store_true",
+        help="with --port: do not run the shadow plant (the arm's shape from the measured motor currents "
+        "of a board that sends no poses)",
+    )
+    ui = p.add_argument_group("panel")
+    ui.add_argument("--ui-host", default="127.0.0.1", help="address the panel binds (default 127.0.0.1)")
+    ui.add_argument("--ui-port", type=port_number, default=8080, help="panel port (default 8080; 0 = any)")
+    ui.add_argument("--headless", action="store_true", help="no panel")
+    ui.add_argument(
+        "--token",
+        help="access token for a non-loopback --ui-host (default: a fresh random one, printed at start)",
+    )
+    run = p.add_argument_group("run")
+    run.add_argument("--duration", type=positive_duration, metavar="S", help="exit after S seconds")
+    run.add_argument("--record", type=Path, metavar="FILE", help="record the board link to an MCAP file")
+    run.add_argument(
+        "--replay", type=Path, metavar="FILE", help="replay a recording (no board) through the same listeners"
+    )
+    run.add_argument("--replay-speed", type=positive_duration, default=1.0, help="replay speed factor")
+    mav = p.add_argument_group("drone link (MAVLink)")
+    mav.add_argument(
+        "--mavlink", metavar="URL", help="pymavlink connection string, e.g. udpout:127.0.0.1:14550"
+    )
+    mav.add_argument("--mav-sysid", type=_mav_id, default=1, help="the drone's system id (default 1)")
+    mav.add_argument("--mav-compid", type=_mav_id, default=25, help="the arm's component id (default 25)")
+    mav.add_argument("--mav-signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key file")
+    mav.add_argument(
+        "--mav-signing-timestamp",
+        type=Path,
+        metavar="FILE",
+        help="where the signing timestamp persists across restarts (default: <key file>.timestamp)",
+    )
+    p.add_argument(
+        "--log-level",
+        default="warning",
+        choices=["debug", "info", "warning", "error"],
+        help="logging level (default warning)",
+    )
+    return p
+
+
+@dataclass(frozen=True, slots=True)
+class HostOptions:
+    """Validated options of one `spirob-host` run (what :func:`build_parser` produced, checked).
+
+    Attributes:
+        port: board link URL; None = start the virtual board.
+        ui: serve the panel.
+        ui_host: panel bind address.
+        ui_port: panel port (0 = any free port).
+        token: access token (None on loopback).
+        duration_s: stop after this long (None = until interrupted).
+        record: MCAP file to write.
+        replay: MCAP file to replay instead of a board.
+        replay_speed: replay speed factor.
+        virtual_rc: right lever the command line drives the virtual radio to (None = it does not).
+        mavlink: MAVLink connection string.
+        mav_sysid: drone system id.
+        mav_compid: our component id.
+        mav_signing_key: signing key file.
+        mav_signing_timestamp: file persisting the signing timestamp (None with a key:
+            ``<key file>.timestamp``).
+        shadow: with ``port``, run the shadow plant when the board sends no poses.
+    """
+
+    port: str | None = None
+    ui: bool = True
+    ui_host: str = "127.0.0.1"
+    ui_port: int = 8080
+    token: str | None = None
+    duration_s: float | None = None
+    record: Path | None = None
+    replay: Path | None = None
+    replay_speed: float = 1.0
+    virtual_rc: Lever | None = None
+    mavlink: str | None = None
+    mav_sysid: int = 1
+    mav_compid: int = 25
+    mav_signing_key: Path | None = None
+    mav_signing_timestamp: Path | None = None
+    shadow: bool = True
+
+    @classmethod
+    def from_args(cls, ns: argparse.Namespace) -> HostOptions:
+        """Check the combination of flags.
+
+        Raises:
+            HostError: flags that cannot go together, or a missing file.
+        """
+        if ns.replay is not None:
+            if ns.port is not None:
+                raise HostError("--replay and --port cannot be combined (a replay has no board)")
+            if ns.record is not None:
+                raise HostError("--replay and --record cannot be combined")
+            if ns.virtual_rc is not None:
+                raise HostError("--virtual-rc needs a board; it cannot be used with --replay")
+            if not ns.replay.is_file():
+                raise HostError(f"no such recording: {ns.replay}")
+            from hil.recording import is_mcap
+
+            if not is_mcap(ns.replay):
+                raise HostError(f"{ns.replay} is not an MCAP recording")
+        if ns.record is not None and not ns.record.parent.exists():
+            raise HostError(f"cannot record to {ns.record}: directory {ns.record.parent} does not exist")
+        if ns.mav_signing_key is not None and ns.mavlink is None:
+            raise HostError("--mav-signing-key needs --mavlink")
+        if ns.mav_signing_key is not None and not ns.mav_signing_key.is_file():
+            raise HostError(f"no such signing key file: {ns.mav_signing_key}")
+        if ns.mav_signing_timestamp is not None and ns.mav_signing_key is None:
+            raise HostError("--mav-signing-timestamp needs --mav-signing-key")
+        token = ns.token  # an explicit token is honoured on loopback too
+        if not ns.headless and not is_loopback(ns.ui_host):
+            token = token or new_token()
+        return cls(
+            port=ns.port,
+            ui=not ns.headless,
+            ui_host=ns.ui_host,
+            ui_port=ns.ui_port,
+            token=token,
+            duration_s=ns.duration,
+            record=ns.record,
+            replay=ns.replay,
+            replay_speed=ns.replay_speed,
+            virtual_rc=VIRTUAL_RC_LEVERS[ns.virtual_rc] if ns.virtual_rc else None,
+            mavlink=ns.mavlink,
+            mav_sysid=ns.mav_sysid,
+            mav_compid=ns.mav_compid,
+            mav_signing_key=ns.mav_signing_key,
+            mav_signing_timestamp=ns.mav_signing_timestamp,
+            shadow=not ns.no_shadow,
+        )
+
+
+def signing_timestamp_path(options: HostOptions) -> Path | None:
+    """Where the MAVLink signing timestamp persists (None without a signing key).
+
+    ``--mav-signing-timestamp`` if given, else ``<key file>.timestamp``, the default of
+    ``host.drone_link.DroneLinkConfig.with_signing_key_file``; passed explicitly so the check at start
+    and the drone link agree on one file.
+    """
+    if options.mav_signing_key is None:
+        return None
+    if options.mav_signing_timestamp is not None:
+        return options.mav_signing_timestamp
+    key = options.mav_signing_key
+    return key.with_name(key.name + ".timestamp")
+
+
+def check_signing_timestamp_writable(path: Path) -> None:
+    """Fail early if the signing timestamp cannot be persisted (issue 7: it must survive restarts).
+
+    The drone link only counts a failed save as an I/O error, so without this check a read-only key
+    directory would silently restart the timestamp from the wall clock every run.
+
+    Raises:
+        HostError: the file or its directory is not writable.
+    """
+    target = path if path.exists() else path.parent
+    if path.exists() and not path.is_file():
+        raise HostError(f"signing timestamp {path} is not a regular file")
+    if not target.exists():
+        raise HostError(f"cannot persist the signing timestamp to {path}: {path.parent} does not exist")
+    # The save writes <path>.tmp beside it and renames: the directory must be writable too.
+    if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise HostError(
+            f"cannot persist the signing timestamp to {path}: not writable "
+            "(choose another place with --mav-signing-timestamp)"
+        )
+
+
+def is_loopback(host: str) -> bool:
+    """True for ``localhost`` and loopback addresses (127.0.0.0/8, ::1)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def check_ui_port_free(host: str, port: int) -> None:
+    """Fail early, with one line, if the panel's port is taken (viser would silently hop to the next).
+
+    Raises:
+        HostError: the port is in use or the address cannot be bound.
+    """
+    if port == 0:
+        return
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as s:
+        # Same option as the server will use: a port in TIME_WAIT is free, a listening one is not.
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                raise HostError(
+                    f"UI port {port} on {host} is already in use (choose another with --ui-port)"
+                ) from exc
+            raise HostError(f"cannot bind the panel to {host}:{port}: {exc.strerror or exc}") from exc
