@@ -23,7 +23,6 @@ from controller.mapping import CableMapper
 from controller.modes import GRASP_STICK_MIN, ModeSelector
 from controller.rc import LinkRcSource, RcInput, RcSource
 from protocol.dbus import Lever
-from protocol.errors import DecodeError
 from protocol.link import LinkFrame
 from protocol.messages import (
     PARAM_INDEX_BY_NAME,
@@ -42,7 +41,6 @@ from protocol.messages import (
     ParamValue,
     Phase,
     VirtualRc,
-    decode,
     truncate_utf8,
 )
 
@@ -169,6 +167,7 @@ class CommandServer:
         self._acks = acks
         self._events = events
         self.virtual_rc_ignored = 0
+        link.stream.undecodable = self._unsupported_command
 
     def serve(self, now_us: int) -> None:
         """Send the owed acks, then answer every frame received since the last call."""
@@ -178,14 +177,8 @@ class CommandServer:
             for msg in pending:
                 link.send(msg)
             pending.clear()
-        for frame in link.receive():
-            try:
-                msg = decode(frame)
-            except DecodeError:
-                link.decode_errors += 1
-                self._unsupported_command(frame)
-                continue
-            self._dispatch(link, now_us, frame.seq, msg)
+        for seq, msg in link.receive():  # undecodable frames go to _unsupported_command
+            self._dispatch(link, now_us, seq, msg)
 
     def _dispatch(self, link: BoardLink, now_us: int, seq: int, msg: Message) -> None:
         if isinstance(msg, Heartbeat):
@@ -207,7 +200,7 @@ class CommandServer:
             else:
                 self._events.push(now_us, EventKind.PARAM, -1, msg.value, f"unknown parameter {msg.name}")
         else:  # a board -> host message sent to the board
-            link.decode_errors += 1
+            link.misdirected += 1
 
     def _unsupported_command(self, frame: LinkFrame) -> None:
         if frame.cmd_id == Command.CMD_ID and len(frame.payload) == Command.FORMAT.size:

@@ -1,43 +1,59 @@
-"""The board's end of the host link: a :class:`Transport`, a ``LinkParser`` and a sequence counter."""
+"""The board's end of the host link: a :class:`Transport`, a ``MessageStream`` and a sequence counter."""
 
 from __future__ import annotations
 
 from controller.transport import Transport
-from protocol.link import LinkFrame, LinkParser
+from protocol.link import LinkParser
 from protocol.messages import Message, encode
+from protocol.stream import MessageStream, Received, UndecodableHook
 
 __all__ = ["BoardLink"]
 
 
 class BoardLink:
-    """Frames in, messages out, over one transport; never blocks and never raises on bad bytes.
+    """Messages in and out over one transport; never blocks and never raises on bad bytes.
+
+    Args:
+        transport: the byte pipe (owned by the caller).
+        undecodable: told every intact frame whose payload did not decode (the board answers an unknown
+            command code with an UNSUPPORTED ack).
 
     Attributes:
-        transport: the byte pipe (owned by the caller).
-        parser: the incremental frame parser (its counters are the link's receive health).
+        transport: the byte pipe.
+        stream: the decoder (its counters are the link's receive health).
         frames_sent: frames handed to the transport.
-        decode_errors: intact frames whose payload did not decode (or had an unknown id).
+        misdirected: board -> host messages a host sent to the board (decoded, never acted on).
     """
 
-    def __init__(self, transport: Transport) -> None:
+    def __init__(self, transport: Transport, undecodable: UndecodableHook | None = None) -> None:
         """Wrap ``transport``."""
         self.transport = transport
-        self.parser = LinkParser()
+        self.stream = MessageStream(undecodable=undecodable)
         self.frames_sent = 0
-        self.decode_errors = 0
+        self.misdirected = 0
         self._seq = 0
 
     @property
-    def crc_errors(self) -> int:
-        """Header and body CRC errors seen by the parser."""
-        return self.parser.header_crc_errors + self.parser.body_crc_errors
+    def parser(self) -> LinkParser:
+        """The incremental frame parser (frames received, bytes skipped)."""
+        return self.stream.parser
 
-    def receive(self) -> list[LinkFrame]:
-        """Verified frames received since the last call."""
+    @property
+    def crc_errors(self) -> int:
+        """Header and body CRC errors."""
+        return self.stream.crc_errors
+
+    @property
+    def decode_errors(self) -> int:
+        """Intact frames that did not decode or had an unknown id, and misdirected messages."""
+        return self.stream.decode_errors + self.misdirected
+
+    def receive(self) -> list[Received]:
+        """``(seq, message)`` of every message received since the last call."""
         data = self.transport.read()
         if not data:
             return []
-        return self.parser.feed(data)
+        return self.stream.feed(data)
 
     def send(self, msg: Message) -> bool:
         """Encode ``msg`` with the next sequence number and queue it; False if the transport dropped it."""

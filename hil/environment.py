@@ -21,8 +21,8 @@ from collections.abc import Callable, Sequence
 from types import TracebackType
 
 from controller.rc import DbusSerialSource
-from protocol.link import LinkParser
-from protocol.messages import Event, Message, RawRc, Telemetry, decode
+from protocol.messages import Event, Message, RawRc, Telemetry
+from protocol.stream import MessageStream
 
 from . import recording
 from .board import BoardConfig, VirtualBoard
@@ -209,9 +209,9 @@ class Environment:
             telemetry_received_us=[m.time_us for m in host.telemetry],
             decode_errors=host.decode_errors,
         )
-        _board_messages(run, bytes(self._board_tx))
         run.counters = dict(board.firmware.counters)
         run.counters.update({f"injected_{k}": v for k, v in board.faults.injected.items()})
+        _board_messages(run, bytes(self._board_tx))
         return run
 
     def close(self) -> None:
@@ -229,16 +229,13 @@ class Environment:
 
 def _board_messages(run: RunRecord, data: bytes) -> None:
     """Fill the record's board-message lists from what the board sent, before any link fault."""
-    parser = LinkParser()
-    for frame in parser.feed(data):
-        try:
-            msg = decode(frame)
-        except ValueError:  # the board's own bytes: cannot happen unless the firmware is broken
-            run.decode_errors += 1
-            continue
+    stream = MessageStream()
+    for _, msg in stream.feed(data):
         if isinstance(msg, Telemetry):
             run.telemetry_sent_us.append(msg.time_us)
         elif isinstance(msg, RawRc):
             run.rc.append((msg.time_us, msg.frame))
         elif isinstance(msg, Event):
             run.events.append((msg.time_us, msg))
+    # The board's own bytes, before any fault: an error here is a firmware bug, and counted as one.
+    run.counters["board_output_errors"] = stream.decode_errors + stream.crc_errors

@@ -8,9 +8,8 @@ import time
 from pathlib import Path
 
 from host.errors import HostError
-from protocol.errors import DecodeError
-from protocol.link import LinkParser
-from protocol.messages import Message, Telemetry, decode
+from protocol.messages import Message, Telemetry
+from protocol.stream import MessageStream
 
 __all__ = ["LinkRecording", "replay_messages"]
 
@@ -74,12 +73,9 @@ def replay_messages(path: Path) -> list[tuple[int, Message]]:
     """Decode every board -> host message of a recording with its time (µs), in order."""
     from hil import recording
 
-    parser = LinkParser()
-    out: list[tuple[int, Message]] = []
-    for rec in recording.read_records(path, {recording.LINK_TX}):
-        for frame in parser.feed(rec.data):
-            try:
-                out.append((rec.time_us, decode(frame)))
-            except DecodeError:
-                continue
-    return out
+    stream = MessageStream()
+    return [
+        (rec.time_us, msg)
+        for rec in recording.read_records(path, {recording.LINK_TX})
+        for _, msg in stream.feed(rec.data)
+    ]
