@@ -1,4 +1,9 @@
-"""A lockstep rig for firmware tests: fake C610 trio, scripted radio, optional in-memory host link.
+"""A rig for the firmware's unit tests: fake C610 trio, scripted radio, optional in-memory host link.
+
+The firmware alone, on a fake bus with no plant: the product's one lockstep loop (board, plant and host
+together) is :class:`hil.environment.Environment`; these tests need tick-exact control of the motors'
+feedback instead. The host's end of the link is the same :class:`~protocol.session.HostSession` every
+host uses (heartbeats off: tests send what they need).
 
 Time is simulated: ``rig.tick()`` runs the firmware at ``rig.now_us`` and then advances 1 ms, so after
 ``tick()`` the state reflects the tick that ran at ``rig.last_us``.
@@ -14,8 +19,8 @@ from controller.motorbus import FakeMotorBus
 from controller.rc import LinkRcSource, RcSource, ScriptedRcSource
 from controller.transport import MemoryTransport
 from protocol.dbus import Lever, RcFrame
-from protocol.link import LinkParser
-from protocol.messages import Message, Phase, decode, encode
+from protocol.messages import Message, Phase
+from protocol.session import HostSession
 
 TICK_US = 1000
 
@@ -54,8 +59,7 @@ class Rig:
         self.fw = Firmware(self.config, self.bus, self.rc, board, exec_timer_ns=lambda: 0)
         self.now_us = 0
         self.last_us = -TICK_US
-        self._parser = LinkParser()
-        self._seq = 0
+        self.session = HostSession(heartbeats=False)
         self.received: list[Message] = []
 
     @property
@@ -89,15 +93,14 @@ class Rig:
     def send(self, msg: Message) -> int:
         """Send a host -> board message; return its seq."""
         assert self.host is not None
-        seq = self._seq
-        self.host.write(encode(msg, seq))
-        self._seq = (self._seq + 1) & 0xFF
+        seq = self.session.send(msg, self.now_us)
+        self.host.write(self.session.data_to_send() + self.session.rc_to_send())
         return seq
 
     def drain(self) -> list[Message]:
         """Board -> host messages received since the last drain (also appended to ``received``)."""
         assert self.host is not None
-        out = [decode(f) for f in self._parser.feed(self.host.read())]
+        out = self.session.receive_data(self.host.read(), self.now_us)
         self.received += out
         return out
 
