@@ -40,18 +40,18 @@ import numpy as np
 from controller.clock import Clock, RealTimeClock, monotonic_ns, run_periodic, zero_ns
 from controller.config import FirmwareConfig
 from controller.firmware import Firmware
-from controller.rc import DbusSerialSource, LinkRcSource, RcSource, Uart
+from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import Transport
 from protocol.dbus import RcFrame
 from protocol.messages import SimPoses
 
 from . import recording
+from .drives import SimMotorBus
 from .errors import HilError
 from .faults import Fault, FaultSet
 from .plant import Plant, PlantConfig
 from .radio import RadioScript, VirtualRadio
 from .recording import Recorder
-from .simbus import SimMotorBus
 from .spiral import SpiralDesign
 
 _log = logging.getLogger(__name__)
@@ -140,31 +140,6 @@ class LinkWire:
             self.host.inbox += data
 
 
-class MemoryUart(Uart):
-    """The board's DBUS UART in lockstep: the virtual radio feeds it, :class:`DbusSerialSource` reads it."""
-
-    def __init__(self) -> None:
-        self._buf = bytearray()
-
-    def feed(self, data: bytes) -> None:
-        """Bytes that arrived on the wire."""
-        self._buf += data
-
-    @property
-    def in_waiting(self) -> int:
-        """Bytes ready to read."""
-        return len(self._buf)
-
-    def read(self, n: int) -> bytes:
-        """Take up to ``n`` bytes."""
-        data = bytes(self._buf[:n])
-        del self._buf[:n]
-        return data
-
-    def close(self) -> None:
-        """Nothing to release."""
-
-
 # --- the board ------------------------------------------------------------------------------------
 
 
@@ -247,12 +222,10 @@ class VirtualBoard:
             current_limit_raw=cfg.firmware.motor.current_limit_raw,
         )
         self.radio: VirtualRadio | None = None
-        self.uart: MemoryUart | None = None
         rc: RcSource
         if cfg.rc == "radio":
             self.radio = VirtualRadio(radio_script, self.faults)
-            self.uart = MemoryUart()
-            rc = DbusSerialSource(self.uart)
+            rc = DbusSerialSource(self.radio.uart)
         elif cfg.rc == "link":
             rc = LinkRcSource()
         else:
@@ -295,12 +268,10 @@ class VirtualBoard:
             t += self.faults.tick_delay_us(t)
         self.now_us = t
         rec = self.recorder
-        if self.radio is not None and self.uart is not None:
-            data = self.radio.read(t)
-            if data:
-                self.uart.feed(data)
-                if rec is not None:
-                    rec.write_raw(recording.DBUS_RX, t, data)
+        if self.radio is not None:
+            data = self.radio.transmit(t)  # into the board's UART, where the firmware's RC source reads
+            if data and rec is not None:
+                rec.write_raw(recording.DBUS_RX, t, data)
         self.bus.deliver_feedback()
         if self.wire is not None:
             self.wire.to_board(t)

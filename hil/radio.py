@@ -1,4 +1,4 @@
-"""A virtual DT7 radio and DR16 receiver: stick states in, DBUS bytes on a UART out, in simulated time.
+"""A virtual DT7 radio and DR16 receiver: stick states in, DBUS bytes into the board's UART, simulated time.
 
 The receiver sends one 18-byte frame every 14 ms (DR16: 14 ms between frames; some receivers 7 ms).
 At 100 000 baud 8E1 a byte takes 110 µs on the wire, so a frame is a 1.98 ms burst followed by a
@@ -11,9 +11,35 @@ from __future__ import annotations
 from bisect import bisect_right
 from collections.abc import Sequence
 
+from controller.rc import Uart
 from protocol.dbus import BYTE_TIME_US, FRAME_PERIOD_US, RcFrame
 
 from .faults import FaultSet
+
+
+class MemoryUart(Uart):
+    """The board's DBUS UART in lockstep: the virtual radio feeds it, :class:`DbusSerialSource` reads it."""
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+
+    def feed(self, data: bytes) -> None:
+        """Bytes that arrived on the wire."""
+        self._buf += data
+
+    @property
+    def in_waiting(self) -> int:
+        """Bytes ready to read."""
+        return len(self._buf)
+
+    def read(self, n: int) -> bytes:
+        """Take up to ``n`` bytes."""
+        data = bytes(self._buf[:n])
+        del self._buf[:n]
+        return data
+
+    def close(self) -> None:
+        """Nothing to release."""
 
 
 class RadioScript:
@@ -63,10 +89,19 @@ class VirtualRadio:
         self._sent = 0
         self._live: RcFrame | None = None
         self.frames_sent = 0
+        self.uart = MemoryUart()
+        """The board's UART receive side, which this radio's wire ends in."""
 
     def set(self, frame: RcFrame | None) -> None:
         """Overrides the script from now on (None: back to the script)."""
         self._live = frame
+
+    def transmit(self, t_us: int) -> bytes:
+        """Put the bytes that finished arriving by ``t_us`` into :attr:`uart`; return them (to record)."""
+        data = self.read(t_us)
+        if data:
+            self.uart.feed(data)
+        return data
 
     def read(self, t_us: int) -> bytes:
         """The bytes that finished arriving at the board's UART since the previous call."""

@@ -23,8 +23,9 @@ from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from protocol.c610 import CURRENT_RAW_MAX
 
 from . import recording
-from .board import MemoryUart, WireEnd, poses_message
+from .board import WireEnd, poses_message
 from .errors import HilError
+from .radio import MemoryUart
 from .recording import KIND_PORT, Record, is_mcap, read_metadata, read_records
 
 _INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
