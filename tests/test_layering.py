@@ -56,7 +56,6 @@ OVERSIZE_ALLOWED: frozenset[str] = frozenset(
     {
         "hil/mjcf.py",  # being split under issue 12
         "host/board_client.py",  # being split under issue 12
-        "protocol/messages.py",  # being split under issue 12
     }
 )
 
