@@ -13,13 +13,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
+from controller.cables import CableMapper
 from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig
 from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
-from controller.mapping import CableMapper
 from controller.modes import GRASP_STICK_MIN, ModeSelector
 from controller.rc import LinkRcSource, RcInput, RcSource
 from protocol.dbus import Lever

@@ -11,8 +11,8 @@ Task table (rates are the config's defaults; tasks due on the same tick run in t
     sim_poses   50 Hz    SimPoses out                               (with a link and a pose provider)
 
 Each body calls into a module: RC intake (``controller.rc.RcInput``), the failsafe
-(``controller.failsafe``), mode selection (``controller.modes``), the cable mapping and slew
-(``controller.mapping``), the motor model and bus; the command and parameter server
+(``controller.failsafe``), mode selection (``controller.modes``), the cables' mapping, slew and motor
+model (``controller.cables``), the motor bus; the command and parameter server
 (``controller.commands``); telemetry building (``controller.telemetry``).
 
 Two ways to drive it: :meth:`Firmware.run` is the real-time loop (:func:`controller.clock.run_periodic`
@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from controller.cables import CableMapper, MotorModel, TensionSlew
 from controller.clock import Clock, StopSignal, monotonic_ns, run_periodic
 from controller.commands import CommandServer, GraspAcks, Params
 from controller.config import MOTOR_COUNT, FirmwareConfig
@@ -35,9 +36,7 @@ from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
-from controller.mapping import CableMapper, TensionSlew
 from controller.modes import ModeSelector
-from controller.motor_model import MotorModel
 from controller.motorbus import MotorBus
 from controller.rc import RcInput, RcSource
 from controller.scheduler import Scheduler, TaskSpec

@@ -8,7 +8,7 @@ Strategy on (octopus-inspired, Note S4 / Fig. S6B)::
       +--- dwell at 0 N <-- RELEASE <--release-- (REACH, WRAP, HOLD, FAILED) <--------------+
 
 The grasp *target* :attr:`GraspMachine.target_rad` is the side of the arm the object is on (same
-convention as the right stick, ``controller.mapping``). :attr:`GraspMachine.direction_rad` is the
+convention as the right stick, ``controller.cables``). :attr:`GraspMachine.direction_rad` is the
 direction the present curl tension bends the arm toward.
 
 - IDLE: the arm is held packed (coiled) toward the target with ``grasp_pack_n``, reached at
@@ -51,9 +51,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from controller.cables import bend_shares
 from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.events import EventQueue
-from controller.mapping import bend_shares
 from protocol.messages import AckResult, EventKind, GraspState
 
 __all__ = ["GraspMachine"]
@@ -66,7 +66,7 @@ class GraspMachine:
         state: current ``GraspState``.
         curl_n: curl (bending) tension toward :attr:`direction_rad`, before shaping and slew.
         target_rad: the side of the arm the object is on (same convention as the right stick, see
-            ``controller.mapping``).
+            ``controller.cables``).
         direction_rad: direction :attr:`curl_n` bends the arm toward: the target while packing and
             reaching (and for the strategy off), the opposite side while wrapping and holding with the
             strategy on.

@@ -16,12 +16,11 @@ from __future__ import annotations
 
 from typing import Protocol
 
+from controller.cables import CableMapper, MotorModel
 from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
-from controller.mapping import CableMapper
-from controller.motor_model import MotorModel
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import EventKind, GraspState, Mode, Phase
 

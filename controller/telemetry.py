@@ -10,14 +10,13 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from controller.cables import MotorModel, TensionSlew
 from controller.config import MOTOR_COUNT
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
-from controller.mapping import TensionSlew
 from controller.modes import ModeSelector
-from controller.motor_model import MotorModel
 from controller.motorbus import MotorBus
 from controller.rc import RcInput, RcSource
 from controller.scheduler import Scheduler

@@ -10,10 +10,10 @@ from __future__ import annotations
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from controller.cables import MotorModel
 from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
-from controller.motor_model import MotorModel
 from protocol.c610 import ANGLE_COUNTS, MotorFeedback
 from protocol.dbus import Lever
 from protocol.messages import Phase

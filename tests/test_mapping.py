@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from controller.cables import CableMapper, TensionSlew, bend_shares
 from controller.config import FirmwareConfig
-from controller.mapping import CableMapper, TensionSlew, bend_shares
 
 ANGLES = tuple(math.radians(a) for a in (0.0, 120.0, 240.0))
 

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from controller.cables import MotorModel
 from controller.config import FirmwareConfig
-from controller.motor_model import MotorModel
 from protocol.c610 import MotorFeedback
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from controller.cables import CableMapper, MotorModel
 from controller.commands import CommandServer, GraspAcks, Params
 from controller.config import PARAMS, FirmwareConfig
 from controller.errors import ConfigError
@@ -11,9 +12,7 @@ from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
-from controller.mapping import CableMapper
 from controller.modes import ModeSelector
-from controller.motor_model import MotorModel
 from controller.rc import RcInput, ScriptedRcSource
 from controller.transport import MemoryTransport
 from protocol.link import LinkParser, encode_frame

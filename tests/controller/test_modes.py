@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
+from controller.cables import CableMapper, MotorModel
 from controller.config import FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
-from controller.mapping import CableMapper
 from controller.modes import ModeSelector
-from controller.motor_model import MotorModel
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import EventKind, GraspState, Mode, Phase
 
