@@ -18,11 +18,12 @@ down = none; right stick (ch0 = x right, ch1 = y up) = bending, direction ``atan
 from cable 1 (at ``cable_angles_deg[0]``, 0° by default) counter-clockwise, magnitude = deflection.
 
 **Motor model** (:class:`MotorModel`): cable tension <-> C610 current, and feedback -> cable length,
-speed and tension. Tension T [N] on a spool of radius r needs an output torque T·r, i.e. a current
-T·r / K_t (K_t at the output shaft, gearbox included), sent as raw units (1000 per amp) and clamped
-to the current limit. Feedback: the rotor angle (0..8191 per rotor turn) is unwrapped into multi-turn counts, divided by the
-gear ratio into the output angle, and times r gives the cable paid in since the first feedback. The
-measured current times K_t / r estimates the tension (the same constant the plant must use).
+speed and tension. Tension T [N] on a spool of radius r needs an output torque T·r, i.e. a current T·r /
+K_t (K_t at the output shaft, gearbox included), sent as raw units (1000 per amp) and clamped to the
+current limit. Feedback: the rotor angle (0..8191 per rotor turn) is unwrapped into multi-turn counts,
+divided by the gear ratio into the output angle, and times r gives the cable paid in since the first
+feedback. The measured current times K_t / r estimates the tension (the same constant the plant must
+use).
 
 Sign convention: with ``motor_signs[i] = +1`` a positive current reels cable ``i`` in (raises its
 tension) and the rotor angle increases while reeling in; ``-1`` mirrors a motor.
