@@ -13,7 +13,7 @@ import pytest
 from controller.cli import main, parse_args
 from controller.transport import SerialTransport
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_parse_args() -> None:

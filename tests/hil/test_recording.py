@@ -59,7 +59,7 @@ def test_file_of_a_killed_process_stays_readable(tmp_path: Path) -> None:
     proc = subprocess.Popen(
         [sys.executable, "-c", _WRITER, str(path)],
         stdout=subprocess.PIPE,
-        cwd=Path(__file__).resolve().parents[1],
+        cwd=Path(__file__).resolve().parents[2],
     )
     try:
         assert proc.stdout is not None

@@ -54,7 +54,7 @@ from protocol.messages import (
 )
 
 SETTINGS = settings(max_examples=200, deadline=None)
-DOC = Path(__file__).resolve().parents[1] / "docs" / "board-link.md"
+DOC = Path(__file__).resolve().parents[2] / "docs" / "board-link.md"
 
 EXPECTED_IDS = {
     Telemetry: 0x0101,

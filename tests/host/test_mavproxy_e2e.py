@@ -21,7 +21,7 @@ from mavproxy_proc import MavProxy, free_udp_port
 from controller.config import PARAMS
 
 pytestmark = pytest.mark.mavproxy
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture
