@@ -50,15 +50,6 @@ def test_checker_sees_a_violation(tmp_path: Path) -> None:
 PACKAGES = ("protocol", "controller", "hil", "host")
 MAX_MODULE_LINES = 700
 
-# Temporary: modules still over the limit, being split under issue 12. Remove an entry when its split lands
-# (the test below fails on an entry that is gone or within the limit).
-OVERSIZE_ALLOWED: frozenset[str] = frozenset(
-    {
-        "hil/mjcf.py",  # being split under issue 12
-        "host/board_client.py",  # being split under issue 12
-    }
-)
-
 
 def _sources() -> list[Path]:
     return sorted(f for package in PACKAGES for f in (ROOT / package).rglob("*.py"))
@@ -71,10 +62,8 @@ def physical_lines(path: Path) -> int:
 
 def test_no_module_over_the_line_limit() -> None:
     sizes = {str(f.relative_to(ROOT)): physical_lines(f) for f in _sources()}
-    over = {name: n for name, n in sizes.items() if n > MAX_MODULE_LINES and name not in OVERSIZE_ALLOWED}
+    over = {name: n for name, n in sizes.items() if n > MAX_MODULE_LINES}
     assert not over, f"modules over {MAX_MODULE_LINES} lines (split them along their seams): {over}"
-    stale = sorted(name for name in OVERSIZE_ALLOWED if sizes.get(name, 0) <= MAX_MODULE_LINES)
-    assert not stale, f"within the limit or gone, remove from OVERSIZE_ALLOWED: {stale}"
 
 
 def module_name(path: Path, root: Path) -> str:

@@ -1,0 +1,317 @@
+"""The plant model's configuration: arm, motors, drone, solver, objects (read by :func:`hil.mjcf.build_mjcf`).
+
+Frozen dataclasses with SI units in their names; each one's ``validate()`` raises ``ValueError`` on a value
+out of range. ``docs/plant.md`` gives the source of every default. ``hil.mjcf`` re-exports them all.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+from controller.config import C610_MAX_A, MotorDriveConfig
+
+__all__ = [
+    "ArmConfig",
+    "DroneConfig",
+    "ModelConfig",
+    "MotorConfig",
+    "ObjectConfig",
+    "SolverConfig",
+]
+
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,40}$")
+_RESERVED = re.compile(r"^(unit|joint|cable|spool|motor|tension|drone|tip|mount|floor|sun)")
+
+
+def _check(cond: bool, message: str) -> None:
+    if not cond:
+        raise ValueError(message)
+
+
+def _finite(name: str, value: float, *, minimum: float = 0.0, allow_equal: bool = False) -> None:
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    ok = ok and (value >= minimum if allow_equal else value > minimum)
+    _check(ok, f"{name} must be a finite number {'>=' if allow_equal else '>'} {minimum:g}, got {value!r}")
+
+
+def _vector(name: str, value: tuple[float, ...], n: int) -> None:
+    ok = len(value) == n and all(isinstance(v, int | float) and math.isfinite(v) for v in value)
+    _check(ok, f"{name} must be {n} finite numbers, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ArmConfig:
+    """Mechanical parameters of the arm body.
+
+    Attributes:
+        total_mass_kg: mass of all units together, split ∝ β³ (uniform density). Prototype: 38.4 g
+            (a reconstruction of the paper's STL files in TPU 95A).
+        base_stiffness_nm_per_rad: stiffness of the joint nearest the base; joint i has
+            ``k_base · β^{−3(i−1)}`` (stiffness ∝ size³, Note S3's proportionality). Published
+            identification of a TPU arm: 0.3-0.8 N·m/rad near the base.
+        damping_ratio: ζ of each joint against the inertia it carries (identification: about 0.13).
+        cable_offset_ratio: cable hole radius as a fraction of the local half-width.
+        cable_mu: capstan friction coefficient of the cable in the holes (0.25-0.4 reproduces the
+            base-first uncurling). 0 disables cable friction.
+        cable_diameter_m: UHMWPE cable diameter (the paper's Note S1: 0.5 mm); drawing only.
+        joint_armature_kg_m2: rotational inertia added to every arm joint. Numerical: with mass ∝ β³ the
+            tip joints carry ~1e-9 kg·m², and MuJoCo scales constraint softness by inverse inertia, so
+            joint limits and the cable would give way under cable loads; 3e-6 keeps them within about a
+            degree / a millimetre at the 1 ms step and leaves the first bending mode unchanged.
+        limit_timeconst_s: ``solref`` time constant of the joint limits (unit-on-unit contact).
+        cable_timeconst_s: ``solref`` time constant of the cable (tendon length limit).
+        self_collision: let non-adjacent units collide. Off by default: Note S3 models units touching by
+            the joint limits, which keeps the packed pose cheap and exact.
+        geom_friction: sliding friction coefficient of the unit surfaces.
+    """
+
+    total_mass_kg: float = 0.0384
+    base_stiffness_nm_per_rad: float = 0.5
+    damping_ratio: float = 0.13
+    cable_offset_ratio: float = 0.8
+    cable_mu: float = 0.3
+    cable_diameter_m: float = 0.0005
+    joint_armature_kg_m2: float = 3e-6
+    limit_timeconst_s: float = 0.002
+    cable_timeconst_s: float = 0.002
+    self_collision: bool = False
+    geom_friction: float = 0.8
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        _finite("total_mass_kg", self.total_mass_kg)
+        _finite("base_stiffness_nm_per_rad", self.base_stiffness_nm_per_rad, allow_equal=True)
+        _finite("damping_ratio", self.damping_ratio, allow_equal=True)
+        _finite("cable_offset_ratio", self.cable_offset_ratio)
+        _check(
+            self.cable_offset_ratio < 1.0, f"cable_offset_ratio must be < 1, got {self.cable_offset_ratio!r}"
+        )
+        _finite("cable_mu", self.cable_mu, allow_equal=True)
+        _finite("cable_diameter_m", self.cable_diameter_m)
+        _finite("joint_armature_kg_m2", self.joint_armature_kg_m2, allow_equal=True)
+        _finite("limit_timeconst_s", self.limit_timeconst_s)
+        _finite("cable_timeconst_s", self.cable_timeconst_s)
+        _finite("geom_friction", self.geom_friction, allow_equal=True)
+
+
+_DRIVE = MotorDriveConfig()
+"""The firmware's drive constants: the one source of the torque constant, gear ratio and spool radius."""
+
+
+@dataclass(frozen=True)
+class MotorConfig:
+    """DJI M2006 P36 + C610 + spool, one per cable (DJI's M2006 P36 and C610 documents).
+
+    Attributes:
+        torque_constant_nm_per_a: output-shaft torque per amp; default the firmware's
+            (``controller.config.MotorDriveConfig``), as are ``gear_ratio`` and ``spool_radius_m``, so
+            the plant and the firmware's tension estimate agree. 0.18 N·m/A: DJI's M2006 P36 figure
+            on its product page. DJI also states "1 N·m rated at 3 A" (about
+            0.33 N·m/A); the C610 manual's curve is the better reference. The firmware must estimate
+            tension with the same constant as the plant.
+        gear_ratio: rotor turns per output turn (P36: 36).
+        rotor_inertia_kg_m2: rotor inertia before the gearbox. No published figure; 1e-7 kg·m² is the
+            estimate for a Ø10 × 15 mm steel/NdFeB inner rotor (1.3 kg seen at the cable with a 10 mm
+            spool).
+        spool_radius_m: cable spool radius (10 mm, the prototype's).
+        current_limit_a: largest |current| the plant accepts (C610: 10 A peak = raw 10000, from
+            ``protocol.c610``).
+        no_load_speed_rad_s: output speed at zero torque (500 rpm, DJI's M2006 P36 figure).
+        stall_current_a: current the drive could push at standstill; with the no-load speed it sets the
+            torque-speed line ``I_avail = I_stall · (1 − ω/ω_nl)``. 18 A puts DJI's rated point (3 A at
+            416 rpm) on that line.
+        output_friction_nm: Coulomb friction of gearbox and spool at the output shaft.
+        current_noise_raw: standard deviation of the fed-back current, raw units (0 = exact).
+        temperature_c: temperature reported in every feedback frame.
+    """
+
+    torque_constant_nm_per_a: float = _DRIVE.torque_constant_nm_per_a
+    gear_ratio: float = _DRIVE.gear_ratio
+    rotor_inertia_kg_m2: float = 1.0e-7
+    spool_radius_m: float = _DRIVE.spool_radius_m
+    current_limit_a: float = C610_MAX_A
+    no_load_speed_rad_s: float = 500.0 * 2.0 * math.pi / 60.0
+    stall_current_a: float = 18.0
+    output_friction_nm: float = 0.01
+    current_noise_raw: float = 0.0
+    temperature_c: int = 30
+
+    @property
+    def reflected_mass_kg(self) -> float:
+        """Rotor inertia seen at the cable: ``J_rotor · N² / r_spool²`` [kg]."""
+        return self.rotor_inertia_kg_m2 * self.gear_ratio**2 / self.spool_radius_m**2
+
+    @property
+    def force_per_amp_n(self) -> float:
+        """Cable force per amp at standstill: ``kt / r_spool`` [N/A]."""
+        return self.torque_constant_nm_per_a / self.spool_radius_m
+
+    @property
+    def friction_force_n(self) -> float:
+        """Output friction seen at the cable [N]."""
+        return self.output_friction_nm / self.spool_radius_m
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        _finite("torque_constant_nm_per_a", self.torque_constant_nm_per_a)
+        _finite("gear_ratio", self.gear_ratio)
+        _finite("rotor_inertia_kg_m2", self.rotor_inertia_kg_m2)
+        _finite("spool_radius_m", self.spool_radius_m)
+        _finite("current_limit_a", self.current_limit_a)
+        _check(
+            self.current_limit_a <= C610_MAX_A,
+            f"current_limit_a must be <= 10 A (C610), got {self.current_limit_a!r}",
+        )
+        _finite("no_load_speed_rad_s", self.no_load_speed_rad_s)
+        _finite("stall_current_a", self.stall_current_a)
+        _finite("output_friction_nm", self.output_friction_nm, allow_equal=True)
+        _finite("current_noise_raw", self.current_noise_raw, allow_equal=True)
+        _check(
+            isinstance(self.temperature_c, int) and 0 <= self.temperature_c <= 255,
+            f"temperature_c must be an int 0..255, got {self.temperature_c!r}",
+        )
+
+
+@dataclass(frozen=True)
+class ObjectConfig:
+    """A cylinder to grasp.
+
+    Attributes:
+        name: body name in the model (letters, digits, underscores; not an arm name).
+        radius_m: cylinder radius.
+        length_m: cylinder length.
+        pos_m: centre in world coordinates.
+        axis: direction of the cylinder axis in world coordinates (normalised here).
+        mass_kg: ``None`` = fixed to the world (a branch, a pole); otherwise a free body of this mass,
+            with a switchable support (``{name}_support``: a mocap body and a weld to it, inactive at
+            start) that :meth:`hil.plant.Plant.hold_object` uses to hold it where it is.
+        friction: sliding friction coefficient.
+        shape: ``"cylinder"`` (flat ends, convex collision) or ``"capsule"`` (rounded ends, analytic
+            collision: cheaper).
+    """
+
+    name: str
+    radius_m: float
+    length_m: float
+    pos_m: tuple[float, float, float]
+    axis: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    mass_kg: float | None = None
+    friction: float = 0.8
+    shape: str = "cylinder"
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        _check(
+            isinstance(self.name, str) and bool(_NAME.match(self.name)) and not _RESERVED.match(self.name),
+            f"object name must be an identifier not starting like an arm name, got {self.name!r}",
+        )
+        _finite("radius_m", self.radius_m)
+        _finite("length_m", self.length_m)
+        _vector("pos_m", self.pos_m, 3)
+        _vector("axis", self.axis, 3)
+        _check(any(v != 0 for v in self.axis), f"axis must be non-zero, got {self.axis!r}")
+        if self.mass_kg is not None:
+            _finite("mass_kg", self.mass_kg)
+        _finite("friction", self.friction, allow_equal=True)
+        _check(
+            self.shape in ("cylinder", "capsule"),
+            f"shape must be 'cylinder' or 'capsule', got {self.shape!r}",
+        )
+
+
+@dataclass(frozen=True)
+class DroneConfig:
+    """The body the arm hangs from.
+
+    Attributes:
+        pos_m: initial position of the drone's origin (world frame, z up).
+        quat_wxyz: initial orientation (normalised here).
+        mount_offset_m: distance from the drone origin down to the base of the arm.
+        half_size_m: half extents of the drone's box (drawing only; it does not collide).
+        floor: add a ground plane at z = 0.
+    """
+
+    pos_m: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    quat_wxyz: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    mount_offset_m: float = 0.02
+    half_size_m: tuple[float, float, float] = (0.12, 0.12, 0.03)
+    floor: bool = False
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        _vector("pos_m", self.pos_m, 3)
+        _vector("quat_wxyz", self.quat_wxyz, 4)
+        _check(any(v != 0 for v in self.quat_wxyz), "quat_wxyz must be non-zero")
+        _finite("mount_offset_m", self.mount_offset_m)
+        _vector("half_size_m", self.half_size_m, 3)
+        _check(all(v > 0 for v in self.half_size_m), f"half_size_m must be > 0, got {self.half_size_m!r}")
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """MuJoCo numerical settings (``<option>``); the choice is explained in ``docs/plant.md``.
+
+    Attributes:
+        timestep_s: physics step; the control period must be a whole number of these.
+        integrator: ``discrete`` (MuJoCo >= 3.13: joint stiffness, damping and constraints in the implicit
+            step, stable far beyond the explicit limit), ``implicitfast``, ``implicit``, ``Euler`` or ``RK4``.
+        solver: ``Newton``, ``CG`` or ``PGS``.
+        iterations: constraint solver iterations.
+        ls_iterations: line-search iterations.
+        tolerance: solver tolerance.
+        cone: friction cone, ``pyramidal`` or ``elliptic``.
+    """
+
+    timestep_s: float = 0.001
+    integrator: str = "discrete"
+    solver: str = "Newton"
+    iterations: int = 20
+    ls_iterations: int = 10
+    tolerance: float = 1e-8
+    cone: str = "pyramidal"
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        _finite("timestep_s", self.timestep_s)
+        _check(
+            self.integrator in ("discrete", "implicitfast", "implicit", "Euler", "RK4"),
+            f"unknown integrator {self.integrator!r}",
+        )
+        _check(self.solver in ("Newton", "CG", "PGS"), f"unknown solver {self.solver!r}")
+        _check(
+            isinstance(self.iterations, int) and isinstance(self.ls_iterations, int),
+            "iterations must be ints",
+        )
+        _check(self.iterations >= 1 and self.ls_iterations >= 1, "iterations must be >= 1")
+        _finite("tolerance", self.tolerance, allow_equal=True)
+        _check(self.cone in ("pyramidal", "elliptic"), f"unknown cone {self.cone!r}")
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Everything :func:`hil.mjcf.build_mjcf` needs besides the spiral design."""
+
+    arm: ArmConfig = field(default_factory=ArmConfig)
+    motor: MotorConfig = field(default_factory=MotorConfig)
+    drone: DroneConfig = field(default_factory=DroneConfig)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+    objects: tuple[ObjectConfig, ...] = ()
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if any part is out of range or object names clash."""
+        self.arm.validate()
+        self.motor.validate()
+        self.drone.validate()
+        self.solver.validate()
+        names = [o.name for o in self.objects]
+        _check(len(names) == len(set(names)), f"object names must be unique, got {names}")
+        supports = {f"{o.name}_support" for o in self.objects if o.mass_kg is not None}
+        _check(not supports & set(names), f"an object name clashes with another's support body: {names}")
+        for o in self.objects:
+            o.validate()
+
+    def with_objects(self, *objects: ObjectConfig) -> ModelConfig:
+        """A copy with ``objects`` appended."""
+        return ModelConfig(self.arm, self.motor, self.drone, self.solver, self.objects + tuple(objects))
