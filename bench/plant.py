@@ -28,7 +28,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 import numpy as np  # noqa: E402
 
 from hil.errors import PlantDivergedError  # noqa: E402
-from hil.mjcf import ObjectConfig  # noqa: E402
+from hil.model_config import ObjectConfig  # noqa: E402
 from hil.plant import Plant  # noqa: E402
 from hil.spiral import SpiralDesign  # noqa: E402
 

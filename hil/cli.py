@@ -33,7 +33,8 @@ from controller.cli_kit import (
 )
 from hil.cli_design import add_design_arguments, design_from_args
 from hil.cli_experiments import configure_experiment, run_experiment_command
-from hil.mjcf import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig, write_mjcf
+from hil.mjcf import write_mjcf
+from hil.model_config import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
 
 __all__ = ["COMMANDS", "Command", "build_parser", "main"]
 

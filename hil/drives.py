@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from controller.errors import BusError
 from controller.motorbus import MotorBus
-from hil.mjcf import MotorConfig
+from hil.model_config import MotorConfig
 from protocol.c610 import (
     ANGLE_COUNTS,
     COMMAND_ID_LOW,

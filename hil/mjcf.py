@@ -34,24 +34,14 @@ from pathlib import Path
 
 from hil.model_config import (
     ArmConfig,
-    DroneConfig,
     ModelConfig,
-    MotorConfig,
-    ObjectConfig,
-    SolverConfig,
 )
 from hil.spiral import SpiralDesign
 
 __all__ = [
     "ARM_CONTYPE",
     "ENV_CONTYPE",
-    "ArmConfig",
     "CableLayout",
-    "DroneConfig",
-    "ModelConfig",
-    "MotorConfig",
-    "ObjectConfig",
-    "SolverConfig",
     "UnitGeometry",
     "build_mjcf",
     "cable_angles_rad",

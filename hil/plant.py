@@ -32,7 +32,8 @@ from numpy.typing import NDArray
 
 from hil.drives import Drives
 from hil.errors import PlantDivergedError
-from hil.mjcf import ObjectConfig, build_mjcf, cable_layout, unit_geometry
+from hil.mjcf import build_mjcf, cable_layout, unit_geometry
+from hil.model_config import ObjectConfig
 from hil.plant_types import BodyPoses, Contact, PlantConfig, Pose, finite_vector, unit_quat
 from hil.spiral import SpiralDesign
 from protocol.c610 import MotorFeedback

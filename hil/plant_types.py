@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from controller.config import CONTROL_PERIOD_US
-from hil.mjcf import ModelConfig
+from hil.model_config import ModelConfig
 
 __all__ = ["BodyPoses", "Contact", "PlantConfig", "Pose"]
 

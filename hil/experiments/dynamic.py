@@ -12,7 +12,7 @@ import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
 
-from ..mjcf import ObjectConfig
+from ..model_config import ObjectConfig
 from ..spiral import SpiralDesign
 from .common import FAR_M, MS, OBJ, Progress, Row, pyplot, save_figure, sized
 from .parallel import parallel_map

@@ -14,7 +14,7 @@ from controller.config import FirmwareConfig
 from protocol.dbus import Lever
 from protocol.messages import GraspState
 
-from ..mjcf import ObjectConfig
+from ..model_config import ObjectConfig
 from ..spiral import SpiralDesign
 from .common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, S
 from .rig import Rig, contact_units, contact_wrap_deg, rc_frame, world_m

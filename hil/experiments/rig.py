@@ -15,7 +15,7 @@ from protocol.messages import Command, CommandCode, Mode
 
 from ..board import BoardConfig
 from ..environment import Environment
-from ..mjcf import ObjectConfig
+from ..model_config import ObjectConfig
 from ..plant import Plant, PlantConfig
 from ..radio import RadioScript
 from ..spiral import SpiralDesign

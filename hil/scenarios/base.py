@@ -30,7 +30,7 @@ from protocol.messages import Command, EventKind, Phase
 
 from ..environment import Task
 from ..faults import Fault, FaultKind
-from ..mjcf import ObjectConfig
+from ..model_config import ObjectConfig
 from ..record import TICK_US, Check, RunRecord
 
 __all__ = [

@@ -9,7 +9,7 @@ from protocol.dbus import Lever
 from protocol.messages import GraspState
 
 from ..environment import Environment
-from ..mjcf import ObjectConfig
+from ..model_config import ObjectConfig
 from ..record import Check, RunRecord
 from .base import MS, SAFE, Plan, Scenario, rc
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hil.drives import Drives
-from hil.mjcf import MotorConfig
+from hil.model_config import MotorConfig
 from protocol.c610 import ANGLE_COUNTS, MotorFeedback
 
 MOTOR = MotorConfig()

@@ -12,18 +12,13 @@ import numpy as np
 import pytest
 
 from hil.mjcf import (
-    ArmConfig,
-    DroneConfig,
-    ModelConfig,
-    MotorConfig,
-    ObjectConfig,
-    SolverConfig,
     build_mjcf,
     cable_angles_rad,
     cable_layout,
     unit_geometry,
     write_mjcf,
 )
+from hil.model_config import ArmConfig, DroneConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
 from hil.spiral import AUTHORS_DEFAULT, PAPER_PROTOTYPE, SpiralDesign
 
 

@@ -1,4 +1,4 @@
-"""The plant model's configs (hil.model_config): validated alone, shared with the firmware, re-exported."""
+"""The plant model's configs (hil.model_config): validated alone, shared with the firmware."""
 
 from __future__ import annotations
 
@@ -6,16 +6,8 @@ import math
 
 import pytest
 
-import hil.mjcf
-import hil.model_config
 from controller.config import MotorDriveConfig
 from hil.model_config import ArmConfig, DroneConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
-
-
-def test_hil_mjcf_re_exports_the_same_classes() -> None:
-    for name in hil.model_config.__all__:
-        assert getattr(hil.mjcf, name) is getattr(hil.model_config, name)
-        assert name in hil.mjcf.__all__
 
 
 def test_defaults_are_valid_and_the_motor_shares_the_firmware_drive_constants() -> None:

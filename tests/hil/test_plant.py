@@ -10,7 +10,7 @@ import pytest
 
 from hil.errors import HilError, PlantDivergedError
 from hil.experiments import fit_log_spiral
-from hil.mjcf import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
+from hil.model_config import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
 from hil.plant import Plant, PlantConfig
 from hil.spiral import PAPER_PROTOTYPE, SpiralDesign
 from protocol.c610 import ANGLE_COUNTS, M2006_GEAR_RATIO, MotorFeedback, angle_delta_counts

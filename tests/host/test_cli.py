@@ -306,7 +306,7 @@ def test_virtual_board_over_a_pty_with_manual_rc() -> None:
 def test_scene_objects_from_the_plant_objects() -> None:
     import numpy as np
 
-    from hil.mjcf import ObjectConfig
+    from hil.model_config import ObjectConfig
     from host.scene import quat_rotate, scene_objects
 
     objs = scene_objects(
@@ -324,7 +324,7 @@ def test_scene_objects_from_the_plant_objects() -> None:
 
 def test_the_virtual_boards_objects_are_drawn() -> None:
     from hil.board import BoardConfig
-    from hil.mjcf import ModelConfig, ObjectConfig
+    from hil.model_config import ModelConfig, ObjectConfig
     from hil.plant import PlantConfig
 
     branch = ObjectConfig("branch", 0.01, 0.12, (0.08, 0.0, 0.85))
