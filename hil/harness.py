@@ -42,6 +42,8 @@ class ScriptedHost:
             heartbeat_allowed=None if blocked is None else lambda t_us: not blocked(t_us),
         )
         self._script: list[tuple[int, Message]] = []
+        self._idle_until_us = -1
+        """Nothing periodic is due before this (the session's next deadline): most ticks return at once."""
         self._received = bytearray()
         self._received_us = 0
         self._telemetry: list[Telemetry] = []
@@ -71,13 +73,18 @@ class ScriptedHost:
 
     def before_tick(self, t_us: int) -> None:
         """Write what is due by ``t_us``: the heartbeat, then the scripted messages."""
+        script = self._script
+        if t_us < self._idle_until_us and not (script and script[0][0] <= t_us):
+            return  # the common lockstep tick: the heartbeat is 100 ticks apart
         session = self.session
         session.poll(t_us)
-        while self._script and self._script[0][0] <= t_us:
-            session.send(self._script.pop(0)[1], t_us)
+        while script and script[0][0] <= t_us:
+            session.send(script.pop(0)[1], t_us)
         data = session.data_to_send()
         if data:
             self.end.write(data)
+        deadline = session.next_deadline_us()
+        self._idle_until_us = (1 << 62) if deadline is None else deadline
 
     def after_tick(self, t_us: int) -> None:
         """Take what the board sent; it is decoded when a received message is first looked at.

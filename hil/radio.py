@@ -98,6 +98,8 @@ class VirtualRadio:
 
     def transmit(self, t_us: int) -> bytes:
         """Put the bytes that finished arriving by ``t_us`` into :attr:`uart`; return them (to record)."""
+        if self._sent >= len(self._burst) and self._next_slot_us > t_us:
+            return b""  # the common tick, as in read(): no call on the lockstep hot path
         data = self.read(t_us)
         if data:
             self.uart.feed(data)
