@@ -6,10 +6,10 @@ Facts behind the defaults:
   feedback (``RoboMaster/Development-Board-C-Examples``, ``detect_task.c``).
 - M2006 P36: 36:1 gearbox; 3 A continuous, 10 A peak. The torque constant is disputed: DJI's M2006
   spec sheet gives 0.18 N·m/A at the output shaft, while "1 N·m rated at 3 A" implies about 0.33 N·m/A;
-  the C610 manual's performance curve is the better reference (FIELD-NOTES "M2006 figures disagree").
+  the C610 manual's performance curve is the better reference (docs/plant.md, motor table).
   We keep 0.18 N·m/A as the default and expose it as a parameter: the plant must use the same value
   for the firmware's tension estimate to be consistent.
-- Spool radius 10 mm, current limit 3 A (DESIGN.md section 3).
+- Spool radius 10 mm (the prototype's), current limit 3 A (the M2006's continuous rating).
 
 The configuration is nested by concern — :class:`MotorDriveConfig` (``motor``), :class:`MappingConfig`
 (``mapping``), :class:`FailsafeConfig` (``failsafe``), :class:`GraspConfig` (``grasp``) — with the task

@@ -52,7 +52,7 @@ class Plant:
     Args:
         design: the spiral design; ``None`` = the paper's 3-cable prototype. ``design.cables`` sets the
             number of cables and motors.
-        config: plant configuration (defaults: DESIGN.md section 4).
+        config: plant configuration (defaults: the paper's prototype, see docs/plant.md).
         rng: the only source of randomness (encoder zero offsets, current noise). ``None`` = no
             randomness: encoders start at 0 and ``current_noise_raw`` must be 0.
 

@@ -7,7 +7,7 @@ commanded currents, phase, mode, tension targets, counters), ``RawRc`` (every RC
 its board time) and ``Event`` messages. There is no plant to look at (a real board has none), so every
 check is about currents, phases, modes and counters, and every time is measured on the board's clock.
 
-What the host sends (DESIGN.md sections 2-4):
+What the host sends (docs/board-link.md):
 
 - **RC**: the board takes RC from the link (``VirtualRc``), as ``spirob-hil board`` does by default and as a
   board whose radio is the host's panel does. The scenario's radio script goes out as one frame every
