@@ -24,13 +24,15 @@ from ..recording import Recorder
 from ..spiral import SpiralDesign
 from .base import MANUAL, MS, RC_GAP_CHECK, SAFE, TICK_US, Plan, Scenario, rc, rc_gap_check
 from .grasp import Grasp
-from .host_gone import HostLoss, LinkDisconnect
+from .host_loss import HostLoss
+from .link_disconnect import LinkDisconnect
 from .link_noise import LinkNoise
 from .manual_teleop import ManualTeleop
 from .motor_silence import MotorSilence
 from .overcurrent import Overcurrent
-from .rc_bad_frames import RcGarbage, RcOutOfRange
+from .rc_garbage import RcGarbage
 from .rc_loss import RcLoss
+from .rc_out_of_range import RcOutOfRange
 from .startup_gate import StartupGate
 
 __all__ = [

@@ -24,7 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import ClassVar, Final
 
-from controller.config import FirmwareConfig
+from controller.config import FailsafeConfig, FirmwareConfig
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, EventKind, Phase
 
@@ -197,3 +197,43 @@ def rc_gap_check(run: RunRecord, plan: Plan) -> Check:
         "<=",
         "us",
     )
+
+
+# --- the host gone (host-loss, link-disconnect) ------------------------------------------------------
+
+
+def host_gone_plan(kind: FaultKind) -> Plan:
+    """Host required, armed and pulling; ``kind`` (the host or its link gone) from 1.5 s to 2.5 s; re-armed
+    through SAFE at 3.2 s."""
+    pull = rc(Lever.MIDDLE, ch3=400)
+    return Plan(
+        radio=[(0, SAFE), (200 * MS, pull), (3200 * MS, SAFE), (3500 * MS, pull)],
+        faults=[Fault(kind, 1500 * MS, 2500 * MS)],
+        firmware=FirmwareConfig(failsafe=FailsafeConfig(host_required=True)),
+    )
+
+
+def host_acted_us(run: RunRecord) -> int:
+    """Latest time after the last heartbeat the host sent by which the board must have cut the current."""
+    return REQUIRED.failsafe.host_timeout_us + TICK_US + run.link_delay_us + run.lateness_us
+
+
+def host_cut_and_latched(run: RunRecord, last_hb: float, rearm: float) -> list[Check]:
+    """Zero current within the host timeout of the last heartbeat, and none until re-armed."""
+    acted = host_acted_us(run)
+    return [
+        Check(
+            "zero current after the last heartbeat",
+            run.zero_after(last_hb),
+            acted + run.resolution_us,
+            "<=",
+            "us",
+        ),
+        Check(
+            "max |current| from the timeout to re-arming (latched)",
+            run.max_current(last_hb + acted, rearm),
+            0,
+            "<=",
+            "raw",
+        ),
+    ]
