@@ -152,6 +152,10 @@ def test_loopback_over_a_pty_with_an_slcan_adapter(pty_adapter: tuple[str, Slcan
             assert set(got) == {1, 2, 3}
         assert got[1].current == 1000 and got[3].current == -1000
         assert bus.can_errors == 0
+    # The adapter is a thread reading the pty: give it (bounded) time to take shutdown's zero frame.
+    deadline = time.monotonic() + 5.0
+    while adapter.trio.motors[0].current_raw != 0 and time.monotonic() < deadline:
+        time.sleep(0.001)
     assert adapter.trio.motors[0].current_raw == 0
     assert adapter.error is None
 
