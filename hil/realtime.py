@@ -2,10 +2,12 @@
 
 :func:`run_scenario_on_port` plays the host's part of a lockstep scenario (:mod:`hil.scenarios`) over a
 real port (``/dev/ttyACM0``, a pty path, ``socket://...``, any pyserial URL) against a real C-board or
-``spirob-hil board``, and judges the board from what it reports: its ``Telemetry`` (100 Hz: board time,
-commanded currents, phase, mode, tension targets, counters), ``RawRc`` (every RC frame it received, with
-its board time) and ``Event`` messages. There is no plant to look at (a real board has none), so every
-check is about currents, phases, modes and counters, and every time is measured on the board's clock.
+``spirob-hil board``, and judges the board with the scenario's own checks, the ones a lockstep run uses:
+the :class:`~hil.record.RunRecord` they read is filled here from what the board reports, its ``Telemetry``
+(100 Hz: board time, commanded currents, phase, mode, tension targets, counters), ``RawRc`` (every RC frame
+it received, with its board time) and ``Event`` messages. There is no plant to look at (a real board has
+none), so the checks that need one are left out, and every time is measured on the board's clock. The
+host's end of the link is :class:`hil.port_host.PortHost`, a shell around ``protocol.session.HostSession``.
 
 What the host sends (docs/board-link.md):
 
