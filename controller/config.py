@@ -128,8 +128,8 @@ class GraspConfig:
     """The grasp state machine (flat names: ``grasp_`` + the field name).
 
     Attributes:
-        strategy_on: True = the bio-inspired strategy of seed Note S4 (pack, reach, detect contact,
-            wrap); False = the "off" comparison (plain tension ramp from straight).
+        strategy_on: True = the bio-inspired strategy of the SpiRobs supplement's Note S4 (pack, reach,
+            detect contact, wrap); False = the "off" comparison (plain tension ramp from straight).
         direction_deg: grasp direction when neither the right stick nor the host gives one.
         pack_n: curl tension of the packed (coiled) pose the grasp starts from. The prototype plant
             (base joint 0.5 N·m/rad, 12.8 mm hole radius) closes every joint at about 21 N
