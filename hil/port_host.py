@@ -18,6 +18,7 @@ from collections.abc import Callable
 from typing import Final
 
 from controller.clock import RealTimeClock
+from controller.config import CONTROL_PERIOD_US
 from controller.errors import PortError
 from controller.transport import SerialTransport
 from protocol.dbus import RcFrame
@@ -32,8 +33,8 @@ from .recording import Recorder, telemetry_json
 
 __all__ = ["LOOP_PERIOD_US", "PortHost"]
 
-LOOP_PERIOD_US: Final = 1_000
-"""The host loop's period: RC, heartbeat and command times are quantised to it."""
+LOOP_PERIOD_US: Final = CONTROL_PERIOD_US
+"""The host loop's period, the board's tick: RC, heartbeat and command times are quantised to it."""
 _REOPEN_TIMEOUT_US = 2_000_000
 _EOF_READS = 200  # readable but empty this many times in a row (>= 1 ms apart): the board closed the link
 _READER_POLL_S = 0.01  # the reader thread checks for a stop this often
