@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from controller.transport import Transport
 from protocol.link import LinkParser
 from protocol.messages import Message, encode
 from protocol.stream import MessageStream, Received, UndecodableHook
 
 __all__ = ["BoardLink"]
+
+_NOTHING: tuple[Received, ...] = ()
 
 
 class BoardLink:
@@ -48,11 +52,11 @@ class BoardLink:
         """Intact frames that did not decode or had an unknown id, and misdirected messages."""
         return self.stream.decode_errors + self.misdirected
 
-    def receive(self) -> list[Received]:
+    def receive(self) -> Sequence[Received]:
         """``(seq, message)`` of every message received since the last call."""
         data = self.transport.read()
         if not data:
-            return []
+            return _NOTHING  # the idle tick (most of them) allocates nothing
         return self.stream.feed(data)
 
     def send(self, msg: Message) -> bool:
