@@ -34,11 +34,21 @@ from hil.drives import Drives
 from hil.errors import PlantDivergedError
 from hil.mjcf import build_mjcf, cable_layout, unit_geometry
 from hil.model_config import ObjectConfig
-from hil.plant_types import BodyPoses, Contact, PlantConfig, Pose, finite_vector, unit_quat
+from hil.plant_monitor import ExtremesMonitor, object_radii
+from hil.plant_objects import SceneObjects
+from hil.plant_types import (
+    BodyPoses,
+    Contact,
+    PhysicsExtremes,
+    PlantConfig,
+    Pose,
+    finite_vector,
+    unit_quat,
+)
 from hil.spiral import SpiralDesign
 from protocol.c610 import MotorFeedback
 
-__all__ = ["BodyPoses", "Contact", "Plant", "PlantConfig", "Pose"]
+__all__ = ["BodyPoses", "Contact", "PhysicsExtremes", "Plant", "PlantConfig", "Pose"]
 
 FloatArray = NDArray[np.float64]
 
@@ -73,6 +83,21 @@ class Plant:
     """The setpoints last applied (after clamping), raw units."""
     applied_currents_a: Callable[[], FloatArray]
     """Current each drive delivered in the last period (after the torque-speed line) [A]."""
+    # The scene's objects (hil.plant_objects.SceneObjects, rebuilt with the model): see their docstrings.
+    set_object_pose: Callable[..., None]
+    """Place an object (:meth:`hil.plant_objects.SceneObjects.set_object_pose`)."""
+    object_pose: Callable[[str], Pose]
+    """Current pose of an object."""
+    hold_object: Callable[..., None]
+    """Hold a free object still on its support (:meth:`hil.plant_objects.SceneObjects.hold_object`)."""
+    release_object: Callable[[str], None]
+    """Take a held free object off its support."""
+    object_held: Callable[[str], bool]
+    """Whether a free object is on its support (fixed objects: always True)."""
+    set_object_velocity: Callable[..., None]
+    """Give a free object a velocity (:meth:`hil.plant_objects.SceneObjects.set_object_velocity`)."""
+    apply_object_force: Callable[[str, Sequence[float]], None]
+    """Push a free object with a constant force, world frame [N] (``(0, 0, 0)`` removes it)."""
 
     def __init__(
         self,
@@ -171,16 +196,21 @@ class Plant:
         self._tension_adr_list = [int(a) for a in self._tension_adr]
         self._arm_slice = slice(int(self._arm_dofs.min()), int(self._arm_dofs.max()) + 1)
         self._spool_slice = slice(int(self._spool_dadr.min()), int(self._spool_dadr.max()) + 1)
-        self._object_names = tuple(o.name for o in cfg.objects)
-        self._object_bodies = {o.name: bid(o.name) for o in cfg.objects}
-        self._supports = {
-            o.name: (
-                int(m.body_mocapid[bid(f"{o.name}_support")]),
-                int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f"{o.name}_support")),
-            )
-            for o in cfg.objects
-            if o.mass_kg is not None
-        }
+        objects = SceneObjects(m, self._d, cfg.objects)
+        self._object_names = objects.names
+        self._object_bodies = objects.bodies
+        self.set_object_pose = objects.set_object_pose
+        self.object_pose = objects.object_pose
+        self.hold_object = objects.hold_object
+        self.release_object = objects.release_object
+        self.object_held = objects.object_held
+        self.set_object_velocity = objects.set_object_velocity
+        self.apply_object_force = objects.apply_object_force
+        self._angles_buf = np.empty(n_units - 1)
+        radii = object_radii(m, [(o.name, o.radius_m) for o in cfg.objects])
+        self._monitor = ExtremesMonitor(
+            m, self._unit_bodies.tolist(), radii, self._tension_adr_list, self._design.dtheta_rad
+        )
         self._drone_accel = np.zeros(3)
         d = self._d
         self._drives.attach(d.qpos, d.qvel, d.ctrl, self._spool_qadr.tolist(), self._spool_dadr.tolist())
@@ -263,6 +293,7 @@ class Plant:
         m.dof_frictionloss[self._bend_dofs_flat] = 0.0
         self._friction_on = False
         self._bad_qacc = 0
+        self._monitor.reset()
         mujoco.mj_forward(m, d)
 
     def step(self) -> None:
@@ -279,6 +310,8 @@ class Plant:
         for _ in range(self._substeps):
             mujoco.mj_step(m, d)
         self._time_us += self._config.control_period_us
+        self._joint_angles_into(self._angles_buf)
+        self._monitor.update(d, self._angles_buf)
         # One cheap test per period; the detailed diagnosis only when it fails.
         qvel = d.qvel
         arm_speed = np.abs(qvel[self._arm_slice]).max()
@@ -302,6 +335,14 @@ class Plant:
             raise ValueError(f"duration {duration_us} us is not a whole number of {period} us periods")
         for _ in range(duration_us // period):
             self.step()
+
+    def extremes(self) -> PhysicsExtremes:
+        """Largest penetration, tension and limit overshoot since :meth:`reset` or :meth:`reset_extremes`."""
+        return self._monitor.extremes()
+
+    def reset_extremes(self) -> None:
+        """Start measuring :meth:`extremes` afresh (e.g. once a trial's setup is over)."""
+        self._monitor.reset()
 
     def _check_divergence(self) -> None:
         d = self._d
@@ -483,140 +524,6 @@ class Plant:
         self._m.opt.gravity[:] = _GRAVITY - acc
         mujoco.mj_kinematics(self._m, d)
 
-    def set_object_pose(
-        self, name: str, pos_m: Sequence[float], quat_wxyz: Sequence[float] = (1.0, 0.0, 0.0, 0.0)
-    ) -> None:
-        """Place an object (fixed: moves its body; free: sets its position and stops it).
-
-        Raises:
-            KeyError: no object of that name.
-            ValueError: bad vector.
-        """
-        if name not in self._object_bodies:
-            raise KeyError(f"no object named {name!r}; objects: {', '.join(self._object_names) or 'none'}")
-        pos = finite_vector("pos_m", pos_m, 3)
-        quat = unit_quat(quat_wxyz)
-        m, d = self._m, self._d
-        body = self._object_bodies[name]
-        jnt = int(m.body_jntadr[body])
-        if jnt < 0:
-            m.body_pos[body] = pos
-            m.body_quat[body] = quat
-        else:
-            qa, da = int(m.jnt_qposadr[jnt]), int(m.jnt_dofadr[jnt])
-            d.qpos[qa : qa + 3] = pos
-            d.qpos[qa + 3 : qa + 7] = quat
-            d.qvel[da : da + 6] = 0.0
-        mujoco.mj_forward(m, d)
-
-    def object_pose(self, name: str) -> Pose:
-        """Current pose of an object.
-
-        Raises:
-            KeyError: no object of that name.
-        """
-        if name not in self._object_bodies:
-            raise KeyError(f"no object named {name!r}")
-        b = self._object_bodies[name]
-        return Pose(self._d.xpos[b].copy(), self._d.xquat[b].copy())
-
-    def hold_object(
-        self, name: str, pos_m: Sequence[float] | None = None, quat_wxyz: Sequence[float] | None = None
-    ) -> None:
-        """Hold a free object still on its support (a weld to a mocap body), where it is or at a pose.
-
-        The support is a stiff constraint, so the arm can push against a held object as against a fixed
-        one (an object on a stand, or offered by a hand). :meth:`release_object` lets it go.
-
-        Raises:
-            KeyError: no free object of that name (fixed objects are always held).
-            ValueError: bad vector.
-        """
-        if name not in self._supports:
-            raise KeyError(
-                f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
-            )
-        if pos_m is not None or quat_wxyz is not None:
-            here = self.object_pose(name)
-            pos: Sequence[float] = here.pos_m.tolist() if pos_m is None else pos_m
-            quat: Sequence[float] = here.quat_wxyz.tolist() if quat_wxyz is None else quat_wxyz
-            self.set_object_pose(name, pos, quat)
-        else:
-            mujoco.mj_kinematics(self._m, self._d)  # xpos after mj_step lags qpos by one step
-        mocap, eq = self._supports[name]
-        d = self._d
-        body = self._object_bodies[name]
-        d.mocap_pos[mocap] = d.xpos[body]
-        d.mocap_quat[mocap] = d.xquat[body]
-        d.eq_active[eq] = 1
-
-    def release_object(self, name: str) -> None:
-        """Take a held free object off its support (it keeps its velocity, zero if it was held).
-
-        Raises:
-            KeyError: no free object of that name.
-        """
-        if name not in self._supports:
-            raise KeyError(
-                f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
-            )
-        self._d.eq_active[self._supports[name][1]] = 0
-
-    def object_held(self, name: str) -> bool:
-        """Whether a free object is on its support (fixed objects: always True).
-
-        Raises:
-            KeyError: no object of that name.
-        """
-        if name not in self._object_bodies:
-            raise KeyError(f"no object named {name!r}")
-        if name not in self._supports:
-            return True
-        return bool(self._d.eq_active[self._supports[name][1]])
-
-    def set_object_velocity(
-        self,
-        name: str,
-        linear_m_s: Sequence[float],
-        angular_rad_s: Sequence[float] = (0.0, 0.0, 0.0),
-    ) -> None:
-        """Give a free object a velocity, e.g. to throw it at the arm.
-
-        ``linear_m_s`` is in the world frame; ``angular_rad_s`` in the object's own frame (MuJoCo's free
-        joint convention).
-
-        Raises:
-            KeyError: no free object of that name.
-            ValueError: bad vector.
-        """
-        if name not in self._supports:
-            raise KeyError(
-                f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
-            )
-        lin = finite_vector("linear_m_s", linear_m_s, 3)
-        ang = finite_vector("angular_rad_s", angular_rad_s, 3)
-        m, d = self._m, self._d
-        jnt = int(m.body_jntadr[self._object_bodies[name]])
-        da = int(m.jnt_dofadr[jnt])
-        d.qvel[da : da + 3] = lin
-        d.qvel[da + 3 : da + 6] = ang
-
-    def apply_object_force(self, name: str, force_n: Sequence[float]) -> None:
-        """Push a free object with a constant external force (world frame, at its centre of mass) until
-        changed; ``(0, 0, 0)`` removes it (so does :meth:`add_object`, which rebuilds the data). Used as an
-        extra load: a downward force F acts like F/g kg more.
-
-        Raises:
-            KeyError: no free object of that name.
-            ValueError: bad vector.
-        """
-        if name not in self._supports:
-            raise KeyError(
-                f"no free object named {name!r}; free objects: {', '.join(self._supports) or 'none'}"
-            )
-        force = finite_vector("force_n", force_n, 3)
-        self._d.xfrc_applied[self._object_bodies[name], :3] = force
-
     def add_object(self, obj: ObjectConfig) -> None:
         """Add an object to grasp. The model is rebuilt; the arm's state, time and commands are kept.
 
@@ -624,6 +531,7 @@ class Plant:
             ValueError: invalid object or a duplicate name.
         """
         old_m, old_d = self._m, self._d
+        earlier = self._monitor.extremes()
         state = (old_d.qpos.copy(), old_d.qvel.copy(), old_d.mocap_pos.copy(), old_d.mocap_quat.copy())
         eq_active = old_d.eq_active.copy()
         keep = (self._time_us, self._drone_accel.copy(), old_d.time)  # the drives keep their own state
@@ -649,6 +557,7 @@ class Plant:
         self._drone_accel[:] = acc
         m.opt.gravity[:] = _GRAVITY - acc
         self._bad_qacc = 0
+        self._monitor.include(earlier)
         mujoco.mj_forward(m, d)
 
     # ------------------------------------------------------------------ poses for tests and scenarios

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from controller.config import CONTROL_PERIOD_US
 from hil.model_config import ModelConfig
 
-__all__ = ["BodyPoses", "Contact", "PlantConfig", "Pose"]
+__all__ = ["BodyPoses", "Contact", "PhysicsExtremes", "PlantConfig", "Pose"]
 
 FloatArray = NDArray[np.float64]
 
@@ -98,6 +98,35 @@ class Contact:
     other: str
     pos_m: tuple[float, float, float]
     normal_force_n: float
+
+
+@dataclass(frozen=True)
+class PhysicsExtremes:
+    """The worst the physics did over a stretch of simulated time: what says whether a figure can be trusted.
+
+    Sampled at the end of every control period (so a peak inside a period of several physics steps can be
+    missed; at the default 1 ms step there is one physics step per period).
+
+    Attributes:
+        penetration_m: largest depth of an arm unit inside an object (0 if they never overlapped) [m].
+        penetration_ratio: largest such depth over that object's radius.
+        tension_n: largest cable tension [N].
+        limit_overshoot_rad: largest bending angle of a joint beyond its limit Δθ [rad].
+    """
+
+    penetration_m: float
+    penetration_ratio: float
+    tension_n: float
+    limit_overshoot_rad: float
+
+    def as_dict(self) -> dict[str, float]:
+        """The fields in SI units, for JSON."""
+        return {
+            "penetration_m": self.penetration_m,
+            "penetration_ratio": self.penetration_ratio,
+            "tension_n": self.tension_n,
+            "limit_overshoot_rad": self.limit_overshoot_rad,
+        }
 
 
 def finite_vector(name: str, value: Sequence[float], n: int) -> FloatArray:
