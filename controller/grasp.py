@@ -115,6 +115,7 @@ class GraspMachine:
         self._min_tension_n = g.contact_min_tension_n
         self._timeout_us = g.reach_timeout_us
         self._release_dwell_us = g.release_dwell_us
+        self.hold_length = g.hold_length
 
     @property
     def idle_curl_n(self) -> float:
@@ -306,6 +307,10 @@ class GraspMachine:
         s = self._wrap_shares if self.direction_rad != self.target_rad else self._shares
         total = s[0] + s[1] + s[2]
         return (s[0] * speed_m_s[0] + s[1] * speed_m_s[1] + s[2] * speed_m_s[2]) / total
+
+    def pull_shares(self) -> Sequence[float]:
+        """Per-cable bending shares of the present curl (which cables pull toward :attr:`direction_rad`)."""
+        return self._wrap_shares if self.direction_rad != self.target_rad else self._shares
 
     def _pack_side(self, speed_m_s: Sequence[float], tension_n: Sequence[float]) -> tuple[float, float]:
         """Share-weighted paid-in speed and estimated tension of the pack-side (target-side) cables."""
