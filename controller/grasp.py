@@ -34,7 +34,9 @@ direction the present curl tension bends the arm toward.
   ``grasp_takeup_speed_m_per_s`` (a fast spool would snap the cable taut), until they have been still
   for ``grasp_contact_dwell_us``; then the tension ramps to ``grasp_wrap_n``.
 - HOLD (entered once the wrap tension is reached and the pulling cables have been still for
-  ``grasp_contact_dwell_us``: the arm has closed on the object): the tension is kept.
+  ``grasp_contact_dwell_us``: the arm has closed on the object): the tension is kept; with
+  ``grasp_hold_length`` the pulling cables' length is held instead (``controller.lengthhold``, engaged
+  by the mode selector), so a grasped load does not sag.
 - RELEASE: the tension ramps to 0 (uncurl), stays there ``grasp_release_dwell_us``, then IDLE re-packs
   toward the target.
 

@@ -12,10 +12,14 @@ from controller.lengthhold import LengthHold, Pid
 from protocol.c610 import ANGLE_COUNTS, output_rad_s_to_rotor_rpm, output_rad_to_counts
 from protocol.dbus import Lever
 from protocol.messages import (
+    HOLD_HERE,
+    HOLD_RELEASE,
+    HOLD_UNCHANGED,
     AckResult,
     Command,
     CommandAck,
     CommandCode,
+    GraspState,
     Heartbeat,
     Mode,
     Phase,
@@ -25,9 +29,9 @@ from protocol.messages import (
 from tests.controller_harness import Rig, frame
 
 DT_US = 1000
-HERE = math.inf
-RELEASE = -math.inf
-SAME = math.nan
+HERE = HOLD_HERE
+RELEASE = HOLD_RELEASE
+SAME = HOLD_UNCHANGED
 
 
 # --- the PID --------------------------------------------------------------------------------------
@@ -233,3 +237,23 @@ def test_a_held_cable_goes_to_zero_current_on_estop() -> None:
     rig.tick()
     assert rig.currents == (0, 0, 0) and rig.fw.phase == Phase.ESTOP
     _zero_on_next_ticks(rig, 1)
+
+
+def test_grasp_hold_length_freezes_the_pulling_cables_in_hold() -> None:
+    config = FirmwareConfig().replaced(grasp_strategy_on=False, grasp_hold_length=True)
+    rig = Rig(config)
+    rig.arm()
+    rig.set_rc(frame(right=Lever.UP))
+    rig.until(lambda: rig.fw.mode == Mode.GRASP, 30)
+    rig.set_rc(frame(right=Lever.UP, left=Lever.UP))
+    rig.until(lambda: rig.fw.grasp_state == GraspState.HOLD, 5000)
+    rig.tick()
+    hold = rig.fw.hold
+    assert hold.held == [True, False, False] and hold.by_grasp[0]  # toward cable 1 (0°): it alone pulls
+    length0 = hold.setpoint_m[0]
+    rig.tick(500)
+    assert abs(rig.fw.motors.cable_length_m[0] - length0) < 0.1e-3
+    rig.set_rc(frame(right=Lever.UP, left=Lever.DOWN))  # release: the hold ends with HOLD
+    rig.until(lambda: rig.fw.grasp_state == GraspState.RELEASE, 30)
+    rig.tick()
+    assert hold.count == 0
