@@ -161,6 +161,12 @@ class GraspConfig:
             (HOLD).
         contact_grace_us: no contact is detected this soon after the reach starts.
         contact_min_tension_n: the estimated tension must hold at least this for contact.
+        contact_decel_m_per_s2: contact when the pack-side pay-out decelerates faster than this while
+            the arm still moves (``controller.contact``; catches contacts after the reach ramp ended);
+            0 = rule off.
+        contact_decel_tau_us: low-pass time constant of that deceleration.
+        contact_wrap_m_per_s: contact when the wrap-side cables pay out faster than this while the
+            pack side has slowed (the object pushes the coil's outer face back); 0 = rule off.
         reach_timeout_us: FAILED when no contact within this time after the reach starts.
         release_dwell_us: time spent uncurled after a release before re-packing (IDLE).
         hold_length: HOLD freezes the pulling cables' length (``controller.lengthhold``) instead of
@@ -183,6 +189,9 @@ class GraspConfig:
     contact_dwell_us: int = 60_000
     contact_grace_us: int = 200_000
     contact_min_tension_n: float = 0.3
+    contact_decel_m_per_s2: float = 1.0  # the free arm slows at up to 0.66 m/s² after the ramp (prototype)
+    contact_decel_tau_us: int = 10_000
+    contact_wrap_m_per_s: float = 0.0
     reach_timeout_us: int = 4_000_000
     release_dwell_us: int = 500_000
     hold_length: bool = False
@@ -330,6 +339,15 @@ class FirmwareConfig:
             _require(name, 0.0 < v[name] <= 10.0, "must be (0, 10]")
         _require("grasp_contact_slow_ratio", 0.0 <= v["grasp_contact_slow_ratio"] < 1.0, "must be in [0, 1)")
         _require("grasp_contact_min_tension_n", v["grasp_contact_min_tension_n"] >= 0.0, "must be >= 0")
+        _require(
+            "grasp_contact_decel_m_per_s2", 0.0 <= v["grasp_contact_decel_m_per_s2"] <= 1e4, "must be 0..1e4"
+        )
+        _require(
+            "grasp_contact_decel_tau_us", 0 <= v["grasp_contact_decel_tau_us"] <= 1_000_000, "must be 0..1 s"
+        )
+        _require(
+            "grasp_contact_wrap_m_per_s", 0.0 <= v["grasp_contact_wrap_m_per_s"] <= 10.0, "must be 0..10"
+        )
         for name in (
             "grasp_contact_dwell_us",
             "grasp_contact_grace_us",
@@ -483,6 +501,9 @@ PARAM_FIELDS: dict[str, str] = {
     "HOLD_SPD_KP": "hold_speed_kp_n_s_per_m",
     "HOLD_SPD_KI": "hold_speed_ki_n_per_m",
     "HOLD_SPD_IMAX_N": "hold_speed_imax_n",
+    "GRASP_DECEL_M_S2": "grasp_contact_decel_m_per_s2",
+    "GRASP_DECEL_TAU": "grasp_contact_decel_tau_us",
+    "GRASP_WRAP_M_S": "grasp_contact_wrap_m_per_s",
 }
 """Wire name (at most 16 ASCII characters, MAVLink ``param_id`` style) -> flat ``FirmwareConfig`` field."""
 
