@@ -91,3 +91,15 @@ def test_strategy_on_grasps_the_reference_placement() -> None:
 def test_an_object_out_of_reach_is_a_failed_grasp() -> None:
     out = grasp_trial(GraspSetup(0.20, -0.05, 0.02, strategy_on=True))
     assert out.state == "FAILED" and not out.held and math.isnan(out.t_hold_s)
+
+
+def test_contact_helpers() -> None:
+    from hil.experiments.contact import ReachTrial, bootstrap_median, wilson
+
+    lo, hi = wilson(8, 10)
+    assert lo == pytest.approx(0.4902, abs=1e-3) and hi == pytest.approx(0.9433, abs=1e-3)
+    med, lo, hi = bootstrap_median([1.0, 2.0, 3.0, 4.0, 100.0], seed=0)
+    assert med == 3.0 and lo <= med <= hi
+    nan = float("nan")
+    kinds = [ReachTrial(0, 0, 0, "new", tr, de, "").kind for tr, de in ((1, 2), (2, 1), (1, nan), (nan, nan))]
+    assert kinds == ["TP", "FP", "FN", "TN"]
