@@ -225,9 +225,17 @@ def _trial(item: _Item) -> DynamicRun:
     kind, value, timestep_s, position, p, arm_model, seed = item
     design = paper_arm_45cm()
     pen = kind == "pen"
+    # The object's friction is the arm's: MuJoCo takes the larger of a pair's two coefficients, so a
+    # contact-friction variant must change both.
+    friction = arm_model.arm.geom_friction
     if pen:
         obj = ObjectConfig(
-            OBJ, radius_m=p.pen_diameter_m / 2, length_m=p.pen_length_m, pos_m=FAR_M, mass_kg=p.pen_mass_kg
+            OBJ,
+            radius_m=p.pen_diameter_m / 2,
+            length_m=p.pen_length_m,
+            pos_m=FAR_M,
+            mass_kg=p.pen_mass_kg,
+            friction=friction,
         )
     else:
         obj = ObjectConfig(
@@ -236,6 +244,7 @@ def _trial(item: _Item) -> DynamicRun:
             length_m=p.object_length_m,
             pos_m=FAR_M,
             mass_kg=p.object_mass_kg,
+            friction=friction,
         )
     # A step, not a ramp: the slew limiter opened, the ceiling at the 3 A current limit.
     fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=54.0, slew_n_per_s=100_000.0))

@@ -84,6 +84,7 @@ class ModelRig(Rig):
         model: ModelConfig,
         *,
         objects: Sequence[ObjectConfig] = (),
+        start_packed: bool = False,
         seed: int = 0,
     ) -> None:
         cfg = BoardConfig(
@@ -92,6 +93,7 @@ class ModelRig(Rig):
             firmware=firmware,
             rc="radio",
             seed=seed,
+            start_packed=start_packed,
         )
         radio = [(0, rc_frame()), (20 * MS, rc_frame(Lever.MIDDLE))]
         Environment.__init__(self, cfg, radio=RadioScript(radio))
@@ -107,6 +109,7 @@ def model_direct_rig(
     model: ModelConfig,
     *,
     objects: Sequence[ObjectConfig] = (),
+    start_packed: bool = False,
     seed: int = 0,
 ) -> Rig:
     """A :class:`ModelRig` in DIRECT mode (as :func:`~hil.experiments.rig.direct_rig`).
@@ -114,7 +117,7 @@ def model_direct_rig(
     Raises:
         RuntimeError: the firmware did not enter DIRECT mode.
     """
-    rig = ModelRig(design, firmware, model, objects=objects, seed=seed)
+    rig = ModelRig(design, firmware, model, objects=objects, start_packed=start_packed, seed=seed)
     for _ in range(200):
         rig.step()
         if rig.firmware.mode == Mode.MANUAL:
