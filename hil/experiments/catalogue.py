@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..spiral import SpiralDesign
-from . import contact, dynamic, grasp_range, load, packing, strategy, workspace
+from . import contact, dynamic, grasp_range, load, packing, sensitivity, strategy, workspace
 from .common import Progress, Row, sized
 
 
@@ -91,6 +91,14 @@ EXPERIMENTS: dict[str, Experiment] = {
             dynamic.table_rows,
             dynamic.describe_samples,
             dynamic.plot_figure,
+        ),
+        Experiment(
+            "sensitivity",
+            "±50 % on stiffness, damping, spool inertia, drive and contact friction: what survives",
+            sensitivity.run_at_size,
+            sensitivity.table_rows,
+            sensitivity.describe_samples,
+            sensitivity.plot_figure,
         ),
     )
 }

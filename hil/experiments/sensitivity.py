@@ -1,0 +1,334 @@
+"""sensitivity: which conclusions survive ±50 % on the model's uncertain parameters, one at a time.
+
+The varied parameters (:data:`PARAMETERS`) are the ones with no datasheet behind them: the base joint's
+stiffness, the joints' damping ratio, the spool's (rotor) inertia, the drive's output friction and the
+contact friction (arm and objects together: MuJoCo takes the larger of a pair's two coefficients). Each
+variant re-runs every :data:`MEASURES` entry, a function ``(design, model, size, seed, jobs) -> dict``, and
+each of a measure's :class:`Conclusion` s says whether it still holds, with its number. A new measure (the
+grasp strategy's) is one more entry of :data:`MEASURES`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from controller.config import FirmwareConfig
+
+from ..model_config import ModelConfig, ObjectConfig
+from ..spiral import SpiralDesign
+from . import packing as packing_module
+from .common import Progress, Row, pyplot, save_figure, sized
+from .dynamic import TINY, DynamicParams, dynamic
+from .dynamic_rig import model_direct_rig
+from .packing import PackingParams, PackingResult
+from .parallel import parallel_map
+from .rig import Rig
+
+FACTORS = (0.5, 1.5)
+"""Each parameter is multiplied by these (±50 %)."""
+
+
+def _base_stiffness(m: ModelConfig, f: float) -> ModelConfig:
+    k = m.arm.base_stiffness_nm_per_rad * f
+    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, base_stiffness_nm_per_rad=k))
+
+
+def _damping_ratio(m: ModelConfig, f: float) -> ModelConfig:
+    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, damping_ratio=m.arm.damping_ratio * f))
+
+
+def _spool_inertia(m: ModelConfig, f: float) -> ModelConfig:
+    j = m.motor.rotor_inertia_kg_m2 * f
+    return dataclasses.replace(m, motor=dataclasses.replace(m.motor, rotor_inertia_kg_m2=j))
+
+
+def _drive_friction(m: ModelConfig, f: float) -> ModelConfig:
+    t = m.motor.output_friction_nm * f
+    return dataclasses.replace(m, motor=dataclasses.replace(m.motor, output_friction_nm=t))
+
+
+def _contact_friction(m: ModelConfig, f: float) -> ModelConfig:
+    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, geom_friction=m.arm.geom_friction * f))
+
+
+PARAMETERS: dict[str, Callable[[ModelConfig, float], ModelConfig]] = {
+    "base stiffness": _base_stiffness,
+    "damping ratio": _damping_ratio,
+    "spool inertia": _spool_inertia,
+    "drive friction": _drive_friction,
+    "contact friction": _contact_friction,
+}
+"""The varied parameters: name -> ``(model, factor) -> model``. The contact friction's objects follow the
+arm's (see :func:`hil.experiments.dynamic.dynamic`)."""
+
+BASELINE = "baseline"
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One model: the baseline, or one parameter scaled by ``factor``."""
+
+    parameter: str
+    factor: float
+
+    @property
+    def label(self) -> str:
+        """``baseline`` or e.g. ``base stiffness x0.5``."""
+        return BASELINE if self.parameter == BASELINE else f"{self.parameter} x{self.factor:g}"
+
+    def apply(self, model: ModelConfig) -> ModelConfig:
+        """The variant of ``model``."""
+        return model if self.parameter == BASELINE else PARAMETERS[self.parameter](model, self.factor)
+
+
+def variants() -> tuple[Variant, ...]:
+    """The baseline, then every parameter at every factor."""
+    return (Variant(BASELINE, 1.0), *(Variant(p, f) for p in PARAMETERS for f in FACTORS))
+
+
+@dataclass(frozen=True)
+class Conclusion:
+    """A claim a measure's dict can confirm or refute.
+
+    Attributes:
+        name: the claim, in words.
+        holds: whether the measure's dict confirms it.
+        number: the number behind the verdict, for the table.
+    """
+
+    name: str
+    holds: Callable[[dict[str, Any]], bool]
+    number: Callable[[dict[str, Any]], str]
+
+
+Measure = Callable[[SpiralDesign, ModelConfig, str, int, int], dict[str, Any]]
+"""``measure(design, model, size, seed, jobs) -> dict`` of JSON-ready numbers."""
+
+
+def _packing_on_model(
+    design: SpiralDesign, model: ModelConfig, params: PackingParams, seed: int
+) -> PackingResult:
+    """:func:`~hil.experiments.packing.packing` on ``model``.
+
+    The packing run builds its rig with the default plant model (``rig.direct_rig``); until it takes a
+    model, its module's ``direct_rig`` is swapped for one on ``model`` for this call only.
+    """
+
+    def rig_on_model(
+        design: SpiralDesign,
+        firmware: FirmwareConfig,
+        *,
+        objects: Sequence[ObjectConfig] = (),
+        start_packed: bool = False,
+        seed: int = 0,
+    ) -> Rig:
+        return model_direct_rig(
+            design, firmware, model, objects=objects, start_packed=start_packed, seed=seed
+        )
+
+    original = getattr(packing_module, "direct_rig")  # noqa: B009 (packing imports it, not exports it)
+    setattr(packing_module, "direct_rig", rig_on_model)  # noqa: B010
+    try:
+        return packing_module.packing(design, params, seed)
+    finally:
+        setattr(packing_module, "direct_rig", original)  # noqa: B010
+
+
+def packing_measure(
+    design: SpiralDesign, model: ModelConfig, size: str, seed: int, jobs: int
+) -> dict[str, Any]:
+    """The packing ramp (Note S3) on ``design``: curl order and packing tension."""
+    params = sized(size, PackingParams(ramp_s=1.5, hold_s=0.1), PackingParams(), PackingParams(ramp_s=16.0))
+    r = _packing_on_model(design, model, params, seed)
+    return {
+        "order_correlation": r.order_correlation,
+        "packed": r.packed,
+        "pack_tension_n": r.pack_tension_n,
+        "b_error": r.b_fit / r.b_design - 1.0,
+    }
+
+
+def dynamic_measure(
+    design: SpiralDesign, model: ModelConfig, size: str, seed: int, jobs: int
+) -> dict[str, Any]:
+    """Fig. S11 on the 45 cm arm (whatever ``design`` is), at the 1 ms step only."""
+    params = sized(
+        size,
+        dataclasses.replace(TINY, timesteps_s=(0.001,)),
+        DynamicParams(throw_positions=3, timesteps_s=(0.001,)),
+        DynamicParams(timesteps_s=(0.001,)),
+    )
+    r = dynamic(params, seed, None, jobs, model)
+    d = r.as_dict()
+    return {
+        "pen_half_wrap_ms": d["pen_half_wrap_ms"],
+        "pen_carried": d["pen_carried"],
+        "captured": d["captured"],
+        "throws": d["throws"],
+        "penetration_m": d["extremes"]["penetration_m"],
+    }
+
+
+def _ms(x: float) -> str:
+    return "never" if math.isnan(x) else f"{x:.0f} ms"
+
+
+MEASURES: dict[str, tuple[Measure, tuple[Conclusion, ...]]] = {
+    "packing": (
+        packing_measure,
+        (
+            Conclusion(
+                "packing: curls from the tip (rank correlation < -0.8)",
+                lambda d: d["order_correlation"] < -0.8,
+                lambda d: f"{d['order_correlation']:+.2f}",
+            ),
+            Conclusion(
+                "packing: packs fully under the 3 A limit",
+                lambda d: bool(d["packed"]),
+                lambda d: "not packed" if math.isnan(d["pack_tension_n"]) else f"{d['pack_tension_n']:.1f} N",
+            ),
+        ),
+    ),
+    "dynamic": (
+        dynamic_measure,
+        (
+            Conclusion(
+                "dynamic: a current step wraps the pen half way",
+                lambda d: not math.isnan(d["pen_half_wrap_ms"]),
+                lambda d: _ms(d["pen_half_wrap_ms"]),
+            ),
+            Conclusion(
+                "dynamic: the pen is carried toward the base",
+                lambda d: bool(d["pen_carried"]),
+                lambda d: "yes" if d["pen_carried"] else "no",
+            ),
+            Conclusion(
+                "dynamic: most thrown objects are captured",
+                lambda d: 2 * d["captured"] > d["throws"],
+                lambda d: f"{d['captured']}/{d['throws']}",
+            ),
+        ),
+    ),
+}
+"""The measures: name -> (measure, its conclusions). The extension point for further measures."""
+
+
+@dataclass(frozen=True)
+class SensitivityResult:
+    """Every measure on every variant, and each conclusion's verdict.
+
+    Attributes:
+        size: the measures' size.
+        seed: the seed of every run.
+        variants: the variants' labels, baseline first.
+        measured: ``measured[measure][variant]``: the measure's dict.
+    """
+
+    size: str
+    seed: int
+    variants: tuple[str, ...]
+    measured: dict[str, dict[str, dict[str, Any]]]
+
+    def verdicts(self) -> list[tuple[str, list[tuple[bool, str]]]]:
+        """Per conclusion: ``(holds, number)`` per variant (in :attr:`variants` order)."""
+        out = []
+        for name, (_, conclusions) in MEASURES.items():
+            if name not in self.measured:
+                continue
+            for c in conclusions:
+                cells = [
+                    (c.holds(self.measured[name][v]), c.number(self.measured[name][v])) for v in self.variants
+                ]
+                out.append((c.name, cells))
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "experiment": "sensitivity",
+            "seed": self.seed,
+            "size": self.size,
+            "variants": list(self.variants),
+            "conclusions": {
+                name: {v: {"holds": h, "number": n} for v, (h, n) in zip(self.variants, cells, strict=True)}
+                for name, cells in self.verdicts()
+            },
+            "survive_all": [name for name, cells in self.verdicts() if all(h for h, _ in cells)],
+            "measured": self.measured,
+        }
+
+
+def _run_one(item: tuple[str, Variant, SpiralDesign, str, int]) -> dict[str, Any]:
+    name, variant, design, size, seed = item
+    return MEASURES[name][0](design, variant.apply(ModelConfig()), size, seed, 1)
+
+
+def sensitivity(
+    design: SpiralDesign | None = None,
+    size: str = "default",
+    seed: int = 0,
+    progress: Progress | None = None,
+    jobs: int = 1,
+) -> SensitivityResult:
+    """Run every measure on the baseline model and on each ±50 % variant (variants fan out over ``jobs``)."""
+    design = design or SpiralDesign.paper_prototype()
+    vs = variants()
+    items = [(name, v, design, size, seed) for v in vs for name in MEASURES]
+    out = parallel_map(_run_one, items, jobs, progress)
+    measured: dict[str, dict[str, dict[str, Any]]] = {name: {} for name in MEASURES}
+    for (name, v, *_), d in zip(items, out, strict=True):
+        measured[name][v.label] = d
+    return SensitivityResult(size, seed, tuple(v.label for v in vs), measured)
+
+
+def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+    sized(size, 0, 0, 0)
+    return sensitivity(design, size, seed, progress, jobs)
+
+
+def _cell(cell: tuple[bool, str]) -> str:
+    return f"{'holds' if cell[0] else 'FAILS'} ({cell[1]})"
+
+
+def table_rows(r: SensitivityResult) -> list[Row]:
+    """Per conclusion, the baseline's verdict, then per parameter the verdicts at x0.5 / x1.5."""
+    rows: list[Row] = []
+    index = {v: i for i, v in enumerate(r.variants)}
+    for name, cells in r.verdicts():
+        survives = "survives every variant" if all(h for h, _ in cells) else "fails in some variant"
+        rows.append((name, f"baseline: {_cell(cells[0])}", survives))
+        for p in PARAMETERS:
+            labels = [Variant(p, f).label for f in FACTORS]
+            verdicts = " / ".join(_cell(cells[index[lab]]) for lab in labels if lab in index)
+            rows.append((f"  {p} x{' / x'.join(f'{f:g}' for f in FACTORS)}", verdicts, ""))
+    return rows
+
+
+def describe_samples(r: SensitivityResult) -> str:
+    """The result's sample counts, in words."""
+    return (
+        f"{len(r.variants)} models (baseline, {len(PARAMETERS)} parameters x {len(FACTORS)}) x "
+        f"{len(r.measured)} measures ({', '.join(r.measured)}) at size {r.size}"
+    )
+
+
+def plot_figure(r: SensitivityResult, out: Path) -> Path:
+    """Write the figure into the directory ``out``; returns its path (``sensitivity.png``)."""
+    plt = pyplot()
+    verdicts = r.verdicts()
+    fig, ax = plt.subplots(figsize=(2 + 1.0 * len(r.variants), 1.5 + 0.5 * len(verdicts)))
+    grid = [[1.0 if h else 0.0 for h, _ in cells] for _, cells in verdicts]
+    ax.imshow(grid, cmap="RdYlGn", vmin=0.0, vmax=1.0, aspect="auto")
+    for i, (_, cells) in enumerate(verdicts):
+        for j, (_, number) in enumerate(cells):
+            ax.text(j, i, number, ha="center", va="center", fontsize=7)
+    ax.set_xticks(range(len(r.variants)), r.variants, rotation=40, ha="right", fontsize=7)
+    ax.set_yticks(range(len(verdicts)), [name for name, _ in verdicts], fontsize=7)
+    ax.set_title("which conclusions survive ±50 % (green: holds, red: fails)", fontsize=9)
+    return save_figure(fig, out / "sensitivity.png")
