@@ -49,7 +49,7 @@ Triggers: left lever UP / DOWN edges in GRASP mode, host ``GRASP`` / ``RELEASE``
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from controller.cables import bend_shares
 from controller.config import MOTOR_COUNT, FirmwareConfig
@@ -72,6 +72,9 @@ class GraspMachine:
             strategy on.
         pending: a grasp was requested and waits for the arm to be packed.
         peak_payout_m_s: fastest pack-side pay-out seen in the present reach (contact reference).
+        contact_override: None (the firmware's own contact detector), or a test harness's or an
+            experiment's oracle ``f(now_us) -> bool``: REACH goes to WRAP on the first tick it returns
+            True, and the detector is not consulted.
     """
 
     def __init__(self, config: FirmwareConfig, events: EventQueue) -> None:
@@ -81,6 +84,7 @@ class GraspMachine:
         self.curl_n = 0.0
         self.pending = False
         self.peak_payout_m_s = 0.0
+        self.contact_override: Callable[[int], bool] | None = None
         self._shares = [0.0] * MOTOR_COUNT
         self._wrap_shares = [0.0] * MOTOR_COUNT
         self._taut = True
@@ -267,7 +271,10 @@ class GraspMachine:
         slow = self._slow_ratio * self.peak_payout_m_s
         stalled = payout < (slow if slow > self._stall_m_s else self._stall_m_s)
         stalled = stalled and tension >= self._min_tension_n
-        if ramping and self._unrolling_seen and elapsed >= self._grace_us and stalled:
+        if self.contact_override is not None:
+            if self.contact_override(now_us):
+                self._contact(now_us)
+        elif ramping and self._unrolling_seen and elapsed >= self._grace_us and stalled:
             if self._stall_since_us < 0:
                 self._stall_since_us = now_us
             elif now_us - self._stall_since_us >= self._dwell_us:
