@@ -12,9 +12,22 @@ import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
 
-from ..model_config import ObjectConfig
+from ..model_config import ModelConfig, ObjectConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import FAR_M, MS, OBJ, Progress, Row, pyplot, save_figure, sized
+from .common import (
+    DEFAULT_MODEL,
+    FAR_M,
+    MS,
+    OBJ,
+    Progress,
+    Row,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from .parallel import parallel_map
 from .rig import contact_units, contact_wrap_deg, direct_rig, world_m
 
@@ -51,6 +64,7 @@ class DynamicRun:
     max_wrap_deg: float
     held_after_ms: float  # pen: released at the half wrap, still touching the arm this long after
     held: bool
+    extremes: PhysicsExtremes  # the worst physics of the run
     wrap_trace: tuple[float, ...] = field(repr=False)
 
 
@@ -61,6 +75,11 @@ class DynamicResult:
     params: DynamicParams
     seed: int
     runs: tuple[DynamicRun, ...]
+
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every run."""
+        return worst_extremes(r.extremes for r in self.runs)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
@@ -74,6 +93,7 @@ class DynamicResult:
             "pen_held": any(r.held for r in pens),
             "captured": sum(r.held for r in throws),
             "throws": len(throws),
+            "extremes": self.extremes.as_dict(),
             "runs": [
                 {k: v for k, v in dataclasses.asdict(r).items() if k != "wrap_trace"} for r in self.runs
             ],
@@ -81,8 +101,8 @@ class DynamicResult:
         }
 
 
-def _dynamic_run(args: tuple[str, float, DynamicParams, int]) -> DynamicRun:
-    kind, value, p, seed = args
+def _dynamic_run(args: tuple[str, float, DynamicParams, int, ModelConfig]) -> DynamicRun:
+    kind, value, p, seed, model = args
     pen = kind == "pen"
     if pen:
         obj = ObjectConfig(
@@ -92,7 +112,7 @@ def _dynamic_run(args: tuple[str, float, DynamicParams, int]) -> DynamicRun:
         obj = ObjectConfig(OBJ, radius_m=0.01, length_m=0.06, pos_m=FAR_M, mass_kg=0.01)
     # A step, not a ramp: the slew limiter opened, the ceiling at the 3 A current limit.
     fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=54.0, slew_n_per_s=100_000.0))
-    rig = direct_rig(SpiralDesign.paper_prototype(), fw, objects=(obj,), seed=seed)
+    rig = direct_rig(SpiralDesign.paper_prototype(), fw, objects=(obj,), seed=seed, model=model)
     plant = rig.plant
     if pen:
         plant.hold_object(OBJ, world_m(*p.pen))
@@ -125,6 +145,7 @@ def _dynamic_run(args: tuple[str, float, DynamicParams, int]) -> DynamicRun:
                 plant.release_object(OBJ)
                 released = t
     last_touch = t if contact_units(plant, OBJ) else math.nan
+    extremes = plant.extremes()
     rig.close()
     if pen:
         held_after = (last_touch - released) if not math.isnan(released) else math.nan
@@ -132,22 +153,36 @@ def _dynamic_run(args: tuple[str, float, DynamicParams, int]) -> DynamicRun:
     else:
         held_after = math.nan
         held = not math.isnan(half) and not math.isnan(last_touch)
-    return DynamicRun(kind, value, first, half, max_wrap, held_after, held, tuple(trace))
+    return DynamicRun(kind, value, first, half, max_wrap, held_after, held, extremes, tuple(trace))
 
 
 def dynamic(
-    params: DynamicParams | None = None, seed: int = 0, progress: Progress | None = None, jobs: int = 1
+    params: DynamicParams | None = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+    jobs: int = 1,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> DynamicResult:
     """Fig. S11: a current step on cable 0 (DIRECT) against a pen on its support beside the tip (time to
-    a half wrap, then the pen is let go); objects thrown at the hanging arm (passive capture)."""
+    a half wrap, then the pen is let go); objects thrown at the hanging arm (passive capture); on the
+    plant ``model``."""
     p = params or DynamicParams()
-    items: list[tuple[str, float, DynamicParams, int]] = [("pen", t, p, seed) for t in p.step_tensions_n]
-    items += [("throw", v, p, seed) for v in p.throw_speeds_m_s]
+    items: list[tuple[str, float, DynamicParams, int, ModelConfig]] = [
+        ("pen", t, p, seed, model) for t in p.step_tensions_n
+    ]
+    items += [("throw", v, p, seed, model) for v in p.throw_speeds_m_s]
     return DynamicResult(p, seed, tuple(parallel_map(_dynamic_run, items, jobs, progress)))
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``."""
     p = sized(
         size,
         DynamicParams(step_tensions_n=(54.0,), throw_speeds_m_s=(2.0,), window_ms=150),
@@ -156,7 +191,7 @@ def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress |
             step_tensions_n=(10.0, 20.0, 35.0, 54.0), throw_speeds_m_s=(0.5, 1.0, 2.0, 3.0, 4.0, 6.0)
         ),
     )
-    return dynamic(p, seed, progress, jobs)
+    return dynamic(p, seed, progress, jobs, model)
 
 
 def table_rows(r: DynamicResult) -> list[Row]:
@@ -183,6 +218,7 @@ def table_rows(r: DynamicResult) -> list[Row]:
             rows.append(
                 ("  largest wrap, captured", f"{run.max_wrap_deg:.0f}°, {'yes' if run.held else 'no'}", "")
             )
+    rows.extend(extremes_rows(r.extremes))
     return rows
 
 
