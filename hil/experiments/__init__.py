@@ -1,7 +1,7 @@
 """Experiments that reproduce the paper's simulation results with the plant and the firmware (issue 8).
 
-Each experiment is a pure function of ``(design, params, seed)`` that runs the virtual board in lockstep
-(firmware + plant, :class:`hil.board.VirtualBoard`) and returns a frozen, picklable result with
+Each experiment is a pure function of ``(design, params, seed, model)`` that runs the virtual board in
+lockstep (firmware + plant, :class:`hil.board.VirtualBoard`) and returns a frozen, picklable result with
 ``as_dict()``; a ``progress(done, total)`` callback reports how far it is. Each experiment is one module
 (its parameters, its run, its table rows and its figure); the rig, the grasp trial, the geometry and the
 parallel map they share have their own. ``spirob-hil experiment NAME`` (:mod:`hil.cli_experiments`)
@@ -15,12 +15,13 @@ workspace      Note S2, Fig. 2E / S4: envelope ρw          random per-cable ten
                                                            three taper angles
 packing        Note S3, Fig. S5C: packed spiral = design b one cable's tension ramped (DIRECT) until every
                                                            joint sits at its limit
-strategy       Note S4, Fig. S6, Fig. 3C                   the GRASP state machine (left lever) with the
-                                                           strategy on and off, objects on a grid
-grasp-range    eq. (14), (15): d_min, d_max                strategy on/off grasps of cylinders of many
-                                                           diameters, the best wrap angle of each
-load           eq. (16), Fig. 2F: M(φ, d, F_max)           a grasp, then a growing downward load on the
-                                                           object until it slips out
+strategy       Note S4, Fig. S6, Fig. 3C                   the GRASP state machine (left lever): strategy
+                                                           off, on, on with the true-contact oracle, at
+                                                           the same jittered placements; Wilson, McNemar
+grasp-range    eq. (14), (15): d_min, d_max                a strategy-on grasp, then a growing pull along
+                                                           +x: pull-out force vs. diameter, bootstrap CI
+load           eq. (16), Fig. 2F: M(φ, d, F_max)           grasps at 2.5-20 N and friction 0-0.8, then a
+                                                           growing downward load: slope of held mass vs. F
 dynamic        Fig. S11: 0.06 s grasp, 120 ms capture      a current step on one cable (DIRECT); a thrown
                                                            object against the arm with one cable held
 =============  ==========================================  =============================================

@@ -7,9 +7,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..model_config import ModelConfig
 from ..spiral import SpiralDesign
 from . import contact, dynamic, grasp_range, load, packing, sensitivity, strategy, workspace
-from .common import Progress, Row, sized
+from .common import DEFAULT_MODEL, Progress, Row, sized
 
 
 @dataclass(frozen=True)
@@ -19,7 +20,8 @@ class Experiment:
     Attributes:
         name: the CLI word.
         summary: one line.
-        run: ``run(design, size, seed, progress, jobs)`` -> result.
+        run: ``run(design, size, seed, progress, jobs, model)`` -> result (``model``: the plant's model,
+            a preset or a sensitivity variant).
         rows: the result's numbers next to the paper's.
         samples: the result's sample counts, in words.
         plot: writes the figure, returns its path.
@@ -27,7 +29,7 @@ class Experiment:
 
     name: str
     summary: str
-    run: Callable[[SpiralDesign, str, int, Progress | None, int], Any]
+    run: Callable[[SpiralDesign, str, int, Progress | None, int, ModelConfig], Any]
     rows: Callable[[Any], list[Row]]
     samples: Callable[[Any], str]
     plot: Callable[[Any, Path], Path]
@@ -62,7 +64,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         ),
         Experiment(
             "strategy",
-            "objects on a grid grasped with the strategy on and off: success rates, range map (Note S4)",
+            "paired grasps, strategy off / on / on with true contact: Wilson intervals, McNemar (Note S4)",
             strategy.run_at_size,
             strategy.table_rows,
             strategy.describe_samples,
@@ -113,8 +115,10 @@ def run_experiment(
     seed: int = 0,
     progress: Progress | None = None,
     jobs: int = 1,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> Any:
-    """Run the experiment ``name`` at ``size`` (pure; the result is frozen and picklable).
+    """Run the experiment ``name`` at ``size`` on the plant ``model`` (pure; the result is frozen and
+    picklable).
 
     Raises:
         KeyError: unknown experiment.
@@ -122,4 +126,4 @@ def run_experiment(
     """
     exp = EXPERIMENTS[name]
     sized(size, 0, 0, 0)
-    return exp.run(design or SpiralDesign.paper_prototype(), size, seed, progress, max(1, jobs))
+    return exp.run(design or SpiralDesign.paper_prototype(), size, seed, progress, max(1, jobs), model)

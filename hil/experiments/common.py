@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
+
+from ..model_config import ModelConfig
+from ..plant_types import PhysicsExtremes
 
 Progress = Callable[[int, int], None]
 """``progress(done, total)``: work units done so far (trials or simulated milliseconds)."""
@@ -28,6 +31,12 @@ HELD_DROP_MM = 60.0
 settles and swings it by a few centimetres; a dropped object falls far more) ..."""
 HELD_SPEED_M_S = 0.05
 """... and is not moving faster than this at the end (not slipping out)."""
+SUCCESS_WRAP_DEG = 180.0
+"""A grasp succeeds if the object is held and the arm's contacts span at least half its circumference
+(fixed before the strategy experiment was run; eq. 15's "half way around")."""
+
+DEFAULT_MODEL = ModelConfig()
+"""The plant's default model: what an experiment runs on unless given a preset or a variant."""
 
 SIZES = ("tiny", "default", "large")
 """``tiny``: a smoke test of seconds; ``default``: the documented run (< 5 min on 2 cores); ``large``."""
@@ -55,6 +64,36 @@ def pct(x: float) -> str:
 def mm(x: float) -> str:
     """A length in metres as millimetres for a table (``none`` for NaN)."""
     return "none" if math.isnan(x) else f"{1000 * x:.1f} mm"
+
+
+NO_EXTREMES = PhysicsExtremes(0.0, 0.0, 0.0, 0.0)
+"""What an experiment with no trial reports."""
+
+
+def worst_extremes(extremes: Iterable[PhysicsExtremes]) -> PhysicsExtremes:
+    """The field-wise largest of several trials' :meth:`hil.plant.Plant.extremes`."""
+    out = NO_EXTREMES
+    for e in extremes:
+        out = PhysicsExtremes(
+            max(out.penetration_m, e.penetration_m),
+            max(out.penetration_ratio, e.penetration_ratio),
+            max(out.tension_n, e.tension_n),
+            max(out.limit_overshoot_rad, e.limit_overshoot_rad),
+        )
+    return out
+
+
+def extremes_rows(e: PhysicsExtremes) -> list[Row]:
+    """Table rows of the worst physics over an experiment's trials (is the figure trustworthy?)."""
+    return [
+        (
+            "largest arm-object penetration (all trials)",
+            f"{1000 * e.penetration_m:.2f} mm ({100 * e.penetration_ratio:.0f} % of the object's radius)",
+            "goal < 1 mm or < 10 % of the radius",
+        ),
+        ("largest cable tension (all trials)", f"{e.tension_n:.1f} N", ""),
+        ("largest joint overshoot past its limit", f"{math.degrees(e.limit_overshoot_rad):.2f}°", ""),
+    ]
 
 
 def pyplot() -> Any:

@@ -390,7 +390,7 @@ def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress |
             throw_positions=12,
         ),
     )
-    return dynamic(p, seed, progress, jobs)
+    return dynamic(p, seed, progress, jobs, model)
 
 
 def _ms(x: float) -> str:

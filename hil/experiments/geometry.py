@@ -8,7 +8,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ..plant import Plant
+from ..model_config import ModelConfig
+from ..plant import Plant, PlantConfig
 from ..spiral import SpiralDesign
 from .common import BASE_Z_M
 
@@ -143,3 +144,86 @@ class Envelope:
             p = self.pole + d.rho_w_m(theta + math.pi / 2) * complex(math.cos(phi), math.sin(phi))
             out.append((p.real, p.imag))
         return np.array(out)
+
+
+@dataclass(frozen=True)
+class ArmFootprint:
+    """The space the arm takes in the x-z plane when packed (the strategy's start) and when straight (the
+    plain ramp's start): one capsule per unit, positions relative to the arm's base.
+
+    Attributes:
+        packed: per unit ``(x0, z0, x1, z1, half_width)`` with the arm packed toward cable 0 (+x).
+        straight: the same with the arm hanging straight.
+    """
+
+    packed: tuple[tuple[float, float, float, float, float], ...]
+    straight: tuple[tuple[float, float, float, float, float], ...]
+
+    @classmethod
+    def of(cls, design: SpiralDesign, model: ModelConfig) -> ArmFootprint:
+        """Pose a plant of ``design`` and ``model`` packed and straight (kinematically) and read its units."""
+        plant = Plant(design, PlantConfig(model=model))
+        widths = [max(w0, w1) / 2 for _, w0, w1 in plant.unit_dimensions_m()]
+
+        def capsules() -> tuple[tuple[float, float, float, float, float], ...]:
+            pts = joint_points_xz(plant)
+            rel = pts - pts[0]  # unit_00's origin is the mount
+            return tuple(
+                (float(a.real), float(a.imag), float(b.real), float(b.imag), w)
+                for a, b, w in zip(rel[:-1], rel[1:], widths, strict=True)
+            )
+
+        plant.set_packed(0)
+        packed = capsules()
+        plant.set_straight()
+        return cls(packed, capsules())
+
+    def clearance_m(self, x_m: float, z_m: float, radius_m: float) -> float:
+        """Smallest gap between a cylinder (axis y, centre ``(x, z)`` from the base) and any unit, packed or
+        straight (negative: they overlap)."""
+        gap = math.inf
+        for x0, z0, x1, z1, half in (*self.packed, *self.straight):
+            dx, dz = x1 - x0, z1 - z0
+            t = ((x_m - x0) * dx + (z_m - z0) * dz) / (dx * dx + dz * dz)
+            t = min(1.0, max(0.0, t))
+            dist = math.hypot(x_m - (x0 + t * dx), z_m - (z0 + t * dz))
+            gap = min(gap, dist - half - radius_m)
+        return gap
+
+
+def jittered_placements(
+    foot: ArmFootprint,
+    diameter_m: float,
+    x_range_m: tuple[float, float],
+    z_range_m: tuple[float, float],
+    grid: tuple[int, int],
+    rng: np.random.Generator,
+    clearance_m: float,
+) -> list[tuple[float, float]]:
+    """One uniformly jittered object centre ``(x, z)`` per cell of a ``grid`` over the region, each
+    clearing the packed and the straight arm by ``clearance_m``; a cell wholly blocked takes a point from
+    anywhere in the region instead, so there are always ``grid[0] · grid[1]`` placements.
+
+    Raises:
+        ValueError: no point of the region clears the arm.
+    """
+    (x_lo, x_hi), (z_lo, z_hi) = x_range_m, z_range_m
+    nx, nz = grid
+
+    def draw(xs: tuple[float, float], zs: tuple[float, float], tries: int) -> tuple[float, float] | None:
+        for _ in range(tries):
+            x, z = float(rng.uniform(*xs)), float(rng.uniform(*zs))
+            if foot.clearance_m(x, z, diameter_m / 2) >= clearance_m:
+                return (x, z)
+        return None
+
+    out = []
+    for i in range(nx):
+        for j in range(nz):
+            cx = (x_lo + (x_hi - x_lo) * i / nx, x_lo + (x_hi - x_lo) * (i + 1) / nx)
+            cz = (z_lo + (z_hi - z_lo) * j / nz, z_lo + (z_hi - z_lo) * (j + 1) / nz)
+            point = draw(cx, cz, 50) or draw(x_range_m, z_range_m, 2000)
+            if point is None:
+                raise ValueError(f"no placement of a {diameter_m * 1000:g} mm object clears the arm")
+            out.append(point)
+    return out

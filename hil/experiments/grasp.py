@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -14,9 +14,10 @@ from controller.config import FirmwareConfig
 from protocol.dbus import Lever
 from protocol.messages import GraspState
 
-from ..model_config import ObjectConfig
+from ..model_config import ModelConfig, ObjectConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, S
+from .common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, SUCCESS_WRAP_DEG, S
 from .rig import Rig, contact_units, contact_wrap_deg, rc_frame, world_m
 
 
@@ -31,12 +32,20 @@ class GraspSetup:
         strategy_on: the bio-inspired strategy (packed start, reach, contact, wrap) or the plain ramp.
         mass_kg: object mass.
         length_m: cylinder length.
+        object_friction: the object's sliding friction coefficient (MuJoCo uses the larger of the
+            object's and the arm's).
         hold_s: how long the object must stay after its support is removed.
         release: remove the support at HOLD (False: the object stays fixed, a pole or a branch).
-        load_rate_n_per_s: if > 0, once the released object has been held for ``hold_s``, a downward
-            force on it grows at this rate until it drops out (the load experiment).
+        load_rate_n_per_s: if > 0, once the released object has been held for ``hold_s``, a force on it
+            along ``load_dir`` grows at this rate until it comes out (the load and grasp-range
+            experiments).
         load_cap_n: the load stops growing here.
+        load_dir: unit vector (world frame) of that force: ``(0, 0, −1)`` a weight, ``(1, 0, 0)`` a pull
+            away from the arm's axis.
+        contact_oracle: the simulator's true arm-object contact replaces the firmware's contact detector
+            (``GraspMachine.contact_override``): controller and physics told apart.
         firmware: firmware configuration (None = :func:`grasp_firmware`).
+        model: the plant's model (a preset or a sensitivity variant); the object is appended to it.
         seed: seed of the board.
     """
 
@@ -46,11 +55,15 @@ class GraspSetup:
     strategy_on: bool = True
     mass_kg: float = 0.02
     length_m: float = 0.06
+    object_friction: float = 0.8
     hold_s: float = 0.6
     release: bool = True
     load_rate_n_per_s: float = 0.0
     load_cap_n: float = 20.0
+    load_dir: tuple[float, float, float] = (0.0, 0.0, -1.0)
+    contact_oracle: bool = False
     firmware: FirmwareConfig | None = None
+    model: ModelConfig = field(default_factory=ModelConfig)
     seed: int = 0
 
 
@@ -66,16 +79,20 @@ class GraspOutcome:
         contact_s: time from the start of the grasp to the detected contact (strategy on); NaN if none.
         units_at_hold: arm units touching the object when HOLD was reached.
         units_after: arm units touching it ``hold_s`` after its support was removed.
-        wrap_deg: angular extent of the contacts around the object at the end.
+        wrap_deg: angular extent of the contacts around the object ``hold_s`` after its support was
+            removed (0 if HOLD was never reached).
         drop_mm: how far below its release height the object is at the end (negative: above).
         shift_mm: how far the object is from where it was released, at the end.
         held: HOLD reached, and ``hold_s`` after its support was removed the object still touches at
             least 2 units, is less than :data:`HELD_DROP_MM` below its release height and slower than
             :data:`HELD_SPEED_M_S`.
+        success: the grasp criterion fixed before the experiments ran: ``held`` and ``wrap_deg`` at
+            least :data:`~hil.experiments.common.SUCCESS_WRAP_DEG` (half the circumference).
         max_current_raw: largest |current| sent to an ESC.
-        load_n: with a load ramp, the extra downward force at which the object dropped out (more than
-            :data:`HELD_DROP_MM` below where the ramp started, or no contact); the cap if it never did;
-            NaN without a ramp or if it was not held.
+        extremes: the worst physics of the whole trial (:meth:`hil.plant.Plant.extremes`).
+        load_n: with a load ramp, the force at which the object came out (moved more than
+            :data:`HELD_DROP_MM` along the force from where the ramp started, or no contact); the cap if
+            it never did; NaN without a ramp or if it was not held.
     """
 
     setup: GraspSetup
@@ -88,13 +105,15 @@ class GraspOutcome:
     drop_mm: float
     shift_mm: float
     held: bool
+    success: bool
     max_current_raw: int
+    extremes: PhysicsExtremes
     load_n: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
+        """JSON-ready form (the setup without its firmware and model configurations)."""
         d = dataclasses.asdict(self)
-        d["setup"] = {k: v for k, v in d["setup"].items() if k != "firmware"}
+        d["setup"] = {k: v for k, v in d["setup"].items() if k not in ("firmware", "model")}
         return d
 
 
@@ -120,7 +139,12 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
     fw = setup.firmware or grasp_firmware()
     fw = fw.replaced(grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
     obj = ObjectConfig(
-        OBJ, radius_m=setup.diameter_m / 2, length_m=setup.length_m, pos_m=FAR_M, mass_kg=setup.mass_kg
+        OBJ,
+        radius_m=setup.diameter_m / 2,
+        length_m=setup.length_m,
+        pos_m=FAR_M,
+        mass_kg=setup.mass_kg,
+        friction=setup.object_friction,
     )
     rig = Rig(
         design,
@@ -129,9 +153,12 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
         objects=(obj,),
         start_packed=setup.strategy_on,
         seed=setup.seed,
+        model=setup.model,
     )
     plant = rig.plant
     plant.hold_object(OBJ)
+    if setup.contact_oracle:
+        rig.firmware.grasp.contact_override = lambda _now_us: bool(contact_units(plant, OBJ))
     target = world_m(setup.x_m, setup.z_m)
     t_start = -1
     t_contact = -1
@@ -171,20 +198,24 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
     shift_mm = float(np.linalg.norm(final - released_at)) * 1000
     speed = float(np.linalg.norm(final - before_end)) / 0.010
     held = t_hold >= 0 and units_after >= 2 and drop_mm < HELD_DROP_MM and speed < HELD_SPEED_M_S
+    wrap_deg = contact_wrap_deg(plant, OBJ) if t_hold >= 0 else 0.0
+    state_name = GraspState(rig.firmware.grasp_state).name
     if held and setup.release and setup.load_rate_n_per_s > 0:
         load_n = _load_ramp(rig, setup)
     out = GraspOutcome(
         setup,
-        GraspState(rig.firmware.grasp_state).name,
+        state_name,
         (t_hold - t_start) / S if t_hold >= 0 else math.nan,
         (t_contact - t_start) / S if t_contact >= 0 else math.nan,
         units_at_hold,
         units_after,
-        contact_wrap_deg(plant, OBJ) if t_hold >= 0 else 0.0,
+        wrap_deg,
         drop_mm,
         shift_mm,
         held,
+        held and wrap_deg >= SUCCESS_WRAP_DEG,
         max_current,
+        plant.extremes(),
         load_n,
     )
     rig.close()
@@ -192,18 +223,20 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
 
 
 def _load_ramp(rig: Rig, setup: GraspSetup) -> float:
-    """Grow a downward force on the held object until it drops out; the force at that moment [N]."""
+    """Grow a force along ``setup.load_dir`` on the held object until it comes out; the force then [N]."""
     plant = rig.plant
-    z0 = float(plant.object_pose(OBJ).pos_m[2])
+    direction = np.asarray(setup.load_dir, dtype=np.float64)
+    direction /= np.linalg.norm(direction)
+    p0 = plant.object_pose(OBJ).pos_m.copy()
     rate = setup.load_rate_n_per_s / S
     t0 = rig.now_us
     force = 0.0
     while force < setup.load_cap_n:
         force = min(setup.load_cap_n, rate * (rig.now_us - t0))
-        plant.apply_object_force(OBJ, (0.0, 0.0, -force))
+        plant.apply_object_force(OBJ, tuple(float(v) for v in force * direction))
         rig.step()
-        dropped = (z0 - float(plant.object_pose(OBJ).pos_m[2])) * 1000 > HELD_DROP_MM
-        if dropped or not contact_units(plant, OBJ):
+        moved_mm = float(np.dot(plant.object_pose(OBJ).pos_m - p0, direction)) * 1000
+        if moved_mm > HELD_DROP_MM or not contact_units(plant, OBJ):
             return force
     return setup.load_cap_n
 

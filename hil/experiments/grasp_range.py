@@ -1,4 +1,12 @@
-"""grasp-range (eq. 14, 15): the smallest and largest cylinders the arm wraps half way around."""
+"""grasp-range (eq. 14, 15): the force that pulls a grasped object out, against its diameter, next to
+d_min (the packed spiral's hole) and d_max (the whole length wrapping half the object).
+
+Each trial: a free 20 g cylinder on its support, grasped with the strategy on; its support is removed at
+HOLD; after ``hold_s`` a force on it along +x (horizontal, away from the arm's axis, the side the object
+is on) grows at a fixed rate until the object comes out (moved 60 mm along the force, or no contact
+left). A grasp that did not hold the object counts as a pull-out force of 0 N. Per diameter: the mean
+pull-out force over the placements with its percentile bootstrap 95 % interval.
+"""
 
 from __future__ import annotations
 
@@ -8,32 +16,63 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from ..model_config import ModelConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import Progress, Row, mm, pyplot, save_figure, sized
+from .common import (
+    DEFAULT_MODEL,
+    Progress,
+    Row,
+    extremes_rows,
+    mm,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
+from .geometry import ArmFootprint, jittered_placements
 from .grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
 from .parallel import parallel_map
+from .stats import bootstrap_interval
+
+PULL_DIR = (1.0, 0.0, 0.0)
+"""The pull-out force's direction: horizontal, away from the arm's axis (+x, the object's side)."""
 
 
 @dataclass(frozen=True)
 class GraspRangeParams:
     """Attributes:
-    diameters_m: cylinders to try.
-    gaps_m: horizontal gap between the hanging arm's axis and the cylinder's near surface.
-    drops_m: depth of the cylinder's top below the base.
-    half_wrap_deg: the wrap that counts ("at least half way around", eq. 15).
-    wrap_n: wrap tension (a geometric question: more than the grasp default, well within 3 A).
+    diameters_m: cylinders to try (around d_min = 12.8 mm and up to d_max = 123 mm on the prototype).
+    gap_range_m: horizontal gap between the arm's axis and the cylinder's near surface, low and high.
+    depth_range_m: depth of the cylinder's top below the base, low and high.
+    grid: cells over (gap, depth); one jittered placement per cell.
+    clearance_m: smallest gap kept between the object and the packed or straight arm.
+    wrap_n: wrap tension of the grasp.
+    pull_rate_n_per_s: growth of the pull-out force.
+    pull_cap_n: the force stops growing here (a pull-out force of ``pull_cap_n`` means "not pulled out").
+    mass_kg: object mass.
+    hold_s: the released object is held this long before the pull starts.
+    resamples: bootstrap resamples.
     """
 
-    diameters_m: tuple[float, ...] = (0.004, 0.006, 0.009, 0.013, 0.018, 0.026, 0.036, 0.05, 0.07, 0.1, 0.13)
-    gaps_m: tuple[float, ...] = (0.02, 0.04)
-    drops_m: tuple[float, ...] = (0.06, 0.09)
-    half_wrap_deg: float = 180.0
-    wrap_n: float = 15.0
+    diameters_m: tuple[float, ...] = (0.006, 0.009, 0.013, 0.018, 0.026, 0.036, 0.05, 0.07, 0.1, 0.13)
+    gap_range_m: tuple[float, float] = (0.005, 0.045)
+    depth_range_m: tuple[float, float] = (0.04, 0.12)
+    grid: tuple[int, int] = (3, 2)
+    clearance_m: float = 0.002
+    wrap_n: float = 10.0
+    pull_rate_n_per_s: float = 5.0
+    pull_cap_n: float = 20.0
+    mass_kg: float = 0.02
+    hold_s: float = 0.5
+    resamples: int = 10_000
 
 
 @dataclass(frozen=True)
 class GraspRangeResult:
-    """The best wrap around each diameter, and the smallest and largest wrapped half way."""
+    """Pull-out force per diameter with its bootstrap interval, against d_min and d_max."""
 
     params: GraspRangeParams
     seed: int
@@ -41,40 +80,71 @@ class GraspRangeResult:
     d_max_paper_m: float
     outcomes: tuple[GraspOutcome, ...]
 
-    def best_wrap_deg(self) -> list[tuple[float, float]]:
-        """``(diameter, best wrap angle over placements and strategies)`` per diameter."""
+    def per_diameter(self) -> list[dict[str, Any]]:
+        """Per diameter: trials, held, wrapped >= 180°, mean and median pull-out force [N] (0 N for a grasp
+        that did not hold) with the mean's bootstrap 95 % interval."""
         out = []
-        for d in self.params.diameters_m:
-            wraps = [o.wrap_deg for o in self.outcomes if o.setup.diameter_m == d and o.state == "HOLD"]
-            out.append((d, max(wraps, default=0.0)))
+        for k, d in enumerate(self.params.diameters_m):
+            sel = [o for o in self.outcomes if o.setup.diameter_m == d]
+            forces = [pull_out_n(o) for o in sel]
+            seed = self.seed * 1000 + k
+            lo, hi = bootstrap_interval(forces, "mean", 0.95, self.params.resamples, seed)
+            out.append(
+                {
+                    "diameter_m": d,
+                    "n": len(sel),
+                    "held": sum(o.held for o in sel),
+                    "wrapped": sum(o.success for o in sel),
+                    "pull_out_mean_n": float(np.mean(forces)) if forces else math.nan,
+                    "pull_out_median_n": float(np.median(forces)) if forces else math.nan,
+                    "pull_out_ci95_n": [lo, hi],
+                }
+            )
         return out
+
+    def _held_range(self) -> list[float]:
+        """Diameters whose mean pull-out interval lies above 0 N."""
+        return [r["diameter_m"] for r in self.per_diameter() if r["pull_out_ci95_n"][0] > 0.0]
 
     @property
     def d_min_sim_m(self) -> float:
-        """Smallest diameter wrapped at least half way (NaN if none)."""
-        ok = [d for d, w in self.best_wrap_deg() if w >= self.params.half_wrap_deg]
+        """Smallest diameter whose mean pull-out force's 95 % interval excludes 0 (NaN if none)."""
+        ok = self._held_range()
         return min(ok) if ok else math.nan
 
     @property
     def d_max_sim_m(self) -> float:
-        """Largest diameter wrapped at least half way (NaN if none)."""
-        ok = [d for d, w in self.best_wrap_deg() if w >= self.params.half_wrap_deg]
+        """Largest diameter whose mean pull-out force's 95 % interval excludes 0 (NaN if none)."""
+        ok = self._held_range()
         return max(ok) if ok else math.nan
+
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every trial."""
+        return worst_extremes(o.extremes for o in self.outcomes)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {
             "experiment": "grasp-range",
             "seed": self.seed,
+            "pull_direction": list(PULL_DIR),
             "d_min_paper_m": self.d_min_paper_m,
             "d_max_paper_m": self.d_max_paper_m,
             "d_min_sim_m": self.d_min_sim_m,
             "d_max_sim_m": self.d_max_sim_m,
-            "best_wrap_deg": [{"diameter_m": d, "wrap_deg": w} for d, w in self.best_wrap_deg()],
+            "per_diameter": self.per_diameter(),
+            "penetration_m": self.extremes.penetration_m,
+            "extremes": self.extremes.as_dict(),
             "trials": len(self.outcomes),
             "outcomes": [o.as_dict() for o in self.outcomes],
             "params": dataclasses.asdict(self.params),
         }
+
+
+def pull_out_n(o: GraspOutcome) -> float:
+    """The force that pulled the object out of one trial's grasp; 0 N if the grasp did not hold it."""
+    return 0.0 if math.isnan(o.load_n) else o.load_n
 
 
 def grasp_range(
@@ -83,64 +153,102 @@ def grasp_range(
     seed: int = 0,
     progress: Progress | None = None,
     jobs: int = 1,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> GraspRangeResult:
-    """Cylinders of many diameters, fixed beside the arm (held on their support throughout), grasped with
-    the strategy on and off; the wrap angle of the contacts once the grasp holds, against the paper's
-    d_min (eq. 14) and d_max (eq. 15)."""
+    """Free cylinders of many diameters, each at jittered placements clear of the packed and straight arm,
+    grasped with the strategy on, released, then pulled out along +x (see the module); on the plant
+    ``model``; against the paper's d_min (eq. 14) and d_max (eq. 15)."""
     design = design or SpiralDesign.paper_prototype()
     p = params or GraspRangeParams()
     fw = grasp_firmware(grasp_wrap_n=p.wrap_n)
-    setups = [
-        GraspSetup(
-            gap + d / 2, -(drop + d / 2), d, strategy_on=on, hold_s=0.3, release=False, firmware=fw, seed=seed
-        )
-        for d in p.diameters_m
-        for gap in p.gaps_m
-        for drop in p.drops_m
-        for on in (True, False)
-    ]
+    foot = ArmFootprint.of(design, model)
+    setups = []
+    for d in p.diameters_m:
+        rng = np.random.default_rng([seed, round(d * 1e6)])
+        xs = (p.gap_range_m[0] + d / 2, p.gap_range_m[1] + d / 2)
+        zs = (-(p.depth_range_m[1] + d / 2), -(p.depth_range_m[0] + d / 2))
+        for x, z in jittered_placements(foot, d, xs, zs, p.grid, rng, p.clearance_m):
+            setups.append(
+                GraspSetup(
+                    x,
+                    z,
+                    d,
+                    strategy_on=True,
+                    mass_kg=p.mass_kg,
+                    hold_s=p.hold_s,
+                    load_rate_n_per_s=p.pull_rate_n_per_s,
+                    load_cap_n=p.pull_cap_n,
+                    load_dir=PULL_DIR,
+                    firmware=fw,
+                    model=model,
+                    seed=seed,
+                )
+            )
     outcomes = parallel_map(grasp_trial_job, [(s, design) for s in setups], jobs, progress)
     return GraspRangeResult(p, seed, design.d_min_m, design.d_max_m, tuple(outcomes))
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``.
+
+    ``tiny``: one 20 mm cylinder, one placement; ``default``: 10 diameters x 6 placements; ``large``:
+    x 12 placements."""
     p = sized(
         size,
-        GraspRangeParams(diameters_m=(0.013,), gaps_m=(0.02,), drops_m=(0.06,)),
+        GraspRangeParams(
+            diameters_m=(0.02,), gap_range_m=(0.03, 0.03), depth_range_m=(0.1, 0.1), grid=(1, 1)
+        ),
         GraspRangeParams(),
-        GraspRangeParams(gaps_m=(0.015, 0.03, 0.045), drops_m=(0.0, 0.04, 0.07, 0.1)),
+        GraspRangeParams(grid=(4, 3)),
     )
-    return grasp_range(design, p, seed, progress, jobs)
+    return grasp_range(design, p, seed, progress, jobs, model)
 
 
 def table_rows(r: GraspRangeResult) -> list[Row]:
-    """The result\'s numbers next to the paper\'s, one row each."""
+    """The result's numbers next to the paper's, one row each."""
     rows: list[Row] = [
         (
-            "smallest diameter wrapped >= half way",
+            "smallest diameter pulled out only by a force > 0 (95 % CI)",
             mm(r.d_min_sim_m),
-            f"d_min = {mm(r.d_min_paper_m)} (eq. 14)",
+            f"d_min = {mm(r.d_min_paper_m)} (eq. 14: the packed spiral's hole)",
         ),
         (
-            "largest diameter wrapped >= half way",
+            "largest such diameter",
             mm(r.d_max_sim_m),
-            f"d_max = {mm(r.d_max_paper_m)} (eq. 15)",
+            f"d_max = {mm(r.d_max_paper_m)} (eq. 15: whole length wraps half way)",
         ),
     ]
-    for d, w in r.best_wrap_deg():
+    for row in r.per_diameter():
+        d = row["diameter_m"]
+        lo, hi = row["pull_out_ci95_n"]
+        where = "< d_min" if d < r.d_min_paper_m else "> d_max" if d > r.d_max_paper_m else "in range"
         rows.append(
-            (f"  best wrap around {d * 1000:g} mm", f"{w:.0f}°", "" if d > r.d_min_paper_m else "< d_min")
+            (
+                f"  {d * 1000:g} mm: mean pull-out force (95 % CI); held, wrapped / n",
+                f"{row['pull_out_mean_n']:.2f} N ({lo:.2f}-{hi:.2f}); "
+                f"{row['held']}, {row['wrapped']} / {row['n']}",
+                where,
+            )
         )
+    rows.extend(extremes_rows(r.extremes))
     return rows
 
 
 def describe_samples(r: GraspRangeResult) -> str:
-    """The result\'s sample counts, in words."""
+    """The result's sample counts, in words."""
     p = r.params
+    cells = p.grid[0] * p.grid[1]
     return (
-        f"{len(p.diameters_m)} diameters x {len(p.gaps_m) * len(p.drops_m)} placements x 2 strategies = "
-        f"{len(r.outcomes)} grasps of fixed cylinders at {p.wrap_n:g} N"
+        f"{len(p.diameters_m)} diameters x {cells} placements = {len(r.outcomes)} grasps (strategy on, "
+        f"{p.wrap_n:g} N wrap), pulled along +x at {p.pull_rate_n_per_s:g} N/s up to {p.pull_cap_n:g} N; "
+        f"bootstrap {p.resamples} resamples"
     )
 
 
@@ -148,19 +256,25 @@ def plot_figure(r: GraspRangeResult, out: Path) -> Path:
     """Write the figure into the directory ``out``; returns its path (``grasp-range.png``)."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    for on, marker in ((True, "^"), (False, "v")):
-        xs = [o.setup.diameter_m * 1000 for o in r.outcomes if o.setup.strategy_on == on]
-        ys = [o.wrap_deg for o in r.outcomes if o.setup.strategy_on == on]
-        ax.plot(xs, ys, marker, ls="", alpha=0.5, label=f"strategy {'on' if on else 'off'} (each placement)")
-    best = r.best_wrap_deg()
-    ax.plot([d * 1000 for d, _ in best], [w for _, w in best], "k-", lw=1.2, label="best")
-    ax.axhline(r.params.half_wrap_deg, color="r", ls="--", lw=1, label="half way (eq. 15)")
+    ax.plot(
+        [o.setup.diameter_m * 1000 for o in r.outcomes],
+        [pull_out_n(o) for o in r.outcomes],
+        "o",
+        alpha=0.4,
+        label="each placement (0 N: not held)",
+    )
+    rows = r.per_diameter()
+    ds = np.array([row["diameter_m"] * 1000 for row in rows])
+    mean = np.array([row["pull_out_mean_n"] for row in rows])
+    lo = np.array([row["pull_out_ci95_n"][0] for row in rows])
+    hi = np.array([row["pull_out_ci95_n"][1] for row in rows])
+    ax.errorbar(ds, mean, yerr=[mean - lo, hi - mean], fmt="k-", capsize=3, label="mean, bootstrap 95 % CI")
     ax.axvline(r.d_min_paper_m * 1000, color="g", ls=":", label=f"d_min = {r.d_min_paper_m * 1000:.1f} mm")
     ax.axvline(r.d_max_paper_m * 1000, color="m", ls=":", label=f"d_max = {r.d_max_paper_m * 1000:.0f} mm")
     ax.set_xscale("log")
     ax.set_xlabel("cylinder diameter [mm]")
-    ax.set_ylabel("wrap angle of the contacts [°]")
+    ax.set_ylabel("pull-out force along +x [N]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
-    ax.set_title("grasp range: how far the arm wraps around fixed cylinders", fontsize=10)
+    ax.set_title("grasp range: force that pulls a grasped object out", fontsize=10)
     return save_figure(fig, out / "grasp-range.png")

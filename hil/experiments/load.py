@@ -1,4 +1,13 @@
-"""load (eq. 16, Fig. 2F): the heaviest object held per diameter at a fixed cable force."""
+"""load (eq. 16, Fig. 2F): the mass a grasp holds against the wrap force, per contact friction, next to
+the bound ``M(φ, d, F)``.
+
+Each trial: a 20 g cylinder grasped with the strategy on at wrap force F, its support removed at HOLD,
+held ``hold_s``, then a downward force on it grows until it comes out (moved 60 mm down, or no contact
+left). Held mass = 20 g + that force / g. The arm's and the object's friction are both set to μ (MuJoCo
+takes the larger of the two). Per μ, the OLS slope of held mass against F over the trials that held the
+object, with its 95 % interval, beside eq. (16)'s slope ``dM/dF = (1 − d/((d + δ(0))·e^{kπ}))/g``.
+Trials whose grasp did not hold the 20 g object are left out of the fit and counted.
+"""
 
 from __future__ import annotations
 
@@ -10,66 +19,120 @@ from typing import Any
 
 import numpy as np
 
+from ..model_config import ModelConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import G, Progress, Row, pct, pyplot, save_figure, sized
+from .common import (
+    DEFAULT_MODEL,
+    G,
+    Progress,
+    Row,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
+from .geometry import ArmFootprint, jittered_placements
 from .grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
 from .parallel import parallel_map
+from .stats import Slope, ols_slope
 
 
 @dataclass(frozen=True)
 class LoadParams:
     """Attributes:
-    diameters_m: object diameters.
-    forces_n: wrap tensions (the cable force F_max of eq. 16).
-    placements: ``(gap, depth)`` candidates: centre at ``(gap + d/2, −(depth + d/2))``; the best of them.
-    load_rate_n_per_s: growth of the extra downward force.
+    diameter_m: the object's diameter.
+    forces_n: wrap forces F (eq. 16's F_max), within the firmware's 20 N ceiling.
+    frictions: contact friction μ of the arm's and the object's surfaces.
+    gap_range_m: horizontal gap between the arm's axis and the object's near surface, low and high.
+    depth_range_m: depth of the object's top below the base, low and high.
+    grid: cells over (gap, depth); one jittered placement per cell, the same for every F and μ.
+    clearance_m: smallest gap kept between the object and the packed or straight arm.
+    ramp_s: the downward load grows from 0 to twice eq. (16)'s bound in this time.
+    mass_kg: object mass (without the load).
+    hold_s: the released object is held this long before the load grows.
     """
 
-    diameters_m: tuple[float, ...] = (0.013, 0.017, 0.022, 0.03)
-    forces_n: tuple[float, ...] = (5.0, 10.0)
-    placements: tuple[tuple[float, float], ...] = ((0.03, 0.09), (0.02, 0.07), (0.04, 0.09))
-    load_rate_n_per_s: float = 2.0
+    diameter_m: float = 0.02
+    forces_n: tuple[float, ...] = (2.5, 5.0, 10.0, 20.0)
+    frictions: tuple[float, ...] = (0.0, 0.3, 0.8)
+    gap_range_m: tuple[float, float] = (0.015, 0.045)
+    depth_range_m: tuple[float, float] = (0.06, 0.12)
+    grid: tuple[int, int] = (2, 2)
+    clearance_m: float = 0.002
+    ramp_s: float = 4.0
+    mass_kg: float = 0.02
+    hold_s: float = 0.5
+
+
+def _friction(o: GraspOutcome) -> float:
+    return o.setup.model.arm.geom_friction
+
+
+def _force(o: GraspOutcome) -> float:
+    fw = o.setup.firmware
+    return fw.grasp.wrap_n if fw is not None else math.nan
+
+
+def held_kg(o: GraspOutcome) -> float:
+    """Mass held by one trial: the object's plus the load at which it came out (NaN: not held)."""
+    return o.setup.mass_kg + o.load_n / G
 
 
 @dataclass(frozen=True)
 class LoadResult:
-    """The heaviest object held per diameter and wrap force, against M(φ, d, F_max)."""
+    """Held mass against wrap force per friction, its slope, and eq. (16)'s."""
 
     params: LoadParams
     seed: int
+    bound_slope_kg_per_n: float
     outcomes: tuple[GraspOutcome, ...]
-    bounds_kg: tuple[tuple[float, float, float], ...]  # (force, diameter, M bound)
 
-    def rows(self) -> list[dict[str, float]]:
-        """Per (force, diameter): the best held mass over placements (NaN: never held) and the bound."""
+    def _select(self, mu: float) -> list[GraspOutcome]:
+        return [o for o in self.outcomes if _friction(o) == mu]
+
+    def slope(self, mu: float) -> Slope:
+        """OLS slope of held mass [kg] against wrap force [N] over the trials at ``mu`` that held."""
+        sel = [o for o in self._select(mu) if not math.isnan(o.load_n)]
+        return ols_slope([_force(o) for o in sel], [held_kg(o) for o in sel])
+
+    def rows(self) -> list[dict[str, Any]]:
+        """Per friction and force: trials, held, mean held mass [kg], and the bound [kg]."""
         out = []
-        for force, d, bound in self.bounds_kg:
-            held = [
-                o.setup.mass_kg + o.load_n / G
-                for o in self.outcomes
-                if o.setup.diameter_m == d
-                and o.setup.firmware is not None
-                and o.setup.firmware.grasp.wrap_n == force
-                and not math.isnan(o.load_n)
-            ]
-            best = max(held) if held else math.nan
-            out.append(
-                {
-                    "force_n": force,
-                    "diameter_m": d,
-                    "held_kg": best,
-                    "bound_kg": bound,
-                    "ratio": best / bound if held else math.nan,
-                }
-            )
+        d = self.params.diameter_m
+        for mu in self.params.frictions:
+            for f in self.params.forces_n:
+                sel = [o for o in self._select(mu) if _force(o) == f]
+                held = [held_kg(o) for o in sel if not math.isnan(o.load_n)]
+                out.append(
+                    {
+                        "friction": mu,
+                        "force_n": f,
+                        "n": len(sel),
+                        "held": len(held),
+                        "held_kg_mean": float(np.mean(held)) if held else math.nan,
+                        "bound_kg": self.bound_slope_kg_per_n * f,
+                        "diameter_m": d,
+                    }
+                )
         return out
+
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every trial."""
+        return worst_extremes(o.extremes for o in self.outcomes)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {
             "experiment": "load",
             "seed": self.seed,
+            "bound_slope_kg_per_n": self.bound_slope_kg_per_n,
+            "slopes": [{"friction": mu, **self.slope(mu).as_dict()} for mu in self.params.frictions],
             "rows": self.rows(),
+            "penetration_m": self.extremes.penetration_m,
+            "extremes": self.extremes.as_dict(),
             "trials": len(self.outcomes),
             "outcomes": [o.as_dict() for o in self.outcomes],
             "params": dataclasses.asdict(self.params),
@@ -82,96 +145,131 @@ def load(
     seed: int = 0,
     progress: Progress | None = None,
     jobs: int = 1,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> LoadResult:
-    """Grasp (strategy on) a 20 g cylinder, remove its support, then grow a downward force on it until it
-    slips out: the heaviest load held per diameter at a fixed wrap tension F, against eq. (16)."""
+    """Grasp (strategy on) a cylinder at each wrap force and friction, at jittered placements, remove its
+    support, then grow a downward force on it until it comes out (see the module); on the plant ``model``
+    with its friction replaced by each μ."""
     design = design or SpiralDesign.paper_prototype()
     p = params or LoadParams()
+    d = p.diameter_m
+    bound_slope = design.max_load_kg(d, 1.0)  # eq. (16) is proportional to F
+    rng = np.random.default_rng([seed, round(d * 1e6)])
+    xs = (p.gap_range_m[0] + d / 2, p.gap_range_m[1] + d / 2)
+    zs = (-(p.depth_range_m[1] + d / 2), -(p.depth_range_m[0] + d / 2))
+    spots = jittered_placements(ArmFootprint.of(design, model), d, xs, zs, p.grid, rng, p.clearance_m)
     setups = []
-    bounds = []
-    for force in p.forces_n:
-        fw = grasp_firmware(grasp_wrap_n=force)
-        for d in p.diameters_m:
-            bounds.append((force, d, design.max_load_kg(d, force)))
-            for gap, depth in p.placements:
+    for mu in p.frictions:
+        variant = dataclasses.replace(model, arm=dataclasses.replace(model.arm, geom_friction=mu))
+        for f in p.forces_n:
+            fw = grasp_firmware(grasp_wrap_n=f)
+            cap_n = 2.0 * bound_slope * f * G
+            for x, z in spots:
                 setups.append(
                     GraspSetup(
-                        gap + d / 2,
-                        -(depth + d / 2),
+                        x,
+                        z,
                         d,
                         strategy_on=True,
-                        hold_s=0.5,
+                        mass_kg=p.mass_kg,
+                        hold_s=p.hold_s,
+                        load_rate_n_per_s=cap_n / p.ramp_s,
+                        load_cap_n=cap_n,
+                        object_friction=mu,
                         firmware=fw,
-                        load_rate_n_per_s=p.load_rate_n_per_s,
+                        model=variant,
                         seed=seed,
                     )
                 )
     outcomes = parallel_map(grasp_trial_job, [(s, design) for s in setups], jobs, progress)
-    return LoadResult(p, seed, tuple(outcomes), tuple(bounds))
+    return LoadResult(p, seed, bound_slope, tuple(outcomes))
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``.
+
+    ``tiny``: 2 forces at μ = 0.8, one placement; ``default``: 4 forces x 3 frictions x 4 placements;
+    ``large``: 9 placements."""
     p = sized(
         size,
-        LoadParams(diameters_m=(0.02,), forces_n=(5.0,), placements=((0.03, 0.09),)),
+        LoadParams(
+            forces_n=(5.0, 10.0),
+            frictions=(0.8,),
+            gap_range_m=(0.03, 0.03),
+            depth_range_m=(0.09, 0.09),
+            grid=(1, 1),
+        ),
         LoadParams(),
-        LoadParams(diameters_m=(0.013, 0.016, 0.02, 0.025, 0.03, 0.04), forces_n=(5.0, 10.0, 15.0)),
+        LoadParams(grid=(3, 3)),
     )
-    return load(design, p, seed, progress, jobs)
+    return load(design, p, seed, progress, jobs, model)
+
+
+def _g(kg: float) -> str:
+    return "not held" if math.isnan(kg) else f"{kg * 1000:.0f} g"
 
 
 def table_rows(r: LoadResult) -> list[Row]:
-    """The result\'s numbers next to the paper\'s, one row each."""
+    """The result's numbers next to the paper's, one row each."""
+    bound = r.bound_slope_kg_per_n * 1000
     rows: list[Row] = []
-    for row in r.rows():
-        held = row["held_kg"]
+    for mu in r.params.frictions:
+        s = r.slope(mu)
         rows.append(
             (
-                f"F = {row['force_n']:g} N, d = {row['diameter_m'] * 1000:g} mm: heaviest held",
-                "not held" if math.isnan(held) else f"{held * 1000:.0f} g ({pct(row['ratio'])} of the bound)",
-                f"M <= {row['bound_kg'] * 1000:.0f} g (eq. 16)",
+                f"μ = {mu:g}: slope of held mass vs wrap force (95 % CI), n held",
+                f"{s.slope * 1000:.1f} g/N ({s.low * 1000:.1f} to {s.high * 1000:.1f}), {s.n}",
+                f"dM/dF = {bound:.1f} g/N (eq. 16, an upper bound)",
             )
         )
+        for row in r.rows():
+            if row["friction"] != mu:
+                continue
+            rows.append(
+                (
+                    f"  F = {row['force_n']:g} N: mean held mass, held / n",
+                    f"{_g(row['held_kg_mean'])}, {row['held']} / {row['n']}",
+                    f"M <= {row['bound_kg'] * 1000:.0f} g",
+                )
+            )
+    rows.extend(extremes_rows(r.extremes))
     return rows
 
 
 def describe_samples(r: LoadResult) -> str:
-    """The result\'s sample counts, in words."""
+    """The result's sample counts, in words."""
     p = r.params
+    cells = p.grid[0] * p.grid[1]
     return (
-        f"{len(p.forces_n)} forces x {len(p.diameters_m)} diameters x {len(p.placements)} placements = "
-        f"{len(r.outcomes)} grasps, load growing at {p.load_rate_n_per_s:g} N/s"
+        f"{len(p.forces_n)} wrap forces x {len(p.frictions)} frictions x {cells} placements = "
+        f"{len(r.outcomes)} grasps of a {p.diameter_m * 1000:g} mm cylinder, load growing to twice the bound "
+        f"in {p.ramp_s:g} s"
     )
 
 
-def plot_figure(r: LoadResult, out: Path, design: SpiralDesign | None = None) -> Path:
+def plot_figure(r: LoadResult, out: Path) -> Path:
     """Write the figure into the directory ``out``; returns its path (``load.png``)."""
     plt = pyplot()
-    design = design or SpiralDesign.paper_prototype()
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    dd = np.linspace(0.005, max(r.params.diameters_m) * 1.3, 100)
-    for k, force in enumerate(r.params.forces_n):
+    ff = np.linspace(0.0, max(r.params.forces_n) * 1.05, 50)
+    ax.plot(ff, r.bound_slope_kg_per_n * ff * 1000, "k--", lw=1, label="bound M(φ, d, F) (eq. 16)")
+    for k, mu in enumerate(r.params.frictions):
         colour = f"C{k}"
-        ax.plot(
-            dd * 1000,
-            [design.max_load_kg(float(d), force) * 1000 for d in dd],
-            "--",
-            color=colour,
-            lw=1,
-            label=f"bound M(φ, d, {force:g} N)",
-        )
-        rows = [x for x in r.rows() if x["force_n"] == force]
-        ax.plot(
-            [x["diameter_m"] * 1000 for x in rows],
-            [x["held_kg"] * 1000 for x in rows],
-            "o-",
-            color=colour,
-            label=f"held in simulation, F = {force:g} N",
-        )
-    ax.set_xlabel("object diameter [mm]")
+        sel = [o for o in r.outcomes if _friction(o) == mu and not math.isnan(o.load_n)]
+        ax.plot([_force(o) for o in sel], [held_kg(o) * 1000 for o in sel], "o", color=colour, alpha=0.5)
+        s = r.slope(mu)
+        if not math.isnan(s.slope):
+            ax.plot(ff, (s.intercept + s.slope * ff) * 1000, "-", color=colour, label=f"μ = {mu:g}: OLS fit")
+    ax.set_xlabel("wrap force F [N]")
     ax.set_ylabel("mass held [g]")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7)
-    ax.set_title("load: heaviest object held vs. the bound of eq. (16)", fontsize=10)
+    ax.set_title(f"load: mass held vs wrap force, d = {r.params.diameter_m * 1000:g} mm", fontsize=10)
     return save_figure(fig, out / "load.png")

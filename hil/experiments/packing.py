@@ -12,8 +12,10 @@ import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
 
+from ..model_config import ModelConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import BASE_Z_M, Progress, Row, pyplot, save_figure, sized
+from .common import BASE_Z_M, DEFAULT_MODEL, Progress, Row, extremes_rows, pyplot, save_figure, sized
 from .geometry import fit_log_spiral, joint_points_xz
 from .rig import direct_rig
 
@@ -52,6 +54,7 @@ class PackingResult:
     close_order: tuple[int, ...]
     close_tension_n: tuple[float, ...]
     order_correlation: float
+    extremes: PhysicsExtremes
     ramp_tension_n: tuple[float, ...] = field(repr=False)
     closed_count: tuple[int, ...] = field(repr=False)
     joint_points: tuple[tuple[float, float], ...] = field(repr=False)
@@ -74,6 +77,7 @@ class PackingResult:
             "close_order": list(self.close_order),
             "close_tension_n": list(self.close_tension_n),
             "order_correlation": self.order_correlation,
+            "extremes": self.extremes.as_dict(),
             "params": dataclasses.asdict(self.params),
         }
 
@@ -83,13 +87,16 @@ def packing(
     params: PackingParams | None = None,
     seed: int = 0,
     progress: Progress | None = None,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> PackingResult:
     """Ramp cable 0's tension through the firmware (DIRECT) until every joint is at its limit Δθ; fit a
-    logarithmic spiral to the joints; record in which order the joints closed (Note S3, Fig. S5C)."""
+    logarithmic spiral to the joints; record in which order the joints closed (Note S3, Fig. S5C).
+
+    ``model`` is the plant's model (a preset or a sensitivity variant)."""
     design = design or SpiralDesign.paper_prototype()
     p = params or PackingParams()
     fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=max(20.0, p.tension_end_n)))
-    rig = direct_rig(design, fw, seed=seed)
+    rig = direct_rig(design, fw, seed=seed, model=model)
     plant = rig.plant
     limit = design.dtheta_rad - math.radians(p.limit_tol_deg)
     n_joints = design.joints
@@ -121,6 +128,7 @@ def packing(
             progress(k, total)
     pts = joint_points_xz(plant)
     b_fit, pole, turn = fit_log_spiral(pts)
+    extremes = plant.extremes()
     rig.close()
     order = tuple(
         int(j) + 1 for j in np.argsort(np.where(np.isnan(closed_at), np.inf, closed_at), kind="stable")
@@ -148,6 +156,7 @@ def packing(
         order,
         tuple(float(v) for v in closed_at),
         corr,
+        extremes,
         tuple(ramp_t),
         tuple(closed_n),
         tuple((float(z.real), float(z.imag)) for z in pts),
@@ -155,10 +164,17 @@ def packing(
     )
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``."""
     p = sized(size, PackingParams(ramp_s=1.5, hold_s=0.1), PackingParams(), PackingParams(ramp_s=16.0))
-    return packing(design, p, seed, progress)
+    return packing(design, p, seed, progress, model)
 
 
 def table_rows(r: PackingResult) -> list[Row]:
@@ -184,6 +200,7 @@ def table_rows(r: PackingResult) -> list[Row]:
             f"{order} ({r.order_correlation:+.2f})",
             "curls from the tip (Fig. S5C, Note S4)",
         ),
+        *extremes_rows(r.extremes),
     ]
 
 

@@ -15,7 +15,7 @@ from protocol.messages import Command, CommandCode, Mode
 
 from ..board import BoardConfig
 from ..environment import Environment
-from ..model_config import ObjectConfig
+from ..model_config import ModelConfig, ObjectConfig
 from ..plant import Plant, PlantConfig
 from ..radio import RadioScript
 from ..spiral import SpiralDesign
@@ -57,6 +57,8 @@ class Rig(Environment):
         objects: objects in the scene.
         start_packed: start with the arm coiled on cable 0.
         seed: seed of the board's random choices.
+        model: the plant's model (a preset or a sensitivity variant; None = ``ModelConfig()``); the
+            objects are appended to its own.
     """
 
     def __init__(
@@ -68,10 +70,10 @@ class Rig(Environment):
         objects: Sequence[ObjectConfig] = (),
         start_packed: bool = False,
         seed: int = 0,
+        model: ModelConfig | None = None,
     ) -> None:
-        plant = PlantConfig()
-        if objects:
-            plant = dataclasses.replace(plant, model=plant.model.with_objects(*objects))
+        base = model if model is not None else ModelConfig()
+        plant = dataclasses.replace(PlantConfig(), model=base.with_objects(*objects))
         cfg = BoardConfig(
             design=design, plant=plant, firmware=firmware, rc="radio", seed=seed, start_packed=start_packed
         )
@@ -99,6 +101,7 @@ def direct_rig(
     objects: Sequence[ObjectConfig] = (),
     start_packed: bool = False,
     seed: int = 0,
+    model: ModelConfig | None = None,
 ) -> Rig:
     """A rig in DIRECT mode: lever DOWN (arm), MIDDLE at 20 ms, then the host's SET_MODE DIRECT."""
     rig = Rig(
@@ -108,6 +111,7 @@ def direct_rig(
         objects=objects,
         start_packed=start_packed,
         seed=seed,
+        model=model,
     )
     for _ in range(200):
         rig.step()

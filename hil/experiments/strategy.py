@@ -1,4 +1,13 @@
-"""strategy (Note S4, Fig. S6, Fig. 3C): objects on a grid grasped with the strategy on and off."""
+"""strategy (Note S4, Fig. S6, Fig. 3C): paired grasps at the same placements with the strategy off, on
+with the firmware's contact detector, and on with the simulator's true contact (an oracle).
+
+Placements: per diameter and per seed, one jittered point in each cell of a grid beside the arm, kept
+only if the object clears the packed coil and the straight arm (:class:`~.geometry.ArmFootprint`).
+Success, fixed before any run: HOLD reached, the support removed, and ``hold_s`` later the object still
+touches at least 2 units, has dropped less than 60 mm, moves slower than 5 cm/s (``held``) and the
+contacts span at least 180° around it (:data:`~.common.SUCCESS_WRAP_DEG`).
+Statistics: Wilson 95 % interval per arm, McNemar's exact test of each strategy-on arm against off.
+"""
 
 from __future__ import annotations
 
@@ -8,87 +17,172 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from ..model_config import ModelConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import Progress, Row, pct, pyplot, save_figure, sized
+from .common import (
+    DEFAULT_MODEL,
+    SUCCESS_WRAP_DEG,
+    Progress,
+    Row,
+    extremes_rows,
+    pct,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
+from .geometry import ArmFootprint, jittered_placements
 from .grasp import GraspOutcome, GraspSetup, grasp_trial_job
 from .parallel import parallel_map
+from .stats import mcnemar_exact, wilson_interval
+
+ARMS = ("off", "on", "oracle")
+"""The three arms: strategy off; on with the firmware's contact detector; on with the true contact."""
 
 
 @dataclass(frozen=True)
 class StrategyParams:
     """Attributes:
-    diameters_m: the three object diameters.
-    xs_m: grid of horizontal distances of the object's centre from the arm's axis (target side, +x).
-    zs_m: grid of heights of the object's centre relative to the base (negative = below).
+    diameters_m: the object diameters.
+    x_range_m: object centres' horizontal distance from the arm's axis (target side, +x), low and high.
+    z_range_m: object centres' height relative to the base (negative = below), low and high.
+    grid: cells along x and z; one jittered placement per cell and seed.
+    seeds: jitter seeds (each gives ``grid[0] * grid[1]`` placements per diameter).
+    clearance_m: smallest gap kept between a placed object and the packed or straight arm.
     mass_kg: object mass.
-    hold_s: how long a released object must stay to count as grasped.
+    hold_s: how long a released object must stay to count.
+    oracle: also run the strategy with the true-contact oracle.
     """
 
     diameters_m: tuple[float, ...] = (0.016, 0.024, 0.036)
-    xs_m: tuple[float, ...] = (0.03, 0.05, 0.07, 0.09)
-    zs_m: tuple[float, ...] = (-0.07, -0.10, -0.13, -0.16)
+    x_range_m: tuple[float, float] = (0.02, 0.10)
+    z_range_m: tuple[float, float] = (-0.18, -0.06)
+    grid: tuple[int, int] = (4, 4)
+    seeds: int = 3
+    clearance_m: float = 0.002
     mass_kg: float = 0.02
     hold_s: float = 0.6
+    oracle: bool = True
+
+
+def arm_of(o: GraspOutcome) -> str:
+    """Which of :data:`ARMS` a trial belongs to."""
+    if not o.setup.strategy_on:
+        return "off"
+    return "oracle" if o.setup.contact_oracle else "on"
+
+
+def placements(
+    design: SpiralDesign, p: StrategyParams, seed: int, model: ModelConfig = DEFAULT_MODEL
+) -> list[tuple[float, float, float]]:
+    """``(x, z, diameter)`` of every placement: per diameter and jitter seed,
+    :func:`~.geometry.jittered_placements` over the grid, clear of the packed coil and the straight arm.
+
+    Raises:
+        ValueError: the whole region is blocked for a diameter.
+    """
+    foot = ArmFootprint.of(design, model)
+    out = []
+    for d in p.diameters_m:
+        for s in range(p.seeds):
+            rng = np.random.default_rng([seed, s, round(d * 1e6)])
+            for x, z in jittered_placements(foot, d, p.x_range_m, p.z_range_m, p.grid, rng, p.clearance_m):
+                out.append((x, z, d))
+    return out
 
 
 @dataclass(frozen=True)
 class StrategyResult:
-    """Every placement grasped with the strategy on and off."""
+    """Every placement grasped by each arm (:data:`ARMS`)."""
 
     params: StrategyParams
     seed: int
     outcomes: tuple[GraspOutcome, ...]
 
-    def _share(self, on: bool, d: float | None = None) -> float:
-        sel = [
-            o for o in self.outcomes if o.setup.strategy_on == on and (d is None or o.setup.diameter_m == d)
-        ]
-        return sum(o.held for o in sel) / len(sel) if sel else math.nan
+    def arms(self) -> tuple[str, ...]:
+        """The arms that ran."""
+        return tuple(a for a in ARMS if any(arm_of(o) == a for o in self.outcomes))
+
+    def _select(self, arm: str, d: float | None = None) -> list[GraspOutcome]:
+        return [o for o in self.outcomes if arm_of(o) == arm and (d is None or o.setup.diameter_m == d)]
+
+    def rate(self, arm: str, d: float | None = None) -> dict[str, Any]:
+        """Successes, trials, rate and Wilson 95 % interval of ``arm`` (one diameter or all)."""
+        sel = self._select(arm, d)
+        k = sum(o.success for o in sel)
+        lo, hi = wilson_interval(k, len(sel))
+        return {
+            "successes": k,
+            "n": len(sel),
+            "rate": k / len(sel) if sel else math.nan,
+            "ci95": [lo, hi],
+            "held": sum(o.held for o in sel),
+        }
 
     @property
     def success_on(self) -> float:
-        """Share of placements grasped and held with the strategy on."""
-        return self._share(True)
+        """Success rate with the strategy on and the firmware's detector."""
+        return float(self.rate("on")["rate"])
 
     @property
     def success_off(self) -> float:
-        """Share of placements grasped and held with the strategy off."""
-        return self._share(False)
+        """Success rate with the strategy off."""
+        return float(self.rate("off")["rate"])
 
-    def per_diameter(self) -> list[dict[str, float]]:
-        """Success rates per diameter."""
-        return [
-            {"diameter_m": d, "success_on": self._share(True, d), "success_off": self._share(False, d)}
-            for d in self.params.diameters_m
-        ]
+    def paired(self, arm: str, other: str = "off") -> dict[str, Any]:
+        """Discordant pairs of ``arm`` vs ``other`` at the same placements, and McNemar's exact p-value."""
+        theirs = {_key(o): o.success for o in self._select(other)}
+        pairs = [(o.success, theirs[_key(o)]) for o in self._select(arm) if _key(o) in theirs]
+        only_arm = sum(1 for a, b in pairs if a and not b)
+        only_other = sum(1 for a, b in pairs if b and not a)
+        return {
+            "arm": arm,
+            "vs": other,
+            "pairs": len(pairs),
+            f"only_{arm}": only_arm,
+            f"only_{other}": only_other,
+            "p_value": mcnemar_exact(only_arm, only_other),
+        }
+
+    def paired_all(self) -> list[dict[str, Any]]:
+        """:meth:`paired` of every strategy-on arm against off."""
+        return [self.paired(a) for a in self.arms() if a != "off"]
+
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every trial."""
+        return worst_extremes(o.extremes for o in self.outcomes)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
+        arms = self.arms()
+        e = self.extremes
         return {
             "experiment": "strategy",
             "seed": self.seed,
+            "criterion": f"held {self.params.hold_s:g} s after release and wrap >= {SUCCESS_WRAP_DEG:g} deg",
             "success_on": self.success_on,
             "success_off": self.success_off,
+            "success_oracle": float(self.rate("oracle")["rate"]) if "oracle" in arms else math.nan,
+            "arms": {a: self.rate(a) for a in arms},
+            "mcnemar": self.paired_all(),
+            "per_diameter": [
+                {"diameter_m": d, **{a: self.rate(a, d) for a in arms}} for d in self.params.diameters_m
+            ],
+            "penetration_m": e.penetration_m,
+            "penetration_ratio": e.penetration_ratio,
+            "extremes": e.as_dict(),
             "trials": len(self.outcomes),
-            "per_diameter": self.per_diameter(),
-            "only_on": sum(
-                1 for o in self.outcomes if o.setup.strategy_on and o.held and not self._twin(o).held
-            ),
-            "only_off": sum(
-                1 for o in self.outcomes if not o.setup.strategy_on and o.held and not self._twin(o).held
-            ),
             "outcomes": [o.as_dict() for o in self.outcomes],
             "params": dataclasses.asdict(self.params),
         }
 
-    def _twin(self, o: GraspOutcome) -> GraspOutcome:
-        s = o.setup
-        return next(
-            t
-            for t in self.outcomes
-            if t.setup.strategy_on != s.strategy_on
-            and (t.setup.x_m, t.setup.z_m, t.setup.diameter_m) == (s.x_m, s.z_m, s.diameter_m)
-        )
+
+def _key(o: GraspOutcome) -> tuple[float, float, float]:
+    return (o.setup.x_m, o.setup.z_m, o.setup.diameter_m)
 
 
 def strategy(
@@ -97,96 +191,126 @@ def strategy(
     seed: int = 0,
     progress: Progress | None = None,
     jobs: int = 1,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> StrategyResult:
-    """Objects of three diameters on a grid beside the arm, grasped through the firmware's GRASP mode with
-    the strategy on and off (Note S4, Fig. S6, Fig. 3C)."""
+    """Every placement (:func:`placements`) grasped through the firmware's GRASP mode by each arm
+    (strategy off, on, on with the contact oracle), on the plant ``model`` (Note S4, Fig. S6, Fig. 3C)."""
     design = design or SpiralDesign.paper_prototype()
     p = params or StrategyParams()
+    arms = [(False, False), (True, False)] + ([(True, True)] if p.oracle else [])
     setups = [
-        GraspSetup(x, z, d, strategy_on=on, mass_kg=p.mass_kg, hold_s=p.hold_s, seed=seed)
-        for d in p.diameters_m
-        for z in p.zs_m
-        for x in p.xs_m
-        for on in (True, False)
+        GraspSetup(
+            x,
+            z,
+            d,
+            strategy_on=on,
+            contact_oracle=oracle,
+            mass_kg=p.mass_kg,
+            hold_s=p.hold_s,
+            model=model,
+            seed=seed,
+        )
+        for x, z, d in placements(design, p, seed, model)
+        for on, oracle in arms
     ]
     return StrategyResult(
         p, seed, tuple(parallel_map(grasp_trial_job, [(s, design) for s in setups], jobs, progress))
     )
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``.
+
+    ``tiny``: the one reference placement (a 20 mm object 40 mm out, 110 mm below the base), three arms.
+    ``default``: 3 diameters x 48 placements (4 x 4 cells x 3 seeds) x 3 arms. ``large``: 6 x 6 cells.
+    """
     p = sized(
         size,
-        StrategyParams(diameters_m=(0.02,), xs_m=(0.04,), zs_m=(-0.11,)),
-        StrategyParams(),
         StrategyParams(
-            xs_m=(0.02, 0.035, 0.05, 0.065, 0.08, 0.095),
-            zs_m=(-0.06, -0.08, -0.1, -0.12, -0.14, -0.16, -0.18),
+            diameters_m=(0.02,), x_range_m=(0.04, 0.04), z_range_m=(-0.11, -0.11), grid=(1, 1), seeds=1
         ),
+        StrategyParams(),
+        StrategyParams(grid=(6, 6)),
     )
-    return strategy(design, p, seed, progress, jobs)
+    return strategy(design, p, seed, progress, jobs, model)
+
+
+def _rate_text(r: dict[str, Any]) -> str:
+    lo, hi = r["ci95"]
+    return f"{pct(r['rate'])} ({r['successes']}/{r['n']}; 95 % CI {pct(lo)}-{pct(hi)})"
 
 
 def table_rows(r: StrategyResult) -> list[Row]:
-    """The result\'s numbers next to the paper\'s, one row each."""
-    d = r.as_dict()
-    rows: list[Row] = [
-        (
-            "placements grasped and held, strategy on",
-            pct(r.success_on),
-            "wider range than off (Fig. S6, 3C)",
-        ),
-        ("placements grasped and held, strategy off", pct(r.success_off), "only objects near the tip"),
-        ("held only with the strategy on / only off", f"{d['only_on']} / {d['only_off']}", "on > off"),
-    ]
-    for row in r.per_diameter():
+    """The result's numbers next to the paper's, one row each."""
+    arms = r.arms()
+    label = {
+        "off": ("strategy off (plain ramp)", "only objects near the tip (Fig. S6A)"),
+        "on": ("strategy on, firmware's contact detector", "wider range than off (Fig. S6B, 3C)"),
+        "oracle": ("strategy on, true contact (oracle)", "wider range than off"),
+    }
+    rows: list[Row] = [(f"success: {label[a][0]}", _rate_text(r.rate(a)), label[a][1]) for a in arms]
+    for c in r.paired_all():
         rows.append(
             (
-                f"  diameter {row['diameter_m'] * 1000:g} mm: on / off",
-                f"{pct(row['success_on'])} / {pct(row['success_off'])}",
+                f"  {c['arm']} vs off: only {c['arm']} / only off; McNemar p",
+                f"{c['only_' + c['arm']]} / {c['only_off']}; p = {c['p_value']:.3g}",
+                "on > off",
+            )
+        )
+    for d in r.params.diameters_m:
+        rows.append(
+            (
+                f"  diameter {d * 1000:g} mm: " + " / ".join(arms),
+                " / ".join(pct(r.rate(a, d)["rate"]) for a in arms),
                 "",
             )
         )
+    rows.extend(extremes_rows(r.extremes))
     return rows
 
 
 def describe_samples(r: StrategyResult) -> str:
-    """The result\'s sample counts, in words."""
+    """The result's sample counts, in words."""
     p = r.params
+    per_d = p.grid[0] * p.grid[1] * p.seeds
     return (
-        f"{len(p.diameters_m)} diameters x {len(p.xs_m) * len(p.zs_m)} placements x 2 strategies = "
-        f"{len(r.outcomes)} grasps ({1000 * p.mass_kg:g} g objects, held {p.hold_s:g} s after release)"
+        f"{len(p.diameters_m)} diameters x {per_d} placements ({p.grid[0]} x {p.grid[1]} cells x {p.seeds} "
+        f"seeds) x {len(r.arms())} arms = {len(r.outcomes)} grasps ({1000 * p.mass_kg:g} g objects; success "
+        f"= held {p.hold_s:g} s after release and wrapped >= {SUCCESS_WRAP_DEG:g}°)"
     )
 
 
 def plot_figure(r: StrategyResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``strategy.png``)."""
+    """Write the figure into the directory ``out``; returns its path (``strategy.png``): per diameter, each
+    placement's outcome with the strategy on (firmware detector) against off."""
     plt = pyplot()
     ds = r.params.diameters_m
     fig, axes = plt.subplots(1, len(ds), figsize=(3.8 * len(ds), 4.6), squeeze=False)
+    off = {_key(o): o.success for o in r.outcomes if arm_of(o) == "off"}
+    style = {
+        (True, True): ("o", "tab:green"),
+        (True, False): ("^", "tab:blue"),
+        (False, True): ("v", "tab:orange"),
+        (False, False): ("x", "0.6"),
+    }
     for ax, d in zip(axes[0], ds, strict=True):
         for o in r.outcomes:
             s = o.setup
-            if s.diameter_m != d or not s.strategy_on:
+            if s.diameter_m != d or arm_of(o) != "on":
                 continue
-            twin = r._twin(o)
-            on, off = o.held, twin.held
-            marker, colour = (
-                ("o", "tab:green")
-                if on and off
-                else ("^", "tab:blue")
-                if on
-                else ("v", "tab:orange")
-                if off
-                else ("x", "0.6")
-            )
-            ax.plot(s.x_m * 1000, s.z_m * 1000, marker=marker, color=colour, ms=9, ls="")
-            ax.add_patch(plt.Circle((s.x_m * 1000, s.z_m * 1000), d * 500, fill=False, color=colour, lw=0.6))
+            marker, colour = style[(o.success, off.get(_key(o), False))]
+            ax.plot(s.x_m * 1000, s.z_m * 1000, marker=marker, color=colour, ms=7, ls="")
+            ax.add_patch(plt.Circle((s.x_m * 1000, s.z_m * 1000), d * 500, fill=False, color=colour, lw=0.5))
         ax.plot([0, 0], [0, -223], "k-", lw=3, alpha=0.3)
-        ax.set_title(
-            f"d = {d * 1000:g} mm: on {pct(r._share(True, d))}, off {pct(r._share(False, d))}", fontsize=9
-        )
+        rates = ", ".join(f"{a} {pct(r.rate(a, d)['rate'])}" for a in r.arms())
+        ax.set_title(f"d = {d * 1000:g} mm: {rates}", fontsize=8)
         ax.set_aspect("equal")
         ax.set_xlim(-15, 125)
         ax.set_ylim(-235, 10)
@@ -195,13 +319,10 @@ def plot_figure(r: StrategyResult, out: Path) -> Path:
         ax.set_ylabel("object centre below the base [mm]", fontsize=8)
     handles = [
         plt.Line2D([], [], marker=m, color=c, ls="", label=lab)
-        for m, c, lab in (
-            ("o", "tab:green", "both"),
-            ("^", "tab:blue", "strategy on only"),
-            ("v", "tab:orange", "strategy off only"),
-            ("x", "0.6", "neither"),
+        for (m, c), lab in zip(
+            style.values(), ("both", "strategy on only", "strategy off only", "neither"), strict=True
         )
     ]
     axes[0][0].legend(handles=handles, fontsize=7, loc="lower left")
-    fig.suptitle("grasp-range map: grasped and held against gravity (hanging arm in grey)", fontsize=10)
+    fig.suptitle("strategy on (firmware detector) vs off: held, wrapped >= 180° (arm in grey)", fontsize=10)
     return save_figure(fig, out / "strategy.png")

@@ -13,8 +13,21 @@ import numpy.typing as npt
 
 from controller.config import FirmwareConfig, MappingConfig
 
+from ..model_config import ModelConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import BASE_Z_M, Progress, Row, pct, pyplot, save_figure, sized
+from .common import (
+    BASE_Z_M,
+    DEFAULT_MODEL,
+    Progress,
+    Row,
+    extremes_rows,
+    pct,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from .geometry import Envelope
 from .parallel import parallel_map
 from .rig import direct_rig
@@ -66,6 +79,7 @@ class WorkspaceRun:
     envelope_area_m2: float
     exact_area_m2: float
     covered_area_m2: float
+    extremes: PhysicsExtremes
     u_m: tuple[float, ...] = field(repr=False)
     z_m: tuple[float, ...] = field(repr=False)
     boundary: tuple[tuple[float, float], ...] = field(repr=False)
@@ -86,6 +100,11 @@ class WorkspaceResult:
         n = sum(r.samples for r in self.runs)
         return sum(r.inside_share * r.samples for r in self.runs) / n if n else math.nan
 
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every run."""
+        return worst_extremes(r.extremes for r in self.runs)
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (without the raw samples)."""
         return {
@@ -93,6 +112,7 @@ class WorkspaceResult:
             "seed": self.seed,
             "inside_share": self.inside_share,
             "samples": sum(r.samples for r in self.runs),
+            "extremes": self.extremes.as_dict(),
             "runs": [
                 {
                     k: v
@@ -117,8 +137,8 @@ def _random_tensions(rng: np.random.Generator, p: WorkspaceParams) -> npt.NDArra
     return out
 
 
-def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRun:
-    taper_deg, cables, p, seed = args
+def _workspace_run(args: tuple[float, int, WorkspaceParams, int, ModelConfig]) -> WorkspaceRun:
+    taper_deg, cables, p, seed, model = args
     base = SpiralDesign.paper_prototype()
     design = SpiralDesign.from_physical(
         length_m=0.23,
@@ -128,7 +148,7 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRu
         cables=cables,
     )
     fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=p.tension_max_n))
-    rig = direct_rig(design, fw, seed=seed)
+    rig = direct_rig(design, fw, seed=seed, model=model)
     env = Envelope.of(rig.plant)
     rng = np.random.default_rng([seed, cables, round(taper_deg * 100)])
     n = int(p.duration_s * 1000 / p.sample_ms)
@@ -150,6 +170,7 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRu
             u[i] = abs(tip[0]) if cables < 3 else math.hypot(tip[0], tip[1])
             z[i] = tip[2]
             i += 1
+    extremes = rig.plant.extremes()
     rig.close()
     ratios = np.array([env.ratio(float(a), float(b)) for a, b in zip(u, z, strict=True)])
     exact = np.array([env.exact_ratio(float(a), float(b)) for a, b in zip(u, z, strict=True)])
@@ -193,6 +214,7 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRu
         float(in_w.sum()) * cell_area,
         float(in_exact.sum()) * cell_area,
         float(hit.sum()) * cell_area,
+        extremes,
         tuple(float(v) for v in u),
         tuple(float(v) for v in z),
         tuple((float(a), float(b)) for a, b in bnd),
@@ -201,25 +223,37 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int]) -> WorkspaceRu
 
 
 def workspace(
-    params: WorkspaceParams | None = None, seed: int = 0, progress: Progress | None = None, jobs: int = 1
+    params: WorkspaceParams | None = None,
+    seed: int = 0,
+    progress: Progress | None = None,
+    jobs: int = 1,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> WorkspaceResult:
     """Random per-cable tensions through the firmware (DIRECT mode) on 2- and 3-cable arms of three
-    taper angles; tip samples against the involute envelope ρw (Note S2, Fig. 2E / S4)."""
+    taper angles, on the plant ``model``; tip samples against the involute envelope ρw (Note S2, Fig. 2E /
+    S4)."""
     p = params or WorkspaceParams()
-    items = [(taper, c, p, seed) for taper in p.tapers_deg for c in p.cables]
+    items = [(taper, c, p, seed, model) for taper in p.tapers_deg for c in p.cables]
     runs = parallel_map(_workspace_run, items, jobs, progress)
     return WorkspaceResult(p, seed, tuple(runs))
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``."""
     p = sized(
         size,
         WorkspaceParams(tapers_deg=(6.5,), cables=(2,), duration_s=0.5),
         WorkspaceParams(),
         WorkspaceParams(duration_s=40.0),
     )
-    return workspace(p, seed, progress, jobs)
+    return workspace(p, seed, progress, jobs, model)
 
 
 def table_rows(r: WorkspaceResult) -> list[Row]:
@@ -245,6 +279,7 @@ def table_rows(r: WorkspaceResult) -> list[Row]:
                 "every point inside is reachable",
             )
         )
+    rows.extend(extremes_rows(r.extremes))
     return rows
 
 

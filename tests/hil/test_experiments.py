@@ -1,4 +1,4 @@
-"""The experiments of issue 8 (hil.experiments) at their tiny size, and `spirob-hil experiment`."""
+"""The experiments (hil.experiments) at their tiny size, and `spirob-hil experiment`."""
 
 from __future__ import annotations
 
@@ -9,16 +9,23 @@ from pathlib import Path
 
 import pytest
 
+from controller.config import FirmwareConfig
 from hil.cli import main
 from hil.experiments import (
     EXPERIMENTS,
     GraspSetup,
     PackingResult,
+    Rig,
+    StrategyParams,
     StrategyResult,
     WorkspaceResult,
     grasp_trial,
     run_experiment,
 )
+from hil.experiments.geometry import ArmFootprint
+from hil.experiments.strategy import arm_of, placements
+from hil.model_config import ArmConfig, ModelConfig, ObjectConfig
+from hil.spiral import SpiralDesign
 
 
 @pytest.mark.parametrize("name", list(EXPERIMENTS))
@@ -36,13 +43,15 @@ def test_each_experiment_runs_tiny_reports_and_plots(name: str, tmp_path: Path) 
     assert exp.samples(result)
     png = exp.plot(result, tmp_path)
     assert png.exists() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert d["extremes"]["tension_n"] > 0.0  # every experiment reports the worst physics of its trials
+    assert any("penetration" in r[0] for r in rows)
 
 
 def test_required_json_keys_through_the_cli(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     required = {
         "packing": ("b_design", "b_fit"),
         "workspace": ("inside_share",),
-        "strategy": ("success_on", "success_off"),
+        "strategy": ("success_on", "success_off", "success_oracle", "penetration_m"),
     }
     for name, keys in required.items():
         assert (
@@ -53,6 +62,11 @@ def test_required_json_keys_through_the_cli(capsys: pytest.CaptureFixture[str], 
         for key in keys:
             assert isinstance(out[key], float)
         assert out["samples"] and Path(out["figure"]).exists()
+        if name == "strategy":  # intervals per arm, McNemar of each strategy-on arm against off
+            assert set(out["arms"]) == {"off", "on", "oracle"}
+            assert all(len(a["ci95"]) == 2 and a["n"] == 1 for a in out["arms"].values())
+            assert [c["arm"] for c in out["mcnemar"]] == ["on", "oracle"]
+            assert all(0.0 <= c["p_value"] <= 1.0 for c in out["mcnemar"])
     assert main(["experiment", "packing", "--size", "tiny", "--jobs", "1"]) == 0
     table = capsys.readouterr().out
     assert "paper" in table and "b_fit" not in table and "fitted spiral b" in table
@@ -82,10 +96,36 @@ def test_workspace_samples_stay_inside_the_envelope() -> None:
 def test_strategy_on_grasps_the_reference_placement() -> None:
     r = run_experiment("strategy", size="tiny")
     assert isinstance(r, StrategyResult)
-    on = next(o for o in r.outcomes if o.setup.strategy_on)
+    assert sorted(arm_of(o) for o in r.outcomes) == ["off", "on", "oracle"]
+    assert len({(o.setup.x_m, o.setup.z_m, o.setup.diameter_m) for o in r.outcomes}) == 1  # paired
+    on = next(o for o in r.outcomes if arm_of(o) == "on")
     assert on.state == "HOLD" and on.held and on.contact_s > 0
     assert on.units_after >= 4
     assert on.max_current_raw <= 3000
+    assert on.success == (on.held and on.wrap_deg >= 180.0)
+    oracle = next(o for o in r.outcomes if arm_of(o) == "oracle")
+    assert oracle.contact_s > 0  # the simulator's contact ended the reach
+
+
+def test_strategy_placements_are_jittered_paired_and_clear_of_the_packed_coil() -> None:
+    design = SpiralDesign.paper_prototype()
+    p = StrategyParams()
+    spots = placements(design, p, seed=0)
+    for d in p.diameters_m:
+        assert sum(1 for s in spots if s[2] == d) >= 48
+    foot = ArmFootprint.of(design, ModelConfig())
+    assert all(foot.clearance_m(x, z, d / 2) >= p.clearance_m for x, z, d in spots)
+    assert foot.clearance_m(0.03, -0.03, 0.01) < 0  # inside the packed coil
+    assert spots == placements(design, p, seed=0) != placements(design, p, seed=1)
+
+
+def test_the_rig_runs_the_given_model_with_the_objects_appended() -> None:
+    model = ModelConfig(arm=ArmConfig(base_stiffness_nm_per_rad=0.3))
+    obj = ObjectConfig("can", radius_m=0.01, length_m=0.05, pos_m=(0.5, 0.0, 0.5), mass_kg=0.02)
+    rig = Rig(SpiralDesign.paper_prototype(), FirmwareConfig(), [], objects=(obj,), model=model)
+    used = rig.plant.config.model
+    assert used.arm.base_stiffness_nm_per_rad == 0.3 and used.objects == (obj,)
+    rig.close()
 
 
 def test_an_object_out_of_reach_is_a_failed_grasp() -> None:
