@@ -110,6 +110,7 @@ def test_design_from_spiral_parameters(capsys: pytest.CaptureFixture[str]) -> No
         ["design", "--preset", "nope"],
         ["model", "export", "-o", "x.xml", "--preset", "nope"],
         ["experiment", "packing", "--preset", "nope"],
+        ["experiment", "packing", "--preset", "authors", "--size", "tiny"],
         ["design", "--cables", "4"],
         ["design", "--length", "abc"],
         ["design", "--json", "--load-force", "-1"],
