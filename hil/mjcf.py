@@ -17,7 +17,11 @@ The generated model (``docs/plant.md`` explains every choice and its source):
   length, so the cable is pull-only (a unilateral constraint) and its tension is that limit's force
   (sensor ``tension_k``).
 - Motor ``motor_k`` pushes slider ``spool_k`` with ``kt · I / r_spool`` (``ctrl`` in amps); the rotor
-  inertia reflected through gearbox and spool, ``J_rotor · N² / r_spool²``, is the slider's mass.
+  inertia reflected through gearbox and spool, ``J_rotor · N² / r_spool²``, is the slider's mass. With
+  another ``ActuatorConfig.kind``, ``motor_k`` is an ideal tension source behind a first-order lag
+  (``ctrl`` in newtons) or a MuJoCo muscle (``ctrl`` = activation) on a light slider.
+- Mounting: hanging under the drone (gravity along the arm), lying on a ``table`` plane (the arm's frame
+  ``mount_table`` turned so the hinges are vertical), or hanging with gravity off.
 - Capstan friction of the cable in the holes depends on tension and wrap angle, so
   :class:`hil.plant.Plant` sets it each control period as per-joint dry friction; its coefficient travels
   in the model as the custom numeric ``spirob_cable_mu``.
