@@ -31,10 +31,11 @@ from controller.cli_kit import (
     seed,
     stop_on_signals,
 )
-from hil.cli_design import add_design_arguments, design_from_args
+from hil.cli_design import add_design_arguments, design_from_args, model_from_args
 from hil.cli_experiments import configure_experiment, run_experiment_command
 from hil.mjcf import write_mjcf
-from hil.model_config import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
+from hil.model_config import ModelConfig, ObjectConfig, SolverConfig
+from hil.model_presets import PRESETS
 
 __all__ = ["COMMANDS", "Command", "build_parser", "main"]
 
@@ -113,6 +114,10 @@ def _run_design(args: argparse.Namespace) -> int:
         raise ValueError(f"--load-force must be > 0, got {args.load_force}")
     summary["load_force_n"] = args.load_force
     summary["max_load_d_min_kg"] = design.max_load_kg(design.d_min_m, args.load_force)
+    name = args.preset or "prototype"
+    model = model_from_args(args)
+    summary["model_preset"] = name
+    summary["model"] = _model_summary(model)
     out: TextIO = sys.stdout
     if args.json:
         json.dump(summary, out, indent=2)
@@ -127,7 +132,19 @@ def _run_design(args: argparse.Namespace) -> int:
     if design.inputs:
         given = ", ".join(f"{k}={v:g}" for k, v in design.inputs)
         out.write(f"  inputs: {given}\n")
+    choices = ", ".join(f"{k} {v}" for k, v in summary["model"].items())
+    out.write(f"  model preset {name}: {choices} (source: {PRESETS[name].source})\n")
     return EXIT_OK
+
+
+def _model_summary(model: ModelConfig) -> dict[str, str | float | int]:
+    """The choices a model preset makes, for ``design``'s output."""
+    return {
+        "actuator": model.actuator.kind,
+        "stiffness_exponent": model.arm.stiffness_exponent,
+        "base_stiffness_nm_per_rad": model.arm.base_stiffness_nm_per_rad,
+        "mounting": model.mounting,
+    }
 
 
 # ---------------------------------------------------------------------- model export
@@ -151,13 +168,19 @@ def _configure_model(p: argparse.ArgumentParser) -> None:
     e = sub.add_parser("export", help="write a self-contained MJCF model of the arm under a drone")
     add_design_arguments(e)
     e.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="MJCF file to write")
-    m = e.add_argument_group("model (defaults: the paper's prototype, docs/plant.md)")
+    m = e.add_argument_group("model (defaults: the --preset's, docs/plant.md; prototype's shown)")
     m.add_argument("--total-mass", type=float, metavar="KG", help="mass of the arm [kg] (default 0.0384)")
     m.add_argument(
         "--base-stiffness",
         type=float,
         metavar="NM_PER_RAD",
         help="stiffness of the base joint [N m/rad] (default 0.5)",
+    )
+    m.add_argument(
+        "--stiffness-exponent",
+        type=int,
+        choices=(2, 3),
+        help="joint stiffness profile: proportional to unit size^2 or size^3 (default 3)",
     )
     m.add_argument("--damping-ratio", type=float, metavar="ZETA", help="joint damping ratio (default 0.13)")
     m.add_argument(
@@ -184,10 +207,12 @@ def _configure_model(p: argparse.ArgumentParser) -> None:
 
 def _run_model(args: argparse.Namespace) -> int:
     design = design_from_args(args)
-    arm = ArmConfig()
+    base = model_from_args(args)
+    arm = base.arm
     arm_changes = {
         "total_mass_kg": args.total_mass,
         "base_stiffness_nm_per_rad": args.base_stiffness,
+        "stiffness_exponent": args.stiffness_exponent,
         "damping_ratio": args.damping_ratio,
         "cable_mu": args.mu,
     }
@@ -197,9 +222,9 @@ def _run_model(args: argparse.Namespace) -> int:
         "spool_radius_m": args.spool_radius,
         "current_limit_a": args.current_limit,
     }
-    motor = replace(MotorConfig(), **{k: v for k, v in motor_changes.items() if v is not None})
-    solver = SolverConfig() if args.timestep_ms is None else SolverConfig(timestep_s=args.timestep_ms * 1e-3)
-    cfg = ModelConfig(arm=arm, motor=motor, solver=solver)
+    motor = replace(base.motor, **{k: v for k, v in motor_changes.items() if v is not None})
+    solver = base.solver if args.timestep_ms is None else SolverConfig(timestep_s=args.timestep_ms * 1e-3)
+    cfg = replace(base, arm=arm, motor=motor, solver=solver)
     if args.floor:
         cfg = replace(cfg, drone=replace(cfg.drone, floor=True))
     cfg = cfg.with_objects(*(_parse_object(t) for t in args.object))
@@ -245,10 +270,13 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
 def _run_board(args: argparse.Namespace) -> int:
     from controller.clock import RealTimeClock
     from hil.board import BoardConfig, realtime_board, run_realtime
+    from hil.plant import PlantConfig
 
     design = design_from_args(args)
+    plant = PlantConfig(model=model_from_args(args))
     try:
-        board, url = realtime_board(BoardConfig(design=design, rc=args.rc, seed=args.seed), args.listen)
+        config = BoardConfig(design=design, plant=plant, rc=args.rc, seed=args.seed)
+        board, url = realtime_board(config, args.listen)
     except OSError as exc:
         raise UsageError(f"cannot listen on {args.listen}: {exc.strerror or exc}", f"{PROG} board") from exc
     print(
@@ -380,6 +408,7 @@ def _run_run(args: argparse.Namespace) -> int:
                     name,
                     seed=args.seed,
                     design=design,
+                    model=model_from_args(args),
                     faults=faults,
                     record=record_paths.get(name),
                     report_dir=args.report,

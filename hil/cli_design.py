@@ -1,5 +1,5 @@
-"""The options that select a spiral design, shared by the ``spirob-hil`` subcommands (``design``,
-``model export``, ``board``, ``run``, ``experiment``)."""
+"""The options that select a spiral design and a model preset, shared by the ``spirob-hil`` subcommands
+(``design``, ``model export``, ``board``, ``run``, ``experiment``)."""
 
 from __future__ import annotations
 
@@ -8,21 +8,28 @@ import math
 
 from controller.cli_kit import UsageError
 
-from .spiral import PRESETS, SpiralDesign
+from .model_config import ModelConfig
+from .model_presets import PRESETS, preset
+from .spiral import SpiralDesign
 
-__all__ = ["add_design_arguments", "design_from_args"]
+__all__ = ["add_design_arguments", "design_from_args", "model_from_args"]
 
 
 def add_design_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the options that select a :class:`SpiralDesign` (used by ``design``, ``model export``, ...).
 
-    A design is one of: a preset (default ``prototype``); physical inputs (``--length`` and
-    ``--tip-width`` with ``--taper-deg`` or ``--base-width``); or spiral parameters (``--a``, ``--b``,
-    ``--theta0-deg`` or ``--units``). ``--dtheta-deg`` and ``--cables`` apply to the last two forms.
+    A design is one of: a preset (default ``prototype``: a model preset, :mod:`hil.model_presets`,
+    which names its design and its plant model); physical inputs (``--length`` and ``--tip-width`` with
+    ``--taper-deg`` or ``--base-width``); or spiral parameters (``--a``, ``--b``, ``--theta0-deg`` or
+    ``--units``). ``--dtheta-deg`` and ``--cables`` apply to the last two forms.
     """
     g = parser.add_argument_group("design (default: --preset prototype)")
+    listing = "; ".join(f"{p.name}: {p.summary}" for p in PRESETS.values())
     g.add_argument(
-        "--preset", choices=PRESETS, help="a named design: the paper's prototype or the authors' default"
+        "--preset",
+        choices=list(PRESETS),
+        metavar="NAME",
+        help=f"a named design and plant model ({listing})",
     )
     g.add_argument("--length", type=float, metavar="M", help="length of the straightened arm [m]")
     g.add_argument("--tip-width", type=float, metavar="M", help="width of the tip [m]")
@@ -86,5 +93,17 @@ def design_from_args(args: argparse.Namespace) -> SpiralDesign:
         return SpiralDesign.from_params(args.a, args.b, theta0, dtheta, cables)
     if args.dtheta_deg is not None:
         raise UsageError("--dtheta-deg needs physical inputs or spiral parameters (a preset fixes it)")
-    design = SpiralDesign.preset(args.preset or "prototype")
-    return design if args.cables is None else design.with_cables(cables)
+    chosen = PRESETS[args.preset or "prototype"]
+    design = SpiralDesign.preset(chosen.design_preset)
+    if args.cables is not None:
+        return design.with_cables(cables)
+    return design if chosen.cables is None else design.with_cables(chosen.cables)
+
+
+def model_from_args(args: argparse.Namespace) -> ModelConfig:
+    """The plant model of ``--preset`` (default ``prototype``: :class:`ModelConfig`'s defaults).
+
+    Raises:
+        ValueError: unknown preset name (argparse's choices normally catch it first).
+    """
+    return preset(args.preset or "prototype")

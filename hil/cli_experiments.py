@@ -15,10 +15,11 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from controller.cli_kit import EXIT_OK, seed
+from controller.cli_kit import EXIT_OK, UsageError, seed
 
-from .cli_design import add_design_arguments, design_from_args
+from .cli_design import add_design_arguments, design_from_args, model_from_args
 from .experiments import EXPERIMENTS, SIZES, run_experiment
+from .model_config import ModelConfig
 
 __all__ = ["configure_experiment", "run_experiment_command"]
 
@@ -46,6 +47,13 @@ def run_experiment_command(args: argparse.Namespace) -> int:
     ``--report``."""
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
+    if model_from_args(args) != ModelConfig():
+        # The experiments build their plants with the prototype's model; running them under another
+        # preset's name would mislabel the result.
+        raise UsageError(
+            f"--preset {args.preset}: the experiments run the prototype's plant model; of the presets only "
+            "'prototype' applies (give the authors' design as --a 0.00495 --b 0.1764 --theta0-deg 720)"
+        )
     design = design_from_args(args)
     exp = EXPERIMENTS[args.name]
     err = Console(stderr=True)

@@ -9,6 +9,11 @@ The drives stand between the C610 wire and the MuJoCo physics (:class:`hil.plant
   radius: rotor angle wrapping at 8192 counts per *rotor* turn (with an arbitrary zero), rotor rpm, and
   the current the drive delivered (with optional noise).
 
+With another actuator (:class:`hil.model_config.ActuatorConfig`: an ideal tension source behind a lag,
+or a muscle) the frames are the same: a current asks for the tension ``I · kt / r_spool`` (the
+firmware's force per amp), the angle is still the wound cable, and the fed-back current is the force the
+actuator delivered in the last physics step converted back with that force per amp.
+
 The spool is a slide joint in MuJoCo (its coordinate is cable length in metres); the drives read its
 position and speed and write its actuator's control through plain buffer views of one ``MjData``, given
 by :meth:`Drives.attach` (again after every model rebuild). Their own state (setpoints, delivered
@@ -37,7 +42,7 @@ from numpy.typing import NDArray
 
 from controller.errors import BusError
 from controller.motorbus import MotorBus
-from hil.model_config import MotorConfig
+from hil.model_config import ActuatorConfig, MotorConfig
 from protocol.c610 import (
     ANGLE_COUNTS,
     COMMAND_ID_LOW,
@@ -68,14 +73,37 @@ class Drives:
         count: number of drives (= cables, 1..4).
         rng: the only source of randomness (encoder zeros at :meth:`reset`, current noise). ``None`` = no
             randomness: encoders start at 0 and ``motor.current_noise_raw`` must be 0.
+        actuator: what the spool actuators are (default: the motor). For ``tension`` the actuator's
+            control is the asked tension [N]; for ``muscle`` its activation, the asked tension over
+            ``muscle_force_n`` (capped at 1).
+        muscle_force_n: the muscle's peak force F0 (needed by ``muscle``; see
+            :attr:`hil.model_config.ModelConfig.muscle_force_n`).
 
     Raises:
-        ValueError: current noise without an rng.
+        ValueError: current noise without an rng, or a muscle without its peak force.
     """
 
-    def __init__(self, motor: MotorConfig, count: int, rng: np.random.Generator | None) -> None:
+    def __init__(
+        self,
+        motor: MotorConfig,
+        count: int,
+        rng: np.random.Generator | None,
+        actuator: ActuatorConfig | None = None,
+        muscle_force_n: float | None = None,
+    ) -> None:
         if rng is None and motor.current_noise_raw > 0:
             raise ValueError("current noise needs an rng (numpy.random.Generator)")
+        kind = "motor" if actuator is None else actuator.kind
+        if kind == "muscle" and muscle_force_n is None:
+            raise ValueError("a muscle actuator needs muscle_force_n")
+        self.actuator_kind = kind
+        """``motor``, ``tension`` or ``muscle``."""
+        self._motor_kind = kind == "motor"
+        # Asked tension per amp, in the actuator's control units (N for tension, activation for muscle).
+        fpa = motor.force_per_amp_n
+        self._ctrl_per_a = fpa / muscle_force_n if muscle_force_n is not None and kind == "muscle" else fpa
+        self._ctrl_max = 1.0 if kind == "muscle" else math.inf
+        self._amps_per_n = 1.0 / fpa
         self._n = count
         self._rng = rng
         self.spool_radius_m = motor.spool_radius_m
@@ -97,6 +125,7 @@ class Drives:
         self._qpos_mv = _float_view(np.empty(0))
         self._qvel_mv = self._qpos_mv
         self._ctrl_mv = self._qpos_mv
+        self._force_mv = self._qpos_mv
         self._spool_qadr_list: list[int] = []
         self._spool_dadr_list: list[int] = []
 
@@ -107,6 +136,7 @@ class Drives:
         ctrl: FloatArray,
         spool_qadr: Sequence[int],
         spool_dadr: Sequence[int],
+        qfrc_actuator: FloatArray | None = None,
     ) -> None:
         """Wire the drives to one ``MjData``: its ``qpos``, ``qvel`` and ``ctrl`` (actuator k = drive k).
 
@@ -119,7 +149,16 @@ class Drives:
             ctrl: its ``ctrl``; the first ``count`` actuators are the spools' motors, in cable order.
             spool_qadr: ``qpos`` address of each spool joint, in cable order.
             spool_dadr: ``qvel`` address of each spool joint, in cable order.
+            qfrc_actuator: its ``qfrc_actuator`` (the force each actuator delivered to its spool); needed
+                by the ``tension`` and ``muscle`` actuators, whose fed-back current is that force.
+
+        Raises:
+            ValueError: a ``tension`` or ``muscle`` actuator without ``qfrc_actuator``.
         """
+        if qfrc_actuator is None and not self._motor_kind:
+            raise ValueError(f"a {self.actuator_kind} actuator needs qfrc_actuator")
+        if qfrc_actuator is not None:
+            self._force_mv = _float_view(qfrc_actuator)
         self._qpos_mv = _float_view(qpos)
         self._qvel_mv = _float_view(qvel)
         self._ctrl_mv = _float_view(ctrl)
@@ -144,12 +183,21 @@ class Drives:
         """Run the current loops for one control period: each drive's delivered current into its actuator.
 
         Torque-speed line: in the direction of motion the drive can push at most ``I_stall·(1 − ω/ω_nl)``.
-        Plain floats over buffer views: three motors are cheaper in Python than in numpy.
+        A tension source or a muscle gets the asked tension (pull only) in its control units; MuJoCo
+        applies its lag or activation dynamics. Plain floats over buffer views: three motors are cheaper
+        in Python than in numpy.
         """
-        qvel = self._qvel_mv
         ctrl = self._ctrl_mv
-        applied_a = self._applied_mv
         currents = self._current_raw_list
+        if not self._motor_kind:
+            gain = self._ctrl_per_a / RAW_PER_AMP
+            ctrl_max = self._ctrl_max
+            for k in range(self._n):
+                asked = currents[k] * gain
+                ctrl[k] = 0.0 if asked <= 0.0 else asked if asked < ctrl_max else ctrl_max
+            return
+        qvel = self._qvel_mv
+        applied_a = self._applied_mv
         dadr = self._spool_dadr_list
         inv_r_spool = self._inv_r_spool
         stall_a = self._stall_a
@@ -220,6 +268,8 @@ class Drives:
         qpos = self._qpos_mv
         qvel = self._qvel_mv
         applied = self._applied_mv
+        if not self._motor_kind:
+            self._sense_forces()
         qadr = self._spool_qadr_list
         dadr = self._spool_dadr_list
         offsets = self._angle_offset_list
@@ -250,8 +300,23 @@ class Drives:
         return tuple(self._current_raw_list)
 
     def applied_currents_a(self) -> FloatArray:
-        """Current each drive delivered in the last period (after the torque-speed line) [A]."""
+        """Current each drive delivered in the last period (after the torque-speed line) [A].
+
+        For a tension source or a muscle: the force it delivered in the last physics step over the
+        firmware's force per amp.
+        """
+        if not self._motor_kind:
+            self._sense_forces()
         return self._applied_a.copy()
+
+    def _sense_forces(self) -> None:
+        """Delivered current of a tension source or muscle: its force on the spool over the force per amp."""
+        force = self._force_mv
+        applied = self._applied_mv
+        dadr = self._spool_dadr_list
+        amps_per_n = self._amps_per_n
+        for k in range(self._n):
+            applied[k] = force[dadr[k]] * amps_per_n
 
 
 def _float_view(array: FloatArray) -> memoryview[float]:

@@ -17,7 +17,11 @@ The generated model (``docs/plant.md`` explains every choice and its source):
   length, so the cable is pull-only (a unilateral constraint) and its tension is that limit's force
   (sensor ``tension_k``).
 - Motor ``motor_k`` pushes slider ``spool_k`` with ``kt · I / r_spool`` (``ctrl`` in amps); the rotor
-  inertia reflected through gearbox and spool, ``J_rotor · N² / r_spool²``, is the slider's mass.
+  inertia reflected through gearbox and spool, ``J_rotor · N² / r_spool²``, is the slider's mass. With
+  another ``ActuatorConfig.kind``, ``motor_k`` is an ideal tension source behind a first-order lag
+  (``ctrl`` in newtons) or a MuJoCo muscle (``ctrl`` = activation) on a light slider.
+- Mounting: hanging under the drone (gravity along the arm), lying on a ``table`` plane (the arm's frame
+  ``mount_table`` turned so the hinges are vertical), or hanging with gravity off.
 - Capstan friction of the cable in the holes depends on tension and wrap angle, so
   :class:`hil.plant.Plant` sets it each control period as per-joint dry friction; its coefficient travels
   in the model as the custom numeric ``spirob_cable_mu``.
@@ -33,6 +37,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hil.model_config import (
+    ACTUATOR_KINDS,
+    MOUNTINGS,
     ArmConfig,
     ModelConfig,
 )
@@ -41,6 +47,8 @@ from hil.spiral import SpiralDesign
 __all__ = [
     "ARM_CONTYPE",
     "ENV_CONTYPE",
+    "GRAVITY_M_S2",
+    "TABLE_QUAT_WXYZ",
     "CableLayout",
     "UnitGeometry",
     "build_mjcf",
@@ -49,6 +57,13 @@ __all__ = [
     "unit_geometry",
     "write_mjcf",
 ]
+
+GRAVITY_M_S2 = 9.80665
+"""Standard gravity; the world's gravity points along −z (none with the ``gravity-off`` mounting)."""
+TABLE_QUAT_WXYZ = (0.5, 0.5, -0.5, -0.5)
+"""Orientation of the arm's frame on the drone for the ``table`` mounting: the arm (local −z) along the
+drone's +x, the hinge axes (local y) along its z (vertical), so a 1-2 cable arm bends in the horizontal
+plane."""
 
 ARM_CONTYPE = 1
 """Collision bit of arm geoms: they touch the environment, never each other (unless self-collision)."""
@@ -139,7 +154,8 @@ def unit_geometry(design: SpiralDesign, arm: ArmConfig | None = None) -> UnitGeo
     masses = tuple(arm.total_mass_kg * f for f in design.unit_mass_fractions())
     wb = tuple(w[0] for w in widths)
     wt = tuple(w[1] for w in widths)
-    stiff = [0.0] + [arm.base_stiffness_nm_per_rad * design.beta ** (-3.0 * (i - 1)) for i in range(1, n)]
+    p = arm.stiffness_exponent
+    stiff = [0.0] + [arm.base_stiffness_nm_per_rad * design.beta ** (-p * (i - 1)) for i in range(1, n)]
     radii = [0.25 * (wb[i] + wt[i]) for i in range(n)]
     damp = [0.0] * n
     for i in range(1, n):
@@ -233,7 +249,7 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         raise ValueError("the arm needs at least 2 units (one joint)")
     geo = unit_geometry(design, cfg.arm)
     lay = cable_layout(design, n_cables, cfg)
-    arm, motor, drone, sol = cfg.arm, cfg.motor, cfg.drone, cfg.solver
+    arm, motor, drone, sol, act = cfg.arm, cfg.motor, cfg.drone, cfg.solver, cfg.actuator
     n = design.units
     dtheta = design.dtheta_rad
     ball = n_cables == 3
@@ -246,7 +262,7 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     add(
         f'  <option timestep="{_f(sol.timestep_s)}" integrator="{sol.integrator}" solver="{sol.solver}" '
         f'iterations="{sol.iterations}" ls_iterations="{sol.ls_iterations}" tolerance="{_f(sol.tolerance)}" '
-        f'cone="{sol.cone}" gravity="0 0 -9.80665"/>'
+        f'cone="{sol.cone}" gravity="0 0 {0.0 if cfg.mounting == "gravity-off" else -GRAVITY_M_S2:g}"/>'
     )
     add("  <custom>")
     custom = {
@@ -264,6 +280,8 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         "spirob_current_limit_a": motor.current_limit_a,
         "spirob_no_load_speed_rad_s": motor.no_load_speed_rad_s,
         "spirob_stall_current_a": motor.stall_current_a,
+        "spirob_actuator_kind": ACTUATOR_KINDS.index(act.kind),
+        "spirob_mounting": MOUNTINGS.index(cfg.mounting),
     }
     for key, value in custom.items():
         add(f'    <numeric name="{key}" data="{_f(float(value))}"/>')
@@ -288,13 +306,27 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
             f'    <geom name="floor" type="plane" size="5 5 0.1" contype="{ENV_CONTYPE}" '
             f'conaffinity="{ARM_CONTYPE | ENV_CONTYPE}" rgba="0.8 0.8 0.8 1"/>'
         )
+    table = cfg.mounting == "table"
+    if table:
+        # The table carries the arm's widest section (the base unit's base-side face).
+        table_pos = (drone.pos_m[0], drone.pos_m[1], drone.pos_m[2] - 0.5 * geo.width_base_side_m[0])
+        add(
+            f'    <geom name="table" type="plane" size="1 1 0.1" pos="{_v(*table_pos)}" '
+            f'contype="{ENV_CONTYPE}" conaffinity="{ARM_CONTYPE | ENV_CONTYPE}" rgba="0.6 0.5 0.4 1"/>'
+        )
     hx, hy, hz = drone.half_size_m
     add(f'    <body name="drone" pos="{_v(*drone.pos_m)}" quat="{_v(*drone.quat_wxyz)}" mocap="true">')
     add(
         f'      <geom name="drone_body" type="box" size="{_v(hx, hy, hz)}" pos="0 0 {_f(hz)}" '
         f'contype="0" conaffinity="0" material="drone" mass="1"/>'
     )
+    if table:
+        # The arm lies along the drone's +x with its hinge axes vertical: it bends in the horizontal plane.
+        add(f'      <body name="mount_table" quat="{_v(*TABLE_QUAT_WXYZ)}">')
     add(f'      <site name="mount" pos="0 0 {_f(-drone.mount_offset_m)}"/>')
+    motor_kind = act.kind == "motor"
+    spool_mass_kg = motor.reflected_mass_kg if motor_kind else act.reflected_mass_kg
+    spool_friction_n = motor.friction_force_n if motor_kind else act.friction_n
     r0 = geo.cable_radius_base_side_m[0]
     for k, psi in enumerate(lay.angles_rad):
         cx, cy = r0 * math.cos(psi), r0 * math.sin(psi)
@@ -309,11 +341,11 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         add(
             f'        <joint name="spool_{k}" type="slide" axis="0 0 1" '
             f'range="{_v(-lay.travel_out_m, lay.travel_in_m)}" '
-            f'frictionloss="{_f(motor.friction_force_n)}"/>'
+            f'frictionloss="{_f(spool_friction_n)}"/>'
         )
         add(
             f'        <geom name="spool_{k}_geom" type="sphere" size="0.004" contype="0" conaffinity="0" '
-            f'mass="{_f(motor.reflected_mass_kg)}" rgba="0.6 0.6 0.6 1"/>'
+            f'mass="{_f(spool_mass_kg)}" rgba="0.6 0.6 0.6 1"/>'
         )
         add(f'        <site name="cable_{k}_spool"/>')
         add("      </body>")
@@ -354,6 +386,8 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     for _ in range(n):
         indent = indent[:-2]
         add(f"{indent}  </body>")
+    if table:
+        add("      </body>")
     add("    </body>")
 
     for obj in cfg.objects:
@@ -403,13 +437,8 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     add("  </tendon>")
 
     add("  <actuator>")
-    lim = motor.current_limit_a
     for k in range(n_cables):
-        # ctrl in amps; cable force = kt · I / r_spool. The plant applies the torque-speed line on top.
-        add(
-            f'    <motor name="motor_{k}" joint="spool_{k}" gear="{_f(motor.force_per_amp_n)}" '
-            f'ctrlrange="{_v(-lim, lim)}"/>'
-        )
+        add("    " + _actuator_xml(k, cfg, design, lay))
     add("  </actuator>")
 
     add("  <sensor>")
@@ -418,6 +447,34 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     add("  </sensor>")
     add("</mujoco>")
     return "\n".join(out) + "\n"
+
+
+def _actuator_xml(k: int, cfg: ModelConfig, design: SpiralDesign, lay: CableLayout) -> str:
+    """The actuator ``motor_k`` on slider ``spool_k`` (positive generalised force winds the cable in)."""
+    act, motor = cfg.actuator, cfg.motor
+    if act.kind == "tension":
+        # ctrl is the asked tension [N]; the force follows it through an exact first-order lag.
+        return (
+            f'<general name="motor_{k}" joint="spool_{k}" dyntype="filterexact" dynprm="{_f(act.lag_s)}" '
+            f'gainprm="1" biasprm="0 0 0" ctrlrange="0 {_f(cfg.peak_tension_n)}"/>'
+        )
+    if act.kind == "muscle":
+        # ctrl is the activation. gear -1: the muscle's length is the unwound cable, -x, so its
+        # contraction winds the cable in. Its length range is the authors' (multiples of the arm's
+        # length over the cable's arm-side path), shifted by that path's length with nothing wound.
+        arm_path_m = lay.taut_length_m - lay.spool_lead_m
+        lo, hi = (r * design.length_m - arm_path_m for r in act.muscle_length_range)
+        return (
+            f'<muscle name="motor_{k}" joint="spool_{k}" gear="-1" ctrlrange="0 1" '
+            f'force="{_f(cfg.muscle_force_n)}" lengthrange="{_v(lo, hi)}" '
+            f'timeconst="{_v(*act.muscle_timeconst_s)}"/>'
+        )
+    # ctrl in amps; cable force = kt · I / r_spool. The drives apply the torque-speed line on top.
+    lim = motor.current_limit_a
+    return (
+        f'<motor name="motor_{k}" joint="spool_{k}" gear="{_f(motor.force_per_amp_n)}" '
+        f'ctrlrange="{_v(-lim, lim)}"/>'
+    )
 
 
 def write_mjcf(

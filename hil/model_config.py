@@ -8,11 +8,14 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from controller.config import C610_MAX_A, MotorDriveConfig
 
 __all__ = [
+    "ACTUATOR_KINDS",
+    "MOUNTINGS",
+    "ActuatorConfig",
     "ArmConfig",
     "DroneConfig",
     "ModelConfig",
@@ -20,6 +23,12 @@ __all__ = [
     "ObjectConfig",
     "SolverConfig",
 ]
+
+ACTUATOR_KINDS: tuple[str, ...] = ("motor", "tension", "muscle")
+"""What pulls the cables (:class:`ActuatorConfig`)."""
+
+MOUNTINGS: tuple[str, ...] = ("hanging", "table", "gravity-off")
+"""Where the arm is fixed and whether it has weight (:attr:`ModelConfig.mounting`)."""
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,40}$")
 _RESERVED = re.compile(r"^(unit|joint|cable|spool|motor|tension|drone|tip|mount|floor|sun)")
@@ -49,8 +58,10 @@ class ArmConfig:
         total_mass_kg: mass of all units together, split ∝ β³ (uniform density). Prototype: 38.4 g
             (a reconstruction of the paper's STL files in TPU 95A).
         base_stiffness_nm_per_rad: stiffness of the joint nearest the base; joint i has
-            ``k_base · β^{−3(i−1)}`` (stiffness ∝ size³, Note S3's proportionality). Published
-            identification of a TPU arm: 0.3-0.8 N·m/rad near the base.
+            ``k_base · β^{−p(i−1)}``. Published identification of a TPU arm: 0.3-0.8 N·m/rad near the
+            base; the authors' generator: 0.04 N·m/rad.
+        stiffness_exponent: p, the stiffness profile: 3 (stiffness ∝ size³, Note S3's proportionality:
+            a bending beam of the unit's section) or 2 (∝ size², the authors' generator).
         damping_ratio: ζ of each joint against the inertia it carries (identification: about 0.13).
         cable_offset_ratio: cable hole radius as a fraction of the local half-width.
         cable_mu: capstan friction coefficient of the cable in the holes (0.25-0.4 reproduces the
@@ -69,6 +80,7 @@ class ArmConfig:
 
     total_mass_kg: float = 0.0384
     base_stiffness_nm_per_rad: float = 0.5
+    stiffness_exponent: int = 3
     damping_ratio: float = 0.13
     cable_offset_ratio: float = 0.8
     cable_mu: float = 0.3
@@ -83,6 +95,10 @@ class ArmConfig:
         """Raise ``ValueError`` if a value is out of range."""
         _finite("total_mass_kg", self.total_mass_kg)
         _finite("base_stiffness_nm_per_rad", self.base_stiffness_nm_per_rad, allow_equal=True)
+        _check(
+            self.stiffness_exponent in (2, 3) and not isinstance(self.stiffness_exponent, bool),
+            f"stiffness_exponent must be 2 or 3, got {self.stiffness_exponent!r}",
+        )
         _finite("damping_ratio", self.damping_ratio, allow_equal=True)
         _finite("cable_offset_ratio", self.cable_offset_ratio)
         _check(
@@ -172,6 +188,64 @@ class MotorConfig:
             isinstance(self.temperature_c, int) and 0 <= self.temperature_c <= 255,
             f"temperature_c must be an int 0..255, got {self.temperature_c!r}",
         )
+
+
+@dataclass(frozen=True)
+class ActuatorConfig:
+    """What pulls each cable: the M2006 motor with its spool, an ideal tension source, or a muscle.
+
+    Whatever the kind, the firmware's side is unchanged: it commands C610 currents and reads C610 frames
+    (:class:`hil.drives.Drives`). A current ``I`` asks for the tension ``I · kt / r_spool`` (the firmware's
+    force per amp, :attr:`MotorConfig.force_per_amp_n`); the angle is the wound cable and the fed-back
+    current is the delivered force converted back with the same force per amp. A tension source and a
+    muscle only pull: a negative current delivers no force (the arm's stiffness pulls the cable out).
+
+    Attributes:
+        kind: ``"motor"`` (the M2006 P36 + C610 + spool of :class:`MotorConfig`: reflected rotor inertia,
+            output friction, torque-speed line; the default), ``"tension"`` (an ideal tension source
+            behind a first-order lag, e.g. a force-controlled drive) or ``"muscle"`` (MuJoCo's muscle,
+            as in the authors' published generator).
+        lag_s: time constant of the tension source's first-order lag (``tension`` only).
+        reflected_mass_kg: mass of the spool slider for ``tension`` and ``muscle``: the light actuator's
+            moving parts seen at the cable. MuJoCo needs a mass on the slider; 10 g is under 1 % of
+            the motor's 1.3 kg and of the arm's own inertia seen at the cable.
+        friction_n: Coulomb friction at the cable for ``tension`` and ``muscle`` (the authors' tendon
+            ``frictionloss``: 0.1 N).
+        muscle_force_n: the muscle's peak isometric force F0; ``None`` = the motor's full range
+            (``force_per_amp_n · current_limit_a``). The authors' generator: 5 N.
+        muscle_timeconst_s: the muscle's activation and deactivation time constants (MuJoCo's defaults,
+            which the authors' generator keeps).
+        muscle_length_range: the cable's arm-side length over which the muscle's force-length curve is
+            spread, as multiples of the arm's length (the authors' generator: 0.4 to 2.5).
+    """
+
+    kind: str = "motor"
+    lag_s: float = 0.01
+    reflected_mass_kg: float = 0.01
+    friction_n: float = 0.1
+    muscle_force_n: float | None = None
+    muscle_timeconst_s: tuple[float, float] = (0.01, 0.04)
+    muscle_length_range: tuple[float, float] = (0.4, 2.5)
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        _check(
+            self.kind in ACTUATOR_KINDS,
+            f"actuator kind must be one of {', '.join(ACTUATOR_KINDS)}, got {self.kind!r}",
+        )
+        _finite("lag_s", self.lag_s)
+        _finite("reflected_mass_kg", self.reflected_mass_kg)
+        _finite("friction_n", self.friction_n, allow_equal=True)
+        if self.muscle_force_n is not None:
+            _finite("muscle_force_n", self.muscle_force_n)
+        _vector("muscle_timeconst_s", self.muscle_timeconst_s, 2)
+        _check(
+            min(self.muscle_timeconst_s) > 0,
+            f"muscle_timeconst_s must be > 0, got {self.muscle_timeconst_s!r}",
+        )
+        _vector("muscle_length_range", self.muscle_length_range, 2)
+        lo, hi = self.muscle_length_range
+        _check(0 < lo < hi, f"muscle_length_range must be 0 < low < high, got {self.muscle_length_range!r}")
 
 
 @dataclass(frozen=True)
@@ -291,13 +365,29 @@ class SolverConfig:
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """Everything :func:`hil.mjcf.build_mjcf` needs besides the spiral design."""
+    """Everything :func:`hil.mjcf.build_mjcf` needs besides the spiral design.
+
+    Attributes:
+        arm: the arm's body.
+        motor: the M2006/C610/spool figures; the firmware's force per amp comes from them whatever the
+            actuator.
+        drone: the body the arm is fixed to (the drone, or the clamp on the table).
+        solver: MuJoCo's numerical settings.
+        objects: things to grasp.
+        actuator: what pulls the cables.
+        mounting: ``"hanging"`` (under the drone, gravity along the arm; the drone's acceleration enters
+            as a fictitious force), ``"table"`` (the arm lies flat on a table plane, its base clamped,
+            bending in the horizontal plane; gravity presses it on the table) or ``"gravity-off"``
+            (hanging pose, no gravity: the authors' choice).
+    """
 
     arm: ArmConfig = field(default_factory=ArmConfig)
     motor: MotorConfig = field(default_factory=MotorConfig)
     drone: DroneConfig = field(default_factory=DroneConfig)
     solver: SolverConfig = field(default_factory=SolverConfig)
     objects: tuple[ObjectConfig, ...] = ()
+    actuator: ActuatorConfig = field(default_factory=ActuatorConfig)
+    mounting: str = "hanging"
 
     def validate(self) -> None:
         """Raise ``ValueError`` if any part is out of range or object names clash."""
@@ -305,6 +395,11 @@ class ModelConfig:
         self.motor.validate()
         self.drone.validate()
         self.solver.validate()
+        self.actuator.validate()
+        _check(
+            self.mounting in MOUNTINGS,
+            f"mounting must be one of {', '.join(MOUNTINGS)}, got {self.mounting!r}",
+        )
         names = [o.name for o in self.objects]
         _check(len(names) == len(set(names)), f"object names must be unique, got {names}")
         supports = {f"{o.name}_support" for o in self.objects if o.mass_kg is not None}
@@ -312,6 +407,17 @@ class ModelConfig:
         for o in self.objects:
             o.validate()
 
+    @property
+    def peak_tension_n(self) -> float:
+        """The largest tension the firmware can ask for: ``force_per_amp_n · current_limit_a`` [N]."""
+        return self.motor.force_per_amp_n * self.motor.current_limit_a
+
+    @property
+    def muscle_force_n(self) -> float:
+        """The muscle's peak isometric force F0 (``actuator.muscle_force_n`` or the peak tension) [N]."""
+        f0 = self.actuator.muscle_force_n
+        return self.peak_tension_n if f0 is None else f0
+
     def with_objects(self, *objects: ObjectConfig) -> ModelConfig:
         """A copy with ``objects`` appended."""
-        return ModelConfig(self.arm, self.motor, self.drone, self.solver, self.objects + tuple(objects))
+        return replace(self, objects=self.objects + tuple(objects))

@@ -13,7 +13,7 @@ Per control period the plant also applies what MuJoCo cannot express statically:
   no-load speed);
 - capstan friction of the cables in the unit holes, as per-joint dry friction whose size follows the
   capstan law from the current cable tensions and joint angles (``docs/plant.md``);
-- the drone's acceleration, as a change of the gravity vector (the arm is simulated in the drone's frame).
+- the drone's acceleration (hanging mounting), as a change of gravity (the arm lives in the drone's frame).
 
 Randomness (the encoders' arbitrary zero, current noise) comes only from the ``numpy.random.Generator``
 given to the constructor.
@@ -52,7 +52,6 @@ __all__ = ["BodyPoses", "Contact", "PhysicsExtremes", "Plant", "PlantConfig", "P
 
 FloatArray = NDArray[np.float64]
 
-_GRAVITY = np.array([0.0, 0.0, -9.80665])
 _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
 
 
@@ -110,7 +109,8 @@ class Plant:
         self._config.validate()
         if rng is not None and not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-        drives = Drives(self._config.model.motor, self._design.cables, rng)
+        model = self._config.model
+        drives = Drives(model.motor, self._design.cables, rng, model.actuator, model.muscle_force_n)
         self._drives = drives
         self._drive = drives.drive
         self.apply_currents = drives.apply_currents
@@ -212,8 +212,11 @@ class Plant:
             m, self._unit_bodies.tolist(), radii, self._tension_adr_list, self._design.dtheta_rad
         )
         self._drone_accel = np.zeros(3)
+        self._gravity = m.opt.gravity.copy()  # the mounting's (hil.mjcf)
+        self._accel_gain = 1.0 if cfg.mounting == "hanging" else 0.0
         d = self._d
-        self._drives.attach(d.qpos, d.qvel, d.ctrl, self._spool_qadr.tolist(), self._spool_dadr.tolist())
+        qadr, dadr = self._spool_qadr.tolist(), self._spool_dadr.tolist()
+        self._drives.attach(d.qpos, d.qvel, d.ctrl, qadr, dadr, d.qfrc_actuator)
 
     # ------------------------------------------------------------------ properties
 
@@ -286,7 +289,7 @@ class Plant:
         drone = self._config.model.drone
         d.mocap_pos[self._drone_mocap] = drone.pos_m
         d.mocap_quat[self._drone_mocap] = unit_quat(drone.quat_wxyz)
-        m.opt.gravity[:] = _GRAVITY
+        m.opt.gravity[:] = self._gravity
         self._drone_accel[:] = 0.0
         self._drives.reset()
         self._time_us = 0
@@ -509,7 +512,8 @@ class Plant:
             pos_m: drone origin, world frame.
             quat_wxyz: orientation (normalised here).
             accel_m_s2: the drone's linear acceleration, world frame. The arm is simulated in the drone's
-                frame, so this enters as the fictitious force ``−m·a`` (gravity becomes ``g − a``).
+                frame, so this enters as the fictitious force ``−m·a`` (gravity becomes ``g − a``);
+                hanging mounting only (ignored on a table or without gravity).
 
         Raises:
             ValueError: wrong shape, a non-finite value, or a zero quaternion.
@@ -521,7 +525,7 @@ class Plant:
         d.mocap_pos[self._drone_mocap] = pos
         d.mocap_quat[self._drone_mocap] = quat
         self._drone_accel[:] = acc
-        self._m.opt.gravity[:] = _GRAVITY - acc
+        self._m.opt.gravity[:] = self._gravity - self._accel_gain * acc
         mujoco.mj_kinematics(self._m, d)
 
     def add_object(self, obj: ObjectConfig) -> None:
@@ -555,7 +559,7 @@ class Plant:
                 d.qpos[qa + 3 : qa + 7] = (1.0, 0.0, 0.0, 0.0)
         self._time_us, acc, d.time = keep
         self._drone_accel[:] = acc
-        m.opt.gravity[:] = _GRAVITY - acc
+        m.opt.gravity[:] = self._gravity - self._accel_gain * acc
         self._bad_qacc = 0
         self._monitor.include(earlier)
         mujoco.mj_forward(m, d)

@@ -17,6 +17,7 @@ from pathlib import Path
 from ..board import BoardConfig
 from ..environment import Environment
 from ..faults import Fault
+from ..model_config import ModelConfig
 from ..plant import PlantConfig
 from ..radio import RadioScript
 from ..record import Check, RunRecord, ScenarioResult
@@ -77,9 +78,12 @@ def scenario_names() -> list[str]:
     return list(SCENARIOS)
 
 
-def board_config(plan: Plan, seed: int, design: SpiralDesign | None = None) -> BoardConfig:
-    """The virtual board a plan runs on (objects added to the scene, the plan's firmware settings)."""
-    plant = PlantConfig()
+def board_config(
+    plan: Plan, seed: int, design: SpiralDesign | None = None, model: ModelConfig | None = None
+) -> BoardConfig:
+    """The virtual board a plan runs on (objects added to the scene, the plan's firmware settings);
+    ``model`` is the plant model (default: the prototype's, ``hil.model_presets``)."""
+    plant = PlantConfig() if model is None else PlantConfig(model=model)
     if plan.objects:
         plant = dataclasses.replace(plant, model=plant.model.with_objects(*plan.objects))
     return BoardConfig(
@@ -102,6 +106,7 @@ def run_scenario(
     *,
     seed: int = 0,
     design: SpiralDesign | None = None,
+    model: ModelConfig | None = None,
     faults: Sequence[Fault] = (),
     record: str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
@@ -113,6 +118,7 @@ def run_scenario(
         name: a name from :data:`SCENARIOS`.
         seed: seed of every random choice in the run.
         design: the arm (default: the paper's 3-cable prototype).
+        model: the plant model (default: the prototype's; see :mod:`hil.model_presets`).
         faults: faults added to the scenario's own.
         record: write an MCAP recording of every byte in and out of the board.
         progress: called as ``progress(ticks_done, ticks_total)`` every 100 ticks.
@@ -124,7 +130,7 @@ def run_scenario(
     scenario = SCENARIOS[name]()
     plan = scenario.plan()
     plan = dataclasses.replace(plan, faults=(*plan.faults, *faults))
-    config = board_config(plan, seed, design)
+    config = board_config(plan, seed, design, model)
     recorder = None
     if record is not None:
         meta = {"scenario": name, **config.describe()}

@@ -108,6 +108,9 @@ def test_design_from_spiral_parameters(capsys: pytest.CaptureFixture[str]) -> No
         ["design", "--preset", "authors", "--length", "0.2"],
         ["design", "--preset", "prototype", "--dtheta-deg", "20"],
         ["design", "--preset", "nope"],
+        ["model", "export", "-o", "x.xml", "--preset", "nope"],
+        ["experiment", "packing", "--preset", "nope"],
+        ["experiment", "packing", "--preset", "authors", "--size", "tiny"],
         ["design", "--cables", "4"],
         ["design", "--length", "abc"],
         ["design", "--json", "--load-force", "-1"],
@@ -166,7 +169,54 @@ def test_model_export_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "branch") >= 0
     assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor") >= 0
     assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "unit_23") >= 0
-    assert m.actuator_gear[0][0] == pytest.approx(33.0)
+    # --preset authors is the authors' model: 5 N muscles, no gravity; the torque constant still sets
+    # the firmware's force per amp, which travels as a custom numeric.
+    assert m.actuator_gaintype[0] == mujoco.mjtGain.mjGAIN_MUSCLE
+    assert m.actuator_gainprm[0][2] == pytest.approx(5.0)
+    assert list(m.opt.gravity) == [0.0, 0.0, 0.0]
+    kt = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_NUMERIC, "spirob_torque_constant_nm_per_a")
+    assert m.numeric_data[m.numeric_adr[kt]] == pytest.approx(0.33)
+
+
+def test_model_export_motor_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "arm.xml"
+    argv = ["model", "export", "-o", str(target), "--torque-constant", "0.33", "--stiffness-exponent", "2"]
+    status, _, err = run(argv, capsys)
+    assert status == 0, err
+    m = mujoco.MjModel.from_xml_path(str(target))
+    assert m.actuator_gear[0][0] == pytest.approx(33.0)  # kt / r_spool
+    k1 = m.jnt_stiffness[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "joint_01")]
+    k2 = m.jnt_stiffness[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "joint_02")]
+    assert k1 / k2 == pytest.approx(PAPER_PROTOTYPE.beta**2)
+
+
+@pytest.mark.parametrize("name", ["prototype", "authors", "ideal-tension", "table", "gravity-off"])
+def test_design_names_the_model_preset(name: str, capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, _ = run(["design", "--json", "--preset", name], capsys)
+    assert status == 0
+    summary = json.loads(out)
+    assert summary["model_preset"] == name
+    assert summary["model"]["actuator"] in ("motor", "tension", "muscle")
+    if name == "table":
+        assert summary["cables"] == 2 and summary["model"]["mounting"] == "table"
+
+
+def test_preset_help_lists_every_preset(capsys: pytest.CaptureFixture[str]) -> None:
+    for command in (["design"], ["model", "export"], ["experiment"]):
+        with pytest.raises(SystemExit):
+            main([*command, "--help"])
+        out = capsys.readouterr().out
+        for name in ("prototype", "authors", "ideal-tension", "table", "gravity-off"):
+            assert name in out, (command, name)
+
+
+def test_model_export_table_preset(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "table.xml"
+    status, _, err = run(["model", "export", "--preset", "table", "-o", str(target)], capsys)
+    assert status == 0, err
+    m = mujoco.MjModel.from_xml_path(str(target))
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "table") >= 0
+    assert m.ntendon == 2
 
 
 @pytest.mark.parametrize(

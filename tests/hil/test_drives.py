@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hil.drives import Drives
-from hil.model_config import MotorConfig
+from hil.model_config import ActuatorConfig, MotorConfig
 from protocol.c610 import ANGLE_COUNTS, MotorFeedback
 
 MOTOR = MotorConfig()
@@ -87,3 +87,33 @@ def test_state_survives_a_re_attach() -> None:
     assert drives.commanded_currents_raw() == (100, 200, 300)
     assert drives.angle_offsets_counts == offsets
     assert ctrl.tolist() == pytest.approx([0.1, 0.2, 0.3])
+
+
+@pytest.mark.parametrize(("kind", "per_amp"), [("tension", MOTOR.force_per_amp_n), ("muscle", 0.5)])
+def test_light_actuators_get_the_asked_tension_and_report_their_force(kind: str, per_amp: float) -> None:
+    """A current asks for I·kt/r: newtons for a tension source, that over F0 for a muscle (capped at 1);
+    pull only. The fed-back current is the delivered force over the force per amp."""
+    f0 = MOTOR.force_per_amp_n / 0.5  # 36 N: one amp asks for half the muscle's peak
+    drives = Drives(MOTOR, 3, None, ActuatorConfig(kind=kind), f0)
+    ctrl = np.zeros(3)
+    state = np.zeros(6)
+    force = np.zeros(6)
+    drives.attach(state, state, ctrl, [0, 1, 2], [3, 4, 5], force)
+    drives.apply_currents([1000, -2000, 10_000])
+    drives.drive()
+    assert ctrl.tolist() == pytest.approx(
+        [per_amp, 0.0, min(10 * per_amp, 1.0) if kind == "muscle" else 10 * per_amp]
+    )
+    force[3:] = (9.0, 0.0, 36.0)  # what the actuators delivered to the spools [N]
+    fpa = MOTOR.force_per_amp_n
+    assert drives.applied_currents_a().tolist() == pytest.approx([9.0 / fpa, 0.0, 36.0 / fpa])
+    assert [fb.current for fb in drives.feedback()] == [round(9000 / fpa), 0, round(36000 / fpa)]
+
+
+def test_light_actuators_need_their_force_buffer() -> None:
+    drives = Drives(MOTOR, 3, None, ActuatorConfig(kind="tension"))
+    state = np.zeros(6)
+    with pytest.raises(ValueError, match="qfrc_actuator"):
+        drives.attach(state, state, np.zeros(3), [0, 1, 2], [3, 4, 5])
+    with pytest.raises(ValueError, match="muscle_force_n"):
+        Drives(MOTOR, 3, None, ActuatorConfig(kind="muscle"))

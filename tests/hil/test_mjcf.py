@@ -18,7 +18,15 @@ from hil.mjcf import (
     unit_geometry,
     write_mjcf,
 )
-from hil.model_config import ArmConfig, DroneConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
+from hil.model_config import (
+    ActuatorConfig,
+    ArmConfig,
+    DroneConfig,
+    ModelConfig,
+    MotorConfig,
+    ObjectConfig,
+    SolverConfig,
+)
 from hil.spiral import AUTHORS_DEFAULT, PAPER_PROTOTYPE, SpiralDesign
 
 
@@ -212,6 +220,12 @@ def test_floor_option() -> None:
         (ModelConfig(objects=(ObjectConfig("a", 0.01, 0.1, (0, 0, 0)),) * 2), "unique"),
         (ModelConfig(objects=(ObjectConfig("a", -0.01, 0.1, (0, 0, 0)),)), "radius_m"),
         (ModelConfig(objects=(ObjectConfig("a", 0.01, 0.1, (0, 0, 0), axis=(0, 0, 0)),)), "axis"),
+        (ModelConfig(arm=ArmConfig(stiffness_exponent=4)), "stiffness_exponent"),
+        (ModelConfig(actuator=ActuatorConfig(kind="piston")), "actuator kind"),
+        (ModelConfig(actuator=ActuatorConfig(lag_s=0.0)), "lag_s"),
+        (ModelConfig(actuator=ActuatorConfig(muscle_force_n=-5.0)), "muscle_force_n"),
+        (ModelConfig(actuator=ActuatorConfig(muscle_length_range=(2.5, 0.4))), "muscle_length_range"),
+        (ModelConfig(mounting="ceiling"), "mounting"),
     ],
 )
 def test_bad_configuration_is_refused(config: ModelConfig, match: str) -> None:
@@ -229,3 +243,50 @@ def test_single_unit_is_refused() -> None:
     one = SpiralDesign.from_params(0.005, 0.15, math.radians(30), math.radians(30))
     with pytest.raises(ValueError, match="at least 2 units"):
         build_mjcf(one)
+
+
+def test_stiffness_can_scale_with_size_squared() -> None:
+    m = load(config=ModelConfig(arm=ArmConfig(base_stiffness_nm_per_rad=0.04, stiffness_exponent=2)))
+    joints = [
+        name_id(m, mujoco.mjtObj.mjOBJ_JOINT, f"joint_{i:02d}") for i in range(1, PAPER_PROTOTYPE.units)
+    ]
+    k = [float(m.jnt_stiffness[j]) for j in joints]
+    assert k[0] == pytest.approx(0.04)
+    for a, b in itertools.pairwise(k):
+        assert a / b == pytest.approx(PAPER_PROTOTYPE.beta**2, rel=1e-6)
+
+
+def test_actuator_kinds() -> None:
+    motor = MotorConfig()
+    peak_n = motor.force_per_amp_n * motor.current_limit_a
+    m = load(config=ModelConfig(actuator=ActuatorConfig(kind="tension", lag_s=0.02)))
+    assert m.actuator_dyntype[0] == mujoco.mjtDyn.mjDYN_FILTEREXACT
+    assert m.actuator_dynprm[0][0] == pytest.approx(0.02)
+    assert m.actuator_ctrlrange[0].tolist() == pytest.approx([0.0, peak_n])  # pull only, in newtons
+    spool = name_id(m, mujoco.mjtObj.mjOBJ_BODY, "spool_0")
+    assert m.body_mass[spool] == pytest.approx(0.01)  # light: not the motor's 1.3 kg
+    assert m.dof_frictionloss[
+        m.jnt_dofadr[name_id(m, mujoco.mjtObj.mjOBJ_JOINT, "spool_0")]
+    ] == pytest.approx(0.1)
+    m = load(config=ModelConfig(actuator=ActuatorConfig(kind="muscle")))
+    assert m.actuator_gaintype[0] == mujoco.mjtGain.mjGAIN_MUSCLE
+    assert m.actuator_gear[0][0] == -1.0  # contracting winds the cable in
+    assert m.actuator_gainprm[0][2] == pytest.approx(peak_n)  # F0 defaults to the motor's range
+    lo, hi = m.actuator_lengthrange[0]
+    assert lo < 0.0 < hi  # the straight arm sits inside the force-length range
+
+
+def test_mountings_set_gravity_and_the_table() -> None:
+    design = PAPER_PROTOTYPE.with_cables(2)
+    m = load(design, config=ModelConfig(mounting="gravity-off"))
+    assert m.opt.gravity.tolist() == [0.0, 0.0, 0.0]
+    m = load(design, config=ModelConfig(mounting="table"))
+    assert m.opt.gravity.tolist() == pytest.approx([0.0, 0.0, -9.80665])
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    tip = d.site_xpos[name_id(m, mujoco.mjtObj.mjOBJ_SITE, "tip")]
+    assert tip[0] > 0.2 and abs(tip[2] - 1.0) < 1e-9  # lying along +x at the clamp's height
+    hinge = name_id(m, mujoco.mjtObj.mjOBJ_JOINT, "joint_05")
+    assert d.xaxis[hinge].tolist() == pytest.approx([0.0, 0.0, 1.0])  # bends in the horizontal plane
+    table = name_id(m, mujoco.mjtObj.mjOBJ_GEOM, "table")
+    assert d.geom_xpos[table][2] == pytest.approx(1.0 - 0.5 * unit_geometry(design).width_base_side_m[0])
