@@ -46,6 +46,7 @@ __all__ = [
     "build_mjcf",
     "cable_angles_rad",
     "cable_layout",
+    "cable_stiffness_n_per_m",
     "unit_geometry",
     "write_mjcf",
 ]
@@ -58,6 +59,8 @@ ENV_CONTYPE = 2
 # Constraint impedance close to 1: MuJoCo lets (1 − d) of the unconstrained acceleration leak through a
 # soft constraint. 0.9999 breaks ball-joint limits under large torque; 0.99-0.995 holds (docs/plant.md).
 _SOLIMP = "0.99 0.995 0.001 0.5 2"
+# Placeholder of cable k's solreflimit until the compiled model gives the tendon's inertia.
+_CABLE_SOLREF = "@cable_solref_"
 # Axial inset of each cable hole beyond the wedge gap, as a fraction of its radius: keeps the two facing
 # holes of a closed joint apart, so the cable keeps a moment arm ≈ r at the limit (no kink in the path).
 _HOLE_INSET = 0.3
@@ -270,9 +273,12 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     add("  </custom>")
     add("  <default>")
     arm_aff = ARM_CONTYPE | ENV_CONTYPE if arm.self_collision else ENV_CONTYPE
+    con = cfg.contact
+    # Every arm and object geom carries the same stated contact (MuJoCo mixes the two sides' solref).
+    contact = f'solref="{_v(con.timeconst_s, con.damping_ratio)}" solimp="{_v(*con.solimp)}"'
     add(
         f'    <geom contype="{ARM_CONTYPE}" conaffinity="{arm_aff}" condim="3" '
-        f'friction="{_f(arm.geom_friction)} 0.005 0.0001"/>'
+        f'friction="{_f(arm.geom_friction)} 0.005 0.0001" {contact}/>'
     )
     add(f'    <site size="{_f(arm.cable_diameter_m)}" rgba="0.9 0.9 0.2 1"/>')
     add("  </default>")
@@ -363,7 +369,7 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         geom = (
             f'<geom name="{obj.name}_geom" type="{obj.shape}" fromto="{_v(*ends)}" size="{_f(obj.radius_m)}" '
             f'contype="{ENV_CONTYPE}" conaffinity="{ARM_CONTYPE | ENV_CONTYPE}" '
-            f'friction="{_f(obj.friction)} 0.005 0.0001" material="object"'
+            f'friction="{_f(obj.friction)} 0.005 0.0001" material="object" {contact}'
         )
         add(f'    <body name="{obj.name}" pos="{_v(*obj.pos_m)}">')
         if obj.mass_kg is None:
@@ -391,7 +397,7 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     for k in range(n_cables):
         add(
             f'    <spatial name="cable_{k}" range="0 {_f(lay.taut_length_m)}" '
-            f'solreflimit="{_f(arm.cable_timeconst_s)} 1" solimplimit="{_SOLIMP}" '
+            f'solreflimit="{_CABLE_SOLREF}{k}" solimplimit="{_SOLIMP}" '
             f'width="{_f(0.5 * arm.cable_diameter_m)}" rgba="0.1 0.1 0.1 1">'
         )
         add(f'      <site site="cable_{k}_spool"/>')
@@ -417,7 +423,42 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         add(f'    <tendonlimitfrc name="tension_{k}" tendon="cable_{k}"/>')
     add("  </sensor>")
     add("</mujoco>")
-    return "\n".join(out) + "\n"
+    return _with_cable_stretch("\n".join(out) + "\n", n_cables, arm, lay)
+
+
+def cable_stiffness_n_per_m(arm: ArmConfig, layout: CableLayout) -> float:
+    """Axial stiffness ``E·A/L`` of a cable: ``L`` is its free run from the guide on the drone to the knot
+    at the tip (the spool's lead in the model is a numerical travel, not cable)."""
+    return arm.cable_axial_stiffness_n / (layout.taut_length_m - layout.spool_lead_m)
+
+
+def _with_cable_stretch(xml: str, n_cables: int, arm: ArmConfig, layout: CableLayout) -> str:
+    """Replace each cable's ``solreflimit`` placeholder by its stretch stiffness and damping.
+
+    MuJoCo's direct form ``solref="-k -b"`` sets the constraint's reference acceleration ``−k·r − b·v`` in
+    the tendon's own coordinate, i.e. stiffness per unit of the mass the tendon moves. That mass is
+    ``1 / tendon_invweight0`` (the tendon's inverse inertia in the straight pose, known after compiling),
+    so ``k = K · invweight0`` gives the physical ``K = E·A/L`` [N/m]; ``b = 2ζ√k`` is damping ratio ζ
+    against the same mass. MuJoCo divides by the impedance ``dmax`` (``k/dmax²``, ``b/dmax``), undone here.
+    """
+    if arm.cable_timeconst_s is not None:
+        for k in range(n_cables):
+            xml = xml.replace(f"{_CABLE_SOLREF}{k}", f"{_f(arm.cable_timeconst_s)} 1")
+        return xml
+    import mujoco  # compile-time only: the generator itself has no MuJoCo dependency otherwise
+
+    first = xml
+    for k in range(n_cables):
+        first = first.replace(f"{_CABLE_SOLREF}{k}", "0.002 1")
+    model = mujoco.MjModel.from_xml_string(first)
+    stiffness = cable_stiffness_n_per_m(arm, layout)
+    dmax = float(_SOLIMP.split()[1])
+    for k in range(n_cables):
+        tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, f"cable_{k}")
+        k_acc = stiffness * float(model.tendon_invweight0[tid])
+        b_acc = 2.0 * arm.cable_damping_ratio * math.sqrt(k_acc)
+        xml = xml.replace(f"{_CABLE_SOLREF}{k}", _v(-k_acc * dmax * dmax, -b_acc * dmax))
+    return xml
 
 
 def write_mjcf(

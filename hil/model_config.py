@@ -6,6 +6,7 @@ out of range. ``docs/plant.md`` gives the source of every default. ``hil.mjcf`` 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass, field
@@ -14,6 +15,7 @@ from controller.config import C610_MAX_A, MotorDriveConfig
 
 __all__ = [
     "ArmConfig",
+    "ContactConfig",
     "DroneConfig",
     "ModelConfig",
     "MotorConfig",
@@ -60,8 +62,17 @@ class ArmConfig:
             tip joints carry ~1e-9 kg·m², and MuJoCo scales constraint softness by inverse inertia, so
             joint limits and the cable would give way under cable loads; 3e-6 keeps them within about a
             degree / a millimetre at the 1 ms step and leaves the first bending mode unchanged.
-        limit_timeconst_s: ``solref`` time constant of the joint limits (unit-on-unit contact).
-        cable_timeconst_s: ``solref`` time constant of the cable (tendon length limit).
+        limit_timeconst_s: ``solref`` time constant of the joint limits (unit-on-unit contact of the TPU
+            units); at least twice the physics step (``ModelConfig.validate``).
+        cable_modulus_pa: tensile modulus of the cable's fibre (Dyneema SK75: 109-132 GPa, DSM's fact
+            sheet; the low end, since a braid's fibres are not all along its axis).
+        cable_fill_factor: fraction of the cable's nominal cross-section that is fibre (a braid of round
+            filaments packs about half its circle).
+        cable_damping_ratio: damping ratio of the cable's stretch against the mass it stops (a fibre's
+            loss is small; the value is a modelling choice, see ``docs/plant.md``).
+        cable_timeconst_s: ``None``: the cable's limit is its stretch (the three fields above). A number:
+            MuJoCo's time-constant form instead, with no physical stiffness (the model before issue 13;
+            the benchmark compares against it).
         self_collision: let non-adjacent units collide. Off by default: Note S3 models units touching by
             the joint limits, which keeps the packed pose cheap and exact.
         geom_friction: sliding friction coefficient of the unit surfaces.
@@ -75,7 +86,10 @@ class ArmConfig:
     cable_diameter_m: float = 0.0005
     joint_armature_kg_m2: float = 3e-6
     limit_timeconst_s: float = 0.002
-    cable_timeconst_s: float = 0.002
+    cable_modulus_pa: float = 109e9
+    cable_fill_factor: float = 0.5
+    cable_damping_ratio: float = 0.5
+    cable_timeconst_s: float | None = None
     self_collision: bool = False
     geom_friction: float = 0.8
 
@@ -92,8 +106,52 @@ class ArmConfig:
         _finite("cable_diameter_m", self.cable_diameter_m)
         _finite("joint_armature_kg_m2", self.joint_armature_kg_m2, allow_equal=True)
         _finite("limit_timeconst_s", self.limit_timeconst_s)
-        _finite("cable_timeconst_s", self.cable_timeconst_s)
+        _finite("cable_modulus_pa", self.cable_modulus_pa)
+        _finite("cable_fill_factor", self.cable_fill_factor)
+        _check(
+            self.cable_fill_factor <= 1.0, f"cable_fill_factor must be <= 1, got {self.cable_fill_factor!r}"
+        )
+        _finite("cable_damping_ratio", self.cable_damping_ratio, allow_equal=True)
+        if self.cable_timeconst_s is not None:
+            _finite("cable_timeconst_s", self.cable_timeconst_s)
         _finite("geom_friction", self.geom_friction, allow_equal=True)
+
+    @property
+    def cable_axial_stiffness_n(self) -> float:
+        """The cable's ``E·A`` [N]: its stiffness is this over its length."""
+        return self.cable_modulus_pa * self.cable_fill_factor * math.pi * (0.5 * self.cable_diameter_m) ** 2
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    """Contact parameters of every arm and object geom (MuJoCo's ``solref``/``solimp``).
+
+    MuJoCo's default (20 ms) lets a pen sink 10 mm into the arm; ``docs/plant.md`` gives the measurements
+    behind these defaults.
+
+    Attributes:
+        timeconst_s: ``solref`` time constant: how fast a penetration is pushed out. At least twice the
+            physics step (``ModelConfig.validate``): a shorter one is not resolved by the integrator.
+        damping_ratio: ``solref`` damping ratio (1 = critically damped: no bounce from the contact itself).
+        solimp: ``(dmin, dmax, width_m, midpoint, power)``: the constraint impedance rises from ``dmin`` at
+            zero depth to ``dmax`` at ``width_m`` deep; (1 − d) of the unconstrained push leaks through.
+    """
+
+    timeconst_s: float = 0.002
+    damping_ratio: float = 1.0
+    solimp: tuple[float, float, float, float, float] = (0.99, 0.995, 0.0005, 0.5, 2.0)
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        _finite("contact timeconst_s", self.timeconst_s)
+        _finite("contact damping_ratio", self.damping_ratio)
+        _vector("contact solimp", self.solimp, 5)
+        dmin, dmax, width, mid, power = self.solimp
+        _check(
+            0.0 < dmin <= dmax < 1.0 and width > 0.0 and 0.0 < mid < 1.0 and power >= 1.0,
+            f"contact solimp must have 0 < dmin <= dmax < 1, width > 0, 0 < midpoint < 1, power >= 1, "
+            f"got {self.solimp!r}",
+        )
 
 
 _DRIVE = MotorDriveConfig()
@@ -298,10 +356,13 @@ class ModelConfig:
     drone: DroneConfig = field(default_factory=DroneConfig)
     solver: SolverConfig = field(default_factory=SolverConfig)
     objects: tuple[ObjectConfig, ...] = ()
+    contact: ContactConfig = field(default_factory=ContactConfig)
 
     def validate(self) -> None:
-        """Raise ``ValueError`` if any part is out of range or object names clash."""
+        """Raise ``ValueError`` if any part is out of range, object names clash, or a constraint's time
+        constant is shorter than two physics steps."""
         self.arm.validate()
+        self.contact.validate()
         self.motor.validate()
         self.drone.validate()
         self.solver.validate()
@@ -311,7 +372,19 @@ class ModelConfig:
         _check(not supports & set(names), f"an object name clashes with another's support body: {names}")
         for o in self.objects:
             o.validate()
+        step = self.solver.timestep_s
+        for what, tau in (
+            ("contact.timeconst_s", self.contact.timeconst_s),
+            ("arm.limit_timeconst_s", self.arm.limit_timeconst_s),
+        ):
+            # MuJoCo's soft constraints need the reference dynamics resolved by the step: a time constant
+            # under 2 steps makes the correction overshoot within one step (contacts pop, limits chatter).
+            _check(
+                tau >= 2.0 * step - 1e-12,
+                f"{what} = {tau * 1e3:g} ms must be at least twice the physics step "
+                f"(solver.timestep_s = {step * 1e3:g} ms): shorten the step or lengthen the time constant",
+            )
 
     def with_objects(self, *objects: ObjectConfig) -> ModelConfig:
         """A copy with ``objects`` appended."""
-        return ModelConfig(self.arm, self.motor, self.drone, self.solver, self.objects + tuple(objects))
+        return dataclasses.replace(self, objects=self.objects + tuple(objects))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from pathlib import Path
@@ -15,10 +16,19 @@ from hil.mjcf import (
     build_mjcf,
     cable_angles_rad,
     cable_layout,
+    cable_stiffness_n_per_m,
     unit_geometry,
     write_mjcf,
 )
-from hil.model_config import ArmConfig, DroneConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
+from hil.model_config import (
+    ArmConfig,
+    ContactConfig,
+    DroneConfig,
+    ModelConfig,
+    MotorConfig,
+    ObjectConfig,
+    SolverConfig,
+)
 from hil.spiral import AUTHORS_DEFAULT, PAPER_PROTOTYPE, SpiralDesign
 
 
@@ -229,3 +239,42 @@ def test_single_unit_is_refused() -> None:
     one = SpiralDesign.from_params(0.005, 0.15, math.radians(30), math.radians(30))
     with pytest.raises(ValueError, match="at least 2 units"):
         build_mjcf(one)
+
+
+def test_every_arm_and_object_geom_carries_the_stated_contact() -> None:
+    contact = ContactConfig(timeconst_s=0.003, damping_ratio=0.9, solimp=(0.98, 0.99, 0.001, 0.4, 3.0))
+    cfg = dataclasses.replace(ModelConfig(), contact=contact).with_objects(
+        ObjectConfig("pole", 0.01, 0.1, (0.05, 0, 0.8)),
+        ObjectConfig("cup", 0.02, 0.05, (0.1, 0, 0.8), mass_kg=0.05, shape="capsule"),
+    )
+    m = load(config=cfg)
+    checked = 0
+    for g in range(m.ngeom):
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or ""
+        if name.startswith("unit_") or name in ("pole_geom", "cup_geom"):
+            assert m.geom_solref[g] == pytest.approx((0.003, 0.9))
+            assert m.geom_solimp[g] == pytest.approx((0.98, 0.99, 0.001, 0.4, 3.0))
+            checked += 1
+    assert checked == PAPER_PROTOTYPE.units + 2
+
+
+def test_the_cable_limit_is_its_stretch_ea_over_l() -> None:
+    """MuJoCo's direct solref is stiffness per unit of the tendon's mass: times its inertia it is E·A/L."""
+    arm = ArmConfig()
+    m = load(config=ModelConfig(arm=arm))
+    lay = cable_layout(PAPER_PROTOTYPE, 3)
+    k_phys = cable_stiffness_n_per_m(arm, lay)
+    # 0.5 mm Dyneema braid, half of it fibre at 109 GPa, over the ~0.2 m from the drone to the tip
+    assert 3e4 < k_phys < 8e4
+    dmax = m.tendon_solimp_lim[0][1]
+    for k in range(3):
+        ref = m.tendon_solref_lim[k]
+        assert ref[0] < 0 and ref[1] < 0
+        k_acc = -ref[0] / dmax**2
+        assert k_acc / m.tendon_invweight0[k] == pytest.approx(k_phys, rel=1e-6)
+        assert -ref[1] / dmax == pytest.approx(2 * arm.cable_damping_ratio * math.sqrt(k_acc), rel=1e-6)
+
+
+def test_the_old_time_constant_cable_stays_selectable() -> None:
+    m = load(config=ModelConfig(arm=ArmConfig(cable_timeconst_s=0.002)))
+    assert m.tendon_solref_lim[0] == pytest.approx((0.002, 1.0))
