@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..spiral import SpiralDesign
-from . import dynamic, grasp_range, load, packing, strategy, workspace
+from . import convergence, dynamic, grasp_range, load, packing, strategy, workspace
 from .common import Progress, Row, sized
 
 
@@ -83,6 +83,14 @@ EXPERIMENTS: dict[str, Experiment] = {
             dynamic.table_rows,
             dynamic.describe_samples,
             dynamic.plot_figure,
+        ),
+        Experiment(
+            "convergence",
+            "packing tension, a pen's half wrap, penetration and tension extremes at 1, 0.5, 0.25 ms steps",
+            convergence.run_at_size,
+            convergence.table_rows,
+            convergence.describe_samples,
+            convergence.plot_figure,
         ),
     )
 }
