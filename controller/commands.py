@@ -20,6 +20,7 @@ from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
+from controller.lengthhold import LengthHold
 from controller.modes import GRASP_STICK_MIN, ModeSelector
 from controller.rc import LinkRcSource, RcInput, RcSource
 from protocol.dbus import Lever
@@ -151,11 +152,13 @@ class CommandServer:
         modes: ModeSelector,
         grasp: GraspMachine,
         mapper: CableMapper,
+        hold: LengthHold,
         params: Params,
         acks: GraspAcks,
         events: EventQueue,
     ) -> None:
         """Serve ``link`` with the given components (all owned by the firmware)."""
+        self._hold = hold
         self.link = link
         self._rc = rc
         self._rc_input = rc_input
@@ -254,9 +257,26 @@ class CommandServer:
             return AckResult.ACCEPTED, "clamped" if clamped != list(values) else "ok"
         if code == CommandCode.SET_MODE:
             return self._set_mode(a0)
+        if code == CommandCode.HOLD_LENGTHS:
+            return self._hold_lengths(cmd.args)
         if code in (CommandCode.GRASP, CommandCode.RELEASE, CommandCode.HOLD):
             return self._grasp_command(now_us, seq, code, a0)
         return AckResult.UNSUPPORTED, "unsupported"
+
+    def _hold_lengths(self, args: Sequence[float]) -> tuple[AckResult, str]:
+        """Per cable: NaN unchanged, -inf release, +inf hold here, finite hold at that length (m)."""
+        if self._modes.mode == Mode.SAFE:
+            return AckResult.REJECTED, "length-hold needs an active mode (not SAFE)"
+        hold = self._hold
+        for i, value in enumerate(args):
+            if math.isnan(value):
+                continue
+            if value == -math.inf:
+                hold.release(i)
+            elif not hold.engage(i, None if value == math.inf else value):
+                return AckResult.FAILED, f"cable {i + 1}: no motor feedback yet"
+        held = "".join(str(i + 1) for i in range(len(args)) if hold.held[i])
+        return AckResult.ACCEPTED, f"held cables: {held or 'none'}"
 
     def _set_mode(self, value: float) -> tuple[AckResult, str]:
         modes = self._modes

@@ -12,10 +12,11 @@ Facts behind the defaults:
 - Spool radius 10 mm (the prototype's), current limit 3 A (the M2006's continuous rating).
 
 The configuration is nested by concern — :class:`MotorDriveConfig` (``motor``), :class:`MappingConfig`
-(``mapping``), :class:`FailsafeConfig` (``failsafe``), :class:`GraspConfig` (``grasp``) — with the task
-periods at the top. Its flat form (:meth:`FirmwareConfig.from_dict` / :meth:`~FirmwareConfig.to_dict`,
-and the field behind each wire parameter in :data:`PARAM_FIELDS`) names every field by its own name,
-``grasp_`` before the grasp section's (``grasp_pack_n`` is ``grasp.pack_n``).
+(``mapping``), :class:`FailsafeConfig` (``failsafe``), :class:`GraspConfig` (``grasp``),
+:class:`HoldConfig` (``hold``) — with the task periods at the top. Its flat form
+(:meth:`FirmwareConfig.from_dict` / :meth:`~FirmwareConfig.to_dict`, and the field behind each wire
+parameter in :data:`PARAM_FIELDS`) names every field by its own name, ``grasp_`` before the grasp
+section's (``grasp_pack_n`` is ``grasp.pack_n``) and ``hold_`` before the length-hold section's.
 
 Parameters listed in :data:`PARAMS` can be read and set at run time over the board link (``ParamSet``
 changes the firmware's runtime copy, validated; a rejected value is answered with the current one).
@@ -42,6 +43,7 @@ __all__ = [
     "FailsafeConfig",
     "FirmwareConfig",
     "GraspConfig",
+    "HoldConfig",
     "MappingConfig",
     "MotorDriveConfig",
 ]
@@ -159,8 +161,16 @@ class GraspConfig:
             (HOLD).
         contact_grace_us: no contact is detected this soon after the reach starts.
         contact_min_tension_n: the estimated tension must hold at least this for contact.
+        contact_decel_m_per_s2: contact when the pack-side pay-out decelerates faster than this while
+            the arm still moves (``controller.contact``; catches contacts after the reach ramp ended);
+            0 = rule off.
+        contact_decel_tau_us: low-pass time constant of that deceleration.
+        contact_wrap_m_per_s: contact when the wrap-side cables pay out faster than this while the
+            pack side has slowed (the object pushes the coil's outer face back); 0 = rule off.
         reach_timeout_us: FAILED when no contact within this time after the reach starts.
         release_dwell_us: time spent uncurled after a release before re-packing (IDLE).
+        hold_length: HOLD freezes the pulling cables' length (``controller.lengthhold``) instead of
+            their tension: a grasped load stays still instead of sagging until the tension balances it.
     """
 
     strategy_on: bool = True
@@ -179,8 +189,47 @@ class GraspConfig:
     contact_dwell_us: int = 60_000
     contact_grace_us: int = 200_000
     contact_min_tension_n: float = 0.3
+    contact_decel_m_per_s2: float = 1.0  # the free arm slows at up to 0.66 m/s² after the ramp (prototype)
+    contact_decel_tau_us: int = 10_000
+    contact_wrap_m_per_s: float = 0.0
     reach_timeout_us: int = 4_000_000
     release_dwell_us: int = 500_000
+    hold_length: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class HoldConfig:
+    """The length-hold cascade (``controller.lengthhold``; flat names: ``hold_`` + the field name).
+
+    Two PID loops per held cable, as DJI's C-board motor examples cascade them (angle -> speed ->
+    current): the length error gives a speed set-point, the speed error gives the cable tension (then
+    the current). The defaults suit the M2006 P36 on a 10 mm spool: about 1.3 kg of rotor inertia
+    reflected to the cable and 1 N of drive friction. With the position loop proportional only, the
+    speed loop's integral holds a steady load with no length error (it integrates the speed error,
+    i.e. the length error). Speed loop bandwidth about ``speed_kp / 1.3 kg`` (115 rad/s), the position
+    loop's ``pos_kp`` (20 rad/s) well inside it.
+
+    Attributes:
+        pos_kp_per_s: length error -> speed set-point gain (1/s).
+        pos_ki_per_s2: its integral gain (1/s²; 0 = none, the speed loop's integral already removes a
+            steady error).
+        pos_kd: its derivative gain (dimensionless).
+        pos_max_m_per_s: speed set-point limit (the loop's output limit).
+        pos_imax_m_per_s: the position loop's integral-term limit.
+        speed_kp_n_s_per_m: speed error -> tension gain (N per m/s).
+        speed_ki_n_per_m: its integral gain (N per m of accumulated speed error).
+        speed_imax_n: the speed loop's integral-term limit (the output is also clamped to
+            [pretension_n, tension_max_n] and then to the current limit).
+    """
+
+    pos_kp_per_s: float = 20.0
+    pos_ki_per_s2: float = 0.0
+    pos_kd: float = 0.0
+    pos_max_m_per_s: float = 0.2
+    pos_imax_m_per_s: float = 0.05
+    speed_kp_n_s_per_m: float = 150.0
+    speed_ki_n_per_m: float = 1500.0
+    speed_imax_n: float = 20.0
 
 
 _SECTIONS: dict[str, type[Any]] = {
@@ -188,8 +237,9 @@ _SECTIONS: dict[str, type[Any]] = {
     "mapping": MappingConfig,
     "failsafe": FailsafeConfig,
     "grasp": GraspConfig,
+    "hold": HoldConfig,
 }
-_PREFIX = {"motor": "", "mapping": "", "failsafe": "", "grasp": "grasp_"}
+_PREFIX = {"motor": "", "mapping": "", "failsafe": "", "grasp": "grasp_", "hold": "hold_"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -208,6 +258,7 @@ class FirmwareConfig:
         mapping: sticks to tensions (:class:`MappingConfig`).
         failsafe: timeouts and the host requirement (:class:`FailsafeConfig`).
         grasp: the grasp state machine (:class:`GraspConfig`).
+        hold: the length-hold cascade (:class:`HoldConfig`).
     """
 
     control_period_us: int = CONTROL_PERIOD_US
@@ -221,6 +272,7 @@ class FirmwareConfig:
     mapping: MappingConfig = MappingConfig()
     failsafe: FailsafeConfig = FailsafeConfig()
     grasp: GraspConfig = GraspConfig()
+    hold: HoldConfig = HoldConfig()
 
     def __post_init__(self) -> None:
         self.validate()
@@ -287,6 +339,15 @@ class FirmwareConfig:
             _require(name, 0.0 < v[name] <= 10.0, "must be (0, 10]")
         _require("grasp_contact_slow_ratio", 0.0 <= v["grasp_contact_slow_ratio"] < 1.0, "must be in [0, 1)")
         _require("grasp_contact_min_tension_n", v["grasp_contact_min_tension_n"] >= 0.0, "must be >= 0")
+        _require(
+            "grasp_contact_decel_m_per_s2", 0.0 <= v["grasp_contact_decel_m_per_s2"] <= 1e4, "must be 0..1e4"
+        )
+        _require(
+            "grasp_contact_decel_tau_us", 0 <= v["grasp_contact_decel_tau_us"] <= 1_000_000, "must be 0..1 s"
+        )
+        _require(
+            "grasp_contact_wrap_m_per_s", 0.0 <= v["grasp_contact_wrap_m_per_s"] <= 10.0, "must be 0..10"
+        )
         for name in (
             "grasp_contact_dwell_us",
             "grasp_contact_grace_us",
@@ -299,6 +360,17 @@ class FirmwareConfig:
             v["grasp_reach_timeout_us"] > v["grasp_contact_grace_us"],
             "must exceed grasp_contact_grace_us",
         )
+        for name in (
+            "hold_pos_kp_per_s",
+            "hold_pos_ki_per_s2",
+            "hold_pos_kd",
+            "hold_speed_kp_n_s_per_m",
+            "hold_speed_ki_n_per_m",
+        ):
+            _require(name, 0.0 <= v[name] <= 1e6, "must be 0..1e6")
+        for name in ("hold_pos_max_m_per_s", "hold_pos_imax_m_per_s"):
+            _require(name, 0.0 <= v[name] <= 10.0, "must be 0..10 m/s")
+        _require("hold_speed_imax_n", 0.0 <= v["hold_speed_imax_n"] <= 1000.0, "must be 0..1000 N")
         _require("speed_filter_tau_us", 0 <= v["speed_filter_tau_us"] <= 10_000_000, "must be 0..10 s")
         _require("event_queue_len", 1 <= v["event_queue_len"] <= 4096, "must be 1..4096")
 
@@ -420,6 +492,18 @@ PARAM_FIELDS: dict[str, str] = {
     "GRASP_SLOW_RATIO": "grasp_contact_slow_ratio",
     "GRASP_TAKEUP_N": "grasp_takeup_n",
     "GRASP_TAKEUP_M_S": "grasp_takeup_speed_m_per_s",
+    "GRASP_HOLD_LEN": "grasp_hold_length",
+    "HOLD_POS_KP": "hold_pos_kp_per_s",
+    "HOLD_POS_KI": "hold_pos_ki_per_s2",
+    "HOLD_POS_KD": "hold_pos_kd",
+    "HOLD_POS_MAX_M_S": "hold_pos_max_m_per_s",
+    "HOLD_POS_IMAX": "hold_pos_imax_m_per_s",
+    "HOLD_SPD_KP": "hold_speed_kp_n_s_per_m",
+    "HOLD_SPD_KI": "hold_speed_ki_n_per_m",
+    "HOLD_SPD_IMAX_N": "hold_speed_imax_n",
+    "GRASP_DECEL_M_S2": "grasp_contact_decel_m_per_s2",
+    "GRASP_DECEL_TAU": "grasp_contact_decel_tau_us",
+    "GRASP_WRAP_M_S": "grasp_contact_wrap_m_per_s",
 }
 """Wire name (at most 16 ASCII characters, MAVLink ``param_id`` style) -> flat ``FirmwareConfig`` field."""
 
@@ -494,6 +578,7 @@ _FLAT_ORDER = (
     *(f"grasp_{f.name}" for f in dataclasses.fields(GraspConfig)),
     "speed_filter_tau_us",
     "event_queue_len",
+    *(f"hold_{f.name}" for f in dataclasses.fields(HoldConfig)),
 )
 """The flat form's key order: the one it had before the nesting (recorded configurations keep their bytes)."""
 

@@ -12,8 +12,8 @@ Task table (rates are the config's defaults; tasks due on the same tick run in t
 
 Each body calls into a module: RC intake (``controller.rc.RcInput``), the failsafe
 (``controller.failsafe``), mode selection (``controller.modes``), the cables' mapping, slew and motor
-model (``controller.cables``), the motor bus; the command and parameter server
-(``controller.commands``); telemetry building (``controller.telemetry``).
+model (``controller.cables``), the length-hold cascade (``controller.lengthhold``), the motor bus; the
+command and parameter server (``controller.commands``); telemetry building (``controller.telemetry``).
 
 Two ways to drive it: :meth:`Firmware.run` is the real-time loop (:func:`controller.clock.run_periodic`
 on any :class:`~controller.clock.Clock`); a lockstep simulation calls :meth:`Firmware.run_due` with the
@@ -36,6 +36,7 @@ from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
+from controller.lengthhold import LengthHold
 from controller.modes import ModeSelector
 from controller.motorbus import MotorBus
 from controller.rc import RcInput, RcSource
@@ -68,7 +69,7 @@ class Firmware:
     Read-only state for observers: :attr:`mode`, :attr:`phase`, :attr:`grasp_state`,
     :attr:`commanded_currents`, :attr:`tensions_n`, :attr:`stats`, :attr:`counters`, :attr:`rc_frame`,
     :attr:`config`, and the component objects (:attr:`failsafe`, :attr:`motors`, :attr:`grasp`,
-    :attr:`modes`, :attr:`scheduler`, :attr:`events`, :attr:`link`).
+    :attr:`modes`, :attr:`hold`, :attr:`scheduler`, :attr:`events`, :attr:`link`).
     """
 
     def __init__(
@@ -94,11 +95,12 @@ class Firmware:
         self.motors = MotorModel(config)
         self.mapper = CableMapper(config)
         self.slew = TensionSlew(config)
+        self.hold = LengthHold(config, self.motors, self.slew)
         self.grasp = GraspMachine(config, self.events)
         self.rc_input = RcInput(self.failsafe.on_rc_frame, keep_raw=self.link is not None)
         self.acks = GraspAcks(self.link is not None)
         self.modes = ModeSelector(
-            config, self.failsafe, self.grasp, self.mapper, self.motors, self.events, self.acks
+            config, self.failsafe, self.grasp, self.mapper, self.motors, self.hold, self.events, self.acks
         )
         self.params = Params(config, self.events, self._apply_config)
         self._apply_config(config)
@@ -111,6 +113,7 @@ class Firmware:
                 self.modes,
                 self.grasp,
                 self.mapper,
+                self.hold,
                 self.params,
                 self.acks,
                 self.events,
@@ -133,6 +136,7 @@ class Firmware:
             failsafe=self.failsafe,
             motors=self.motors,
             slew=self.slew,
+            hold=self.hold,
             grasp=self.grasp,
             modes=self.modes,
             bus=bus,
@@ -310,6 +314,7 @@ class Firmware:
         self.motors.configure(config)
         self.mapper.configure(config)
         self.slew.configure(config)
+        self.hold.configure(config)
         self.grasp.configure(config)
         self.bus.current_limit_raw = config.motor.current_limit_raw
 
@@ -357,6 +362,9 @@ class Firmware:
         else:
             targets = self._grasp_targets(now_us, dt, rc)
         tensions = self.slew.step(targets, dt)
+        hold = self.hold
+        if hold.count:  # only after the SAFE return above: a failsafe always wins over a hold
+            hold.step(dt, tensions)
         self.commanded_currents = self.bus.send_currents(self.motors.tensions_to_raw(tensions, self._raw))
 
     def _task_detect(self, now_us: int) -> None:

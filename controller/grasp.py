@@ -34,7 +34,9 @@ direction the present curl tension bends the arm toward.
   ``grasp_takeup_speed_m_per_s`` (a fast spool would snap the cable taut), until they have been still
   for ``grasp_contact_dwell_us``; then the tension ramps to ``grasp_wrap_n``.
 - HOLD (entered once the wrap tension is reached and the pulling cables have been still for
-  ``grasp_contact_dwell_us``: the arm has closed on the object): the tension is kept.
+  ``grasp_contact_dwell_us``: the arm has closed on the object): the tension is kept; with
+  ``grasp_hold_length`` the pulling cables' length is held instead (``controller.lengthhold``, engaged
+  by the mode selector), so a grasped load does not sag.
 - RELEASE: the tension ramps to 0 (uncurl), stays there ``grasp_release_dwell_us``, then IDLE re-packs
   toward the target.
 
@@ -49,10 +51,11 @@ Triggers: left lever UP / DOWN edges in GRASP mode, host ``GRASP`` / ``RELEASE``
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from controller.cables import bend_shares
 from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.contact import ContactDetector
 from controller.events import EventQueue
 from protocol.messages import AckResult, EventKind, GraspState
 
@@ -71,7 +74,11 @@ class GraspMachine:
             reaching (and for the strategy off), the opposite side while wrapping and holding with the
             strategy on.
         pending: a grasp was requested and waits for the arm to be packed.
-        peak_payout_m_s: fastest pack-side pay-out seen in the present reach (contact reference).
+        detector: the firmware's contact detector (``controller.contact``), consulted in REACH.
+        contact_override: None (default), or a true-contact oracle ``(now_us) -> bool`` set by a test
+            harness or an experiment: REACH then goes to WRAP on the first tick it returns True and the
+            detector is not consulted.
+        hold_length: ``grasp_hold_length`` (HOLD holds the pulling cables' length).
     """
 
     def __init__(self, config: FirmwareConfig, events: EventQueue) -> None:
@@ -80,14 +87,14 @@ class GraspMachine:
         self.state = GraspState.IDLE
         self.curl_n = 0.0
         self.pending = False
-        self.peak_payout_m_s = 0.0
+        self.contact_override: Callable[[int], bool] | None = None
+        self.detector = ContactDetector(config)
         self._shares = [0.0] * MOTOR_COUNT
         self._wrap_shares = [0.0] * MOTOR_COUNT
         self._taut = True
         self._t_state_us = 0
         self._stall_since_us = -1
         self._zero_since_us = -1
-        self._unrolling_seen = False
         self.configure(config)
         self.target_rad = self._default_dir_rad
         self.direction_rad = self._default_dir_rad
@@ -109,12 +116,11 @@ class GraspMachine:
         self._wrap_rate = g.wrap_rate_n_per_s / 1e6
         self._release_rate = g.release_rate_n_per_s / 1e6
         self._stall_m_s = g.contact_speed_m_per_s
-        self._slow_ratio = g.contact_slow_ratio
         self._dwell_us = g.contact_dwell_us
-        self._grace_us = g.contact_grace_us
-        self._min_tension_n = g.contact_min_tension_n
         self._timeout_us = g.reach_timeout_us
         self._release_dwell_us = g.release_dwell_us
+        self.hold_length = g.hold_length
+        self.detector.configure(config)
 
     @property
     def idle_curl_n(self) -> float:
@@ -135,9 +141,8 @@ class GraspMachine:
         self._t_state_us = now_us
         self._stall_since_us = -1
         self._zero_since_us = -1
-        self._unrolling_seen = False
         if state == GraspState.REACH:
-            self.peak_payout_m_s = 0.0
+            self.detector.reset(now_us)
         elif state == GraspState.IDLE:
             self.direction_rad = self.target_rad
         self._events.push(now_us, EventKind.GRASP, int(state), self.curl_n, f"grasp {state.name}: {why}")
@@ -258,30 +263,26 @@ class GraspMachine:
             curl = max(self._reach_n, curl - self._reach_rate * dt_us)
             self.curl_n = curl
         elapsed = now_us - self._t_state_us
-        speed, tension = self._pack_side(cable_speed_m_s, tension_est_n)
-        payout = -speed
-        if payout > self._stall_m_s:
-            self._unrolling_seen = True
-        if payout > self.peak_payout_m_s:
-            self.peak_payout_m_s = payout
-        slow = self._slow_ratio * self.peak_payout_m_s
-        stalled = payout < (slow if slow > self._stall_m_s else self._stall_m_s)
-        stalled = stalled and tension >= self._min_tension_n
-        if ramping and self._unrolling_seen and elapsed >= self._grace_us and stalled:
-            if self._stall_since_us < 0:
-                self._stall_since_us = now_us
-            elif now_us - self._stall_since_us >= self._dwell_us:
-                self._contact(now_us)
+        oracle = self.contact_override
+        if oracle is not None:
+            if oracle(now_us):
+                self._contact(now_us, "contact (true-contact oracle)")
         else:
-            self._stall_since_us = -1
+            speed, tension = self._pack_side(cable_speed_m_s, tension_est_n)
+            s = self._wrap_shares
+            wrap = (s[0] * cable_speed_m_s[0] + s[1] * cable_speed_m_s[1] + s[2] * cable_speed_m_s[2]) / (
+                s[0] + s[1] + s[2]
+            )
+            if self.detector.update(now_us, dt_us, ramping, speed, tension, wrap):
+                self._contact(now_us, f"contact ({self.detector.reason})")
         if self.state == GraspState.REACH and elapsed >= self._timeout_us:
             self._enter(now_us, GraspState.FAILED, "no contact before the reach timeout")
 
-    def _contact(self, now_us: int) -> None:
+    def _contact(self, now_us: int, why: str) -> None:
         """Contact: wrap with the cables on the coil's outer face (the face that met the object)."""
         self.curl_n = 0.0
         self.direction_rad = math.remainder(self.target_rad + math.pi, 2.0 * math.pi)
-        self._enter(now_us, GraspState.WRAP, "contact: pay-out stalled while the reach ramp ran")
+        self._enter(now_us, GraspState.WRAP, why)
         self._taut = self._takeup_n <= 0.0
 
     def _take_up(self, now_us: int, cable_speed_m_s: Sequence[float]) -> None:
@@ -306,6 +307,10 @@ class GraspMachine:
         s = self._wrap_shares if self.direction_rad != self.target_rad else self._shares
         total = s[0] + s[1] + s[2]
         return (s[0] * speed_m_s[0] + s[1] * speed_m_s[1] + s[2] * speed_m_s[2]) / total
+
+    def pull_shares(self) -> Sequence[float]:
+        """Per-cable bending shares of the present curl (which cables pull toward :attr:`direction_rad`)."""
+        return self._wrap_shares if self.direction_rad != self.target_rad else self._shares
 
     def _pack_side(self, speed_m_s: Sequence[float], tension_n: Sequence[float]) -> tuple[float, float]:
         """Share-weighted paid-in speed and estimated tension of the pack-side (target-side) cables."""

@@ -8,6 +8,9 @@ DIRECT while the lever is MIDDLE (``SET_MODE``):
 - right lever MIDDLE: MANUAL (sticks), or DIRECT (host tensions) while the host asked for it and its
   heartbeat is fresh; DIRECT ends when the heartbeat is lost.
 
+Every mode change drops every length-hold (``controller.lengthhold``); with ``grasp_hold_length`` the
+grasp's HOLD state holds its pulling cables' length until it ends.
+
 Runs on the control tick: :meth:`ModeSelector.select` once per tick, :meth:`ModeSelector.grasp_targets`
 once per tick in GRASP. Neither allocates unless the mode or the grasp state changes.
 """
@@ -21,6 +24,7 @@ from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
+from controller.lengthhold import LengthHold
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import EventKind, GraspState, Mode, Phase
 
@@ -28,9 +32,11 @@ __all__ = ["GRASP_STICK_MIN", "GraspListener", "ModeSelector"]
 
 GRASP_STICK_MIN = 0.5
 """Right stick deflection (of full scale) that picks the grasp direction."""
+_PULLING_SHARE = 1e-6  # a cable with a larger bending share pulls (the others sit at the pretension)
 
 # Enum members the control tick compares by identity (no class attribute lookup per tick).
 _SAFE, _MANUAL, _DIRECT, _GRASP = Mode.SAFE, Mode.MANUAL, Mode.DIRECT, Mode.GRASP
+_HOLD = GraspState.HOLD
 _PHASE_OK = Phase.OK
 _LEVER_MIDDLE, _LEVER_UP = Lever.MIDDLE, Lever.UP
 
@@ -62,10 +68,12 @@ class ModeSelector:
         grasp: GraspMachine,
         mapper: CableMapper,
         motors: MotorModel,
+        hold: LengthHold,
         events: EventQueue,
         listener: GraspListener,
     ) -> None:
         """Start in SAFE, DIRECT tensions at the pretension."""
+        self._hold = hold
         self._failsafe = failsafe
         self._grasp = grasp
         self._mapper = mapper
@@ -99,6 +107,8 @@ class ModeSelector:
 
     def _changed(self, now_us: int, old: Mode, new: Mode, rc: RcFrame | None) -> None:
         self.mode = new
+        # A hold belongs to the mode it was set in; SAFE (every failsafe) and any other change drop it.
+        self._hold.release_all()
         if new != Mode.DIRECT and new != Mode.MANUAL:
             self.direct_requested = False  # DIRECT only while the lever stays MIDDLE
         if old == Mode.GRASP:
@@ -122,7 +132,19 @@ class ModeSelector:
                 grasp.request_release(now_us)
         motors = self._motors
         curl = grasp.step(now_us, dt_us, motors.cable_speed_m_s, motors.tension_est_n)
-        if grasp.state != self._prev_grasp_state:
-            self._prev_grasp_state = grasp.state
-            self._listener.grasp_progress(grasp.state)
+        state = grasp.state
+        if state != self._prev_grasp_state:
+            if self._prev_grasp_state is _HOLD:
+                self._hold.release_grasp()
+            self._prev_grasp_state = state
+            if state is _HOLD and grasp.hold_length:
+                self._hold_pulling_cables()
+            self._listener.grasp_progress(state)
         return self._mapper.curl(curl, grasp.direction_rad)
+
+    def _hold_pulling_cables(self) -> None:
+        """``grasp_hold_length``: HOLD freezes the length of the cables that pull the wrap."""
+        hold = self._hold
+        for i, share in enumerate(self._grasp.pull_shares()):
+            if share > _PULLING_SHARE:
+                hold.engage(i, by_grasp=True)

@@ -16,6 +16,7 @@ from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
+from controller.lengthhold import LengthHold
 from controller.modes import ModeSelector
 from controller.motorbus import MotorBus
 from controller.rc import RcInput, RcSource
@@ -50,15 +51,16 @@ _FLAG_ARMED, _FLAG_HOST_REQUIRED, _FLAG_HOST_OK, _FLAG_RC_OK, _FLAG_SIM = (
     int(TelemetryFlags.RC_OK),
     int(TelemetryFlags.SIM),
 )
-_TELEMETRY_FLAGS = tuple(TelemetryFlags(bits) for bits in range(1 << 5))
-"""Every combination of the five flags, by value (building an IntFlag per frame is slow)."""
+_HOLD_SHIFT = 5  # LengthHold.flags bit i -> TelemetryFlags.HOLD_1 << i
+_TELEMETRY_FLAGS = tuple(TelemetryFlags(bits) for bits in range(1 << 8))
+"""Every combination of the eight flags, by value (building an IntFlag per frame is slow)."""
 
 
 class TelemetryBuilder:
     """Builds and sends the board's reports from the firmware's components (read only).
 
     Args:
-        failsafe, motors, slew, grasp, modes, bus, rc, rc_input, scheduler, events: the firmware's
+        failsafe, motors, slew, hold, grasp, modes, bus, rc, rc_input, scheduler, events: the firmware's
             components.
         link: the host link, or None (then only :meth:`build` is useful).
     """
@@ -69,6 +71,7 @@ class TelemetryBuilder:
         failsafe: Failsafe,
         motors: MotorModel,
         slew: TensionSlew,
+        hold: LengthHold,
         grasp: GraspMachine,
         modes: ModeSelector,
         bus: MotorBus,
@@ -82,6 +85,7 @@ class TelemetryBuilder:
         self._failsafe = failsafe
         self._motors = motors
         self._slew = slew
+        self._hold = hold
         self._grasp = grasp
         self._modes = modes
         self._bus = bus
@@ -104,6 +108,7 @@ class TelemetryBuilder:
             | (_FLAG_HOST_OK if fs.host_ok else 0)
             | (_FLAG_RC_OK if fs.rc_ok else 0)
             | (_FLAG_SIM if self._bus.simulated else 0)
+            | (self._hold.flags << _HOLD_SHIFT)
         )
         rc_input = self._rc_input
         rc = rc_input.frame

@@ -30,6 +30,9 @@ import numpy.typing as npt
 from host.board_client import LinkState, LinkStats
 from protocol.dbus import CH_LIMIT, Lever, RcFrame
 from protocol.messages import (
+    HOLD_HERE,
+    HOLD_RELEASE,
+    HOLD_UNCHANGED,
     BoardStatus,
     Command,
     CommandAck,
@@ -560,7 +563,7 @@ class UiModel:
         """Send a command on behalf of the control holder (E-stop: any authorised client).
 
         Arguments are validated and clamped here again: ``SET_MODE`` must name a ``Mode``,
-        ``SET_TENSIONS`` is clamped to 0..``tension_max_n``.
+        ``SET_TENSIONS`` is clamped to 0..``tension_max_n``; ``HOLD_LENGTHS`` goes as given.
 
         Returns:
             True if the command went out.
@@ -573,7 +576,9 @@ class UiModel:
                 self.commands_refused += 1
             return False
         a = tuple(_finite(x) for x in args)
-        if code == CommandCode.SET_MODE:
+        if code == CommandCode.HOLD_LENGTHS:
+            a = tuple(float(x) for x in args)  # NaN (unchanged) and ±inf (hold here / release) mean something
+        elif code == CommandCode.SET_MODE:
             try:
                 Mode(int(a[0]))
             except ValueError:
@@ -619,3 +624,19 @@ class UiModel:
             self._op.direct_tensions_n[cable] = v
             t = tuple(self._op.direct_tensions_n)
         return self._forward(Command(CommandCode.SET_TENSIONS, (t[0], t[1], t[2])))
+
+    def set_length_hold(self, client: int, cable: int, hold: bool) -> bool:
+        """Hold one cable at its present length, or release it (``HOLD_LENGTHS``; holder only).
+
+        The other cables are left as they are. The board refuses it in SAFE and drops every hold on a
+        mode change; ``TelemetryFlags.HOLD_1..3`` tell which cables it holds.
+        """
+        if not 0 <= cable <= 2:
+            raise ValueError(f"cable must be 0..2, got {cable}")
+        if not self.has_control(client):
+            with self._lock:
+                self.commands_refused += 1
+            return False
+        args = [HOLD_UNCHANGED, HOLD_UNCHANGED, HOLD_UNCHANGED]
+        args[cable] = HOLD_HERE if hold else HOLD_RELEASE
+        return self._forward(Command(CommandCode.HOLD_LENGTHS, (args[0], args[1], args[2])))

@@ -8,7 +8,7 @@ from typing import Any
 import viser
 
 from host.model import CLI_CLIENT, ControlResult, UiModel
-from protocol.messages import CommandCode, Mode
+from protocol.messages import CommandCode, Mode, TelemetryFlags
 
 __all__ = ["LEVER_OPTIONS", "STICK_CHANNELS", "ControlHandles", "build_control_panel", "refresh_control"]
 
@@ -50,6 +50,7 @@ class ControlHandles:
     hold: Any
     direct_mode: Any
     tensions: list[Any]
+    holds: list[Any]
     estop_command: Any
     shown: dict[str, Any] = field(default_factory=dict)
 
@@ -66,6 +67,7 @@ class ControlHandles:
             self.hold,
             self.direct_mode,
             *self.tensions,
+            *self.holds,
         ]
 
 
@@ -126,6 +128,15 @@ def build_control_panel(
                 )
                 for i in range(3)
             ]
+            holds = [
+                gui.add_checkbox(
+                    f"Cable {i + 1} hold length",
+                    initial_value=False,
+                    disabled=True,
+                    hint="Hold this cable at its present length (position loop) instead of a tension",
+                )
+                for i in range(3)
+            ]
     estop_cmd = gui.add_command(
         "E-STOP", description="Emergency stop (zero current, latched)", hotkey="space"
     )
@@ -154,6 +165,7 @@ def build_control_panel(
         hold,
         direct_mode,
         tensions,
+        holds,
         estop_cmd,
     )
 
@@ -262,6 +274,14 @@ def build_control_panel(
 
         slider.on_update(_tension)
 
+    for i, box in enumerate(holds):
+
+        def _hold(event: Any, i: int = i) -> None:
+            if own(event):
+                model.set_length_hold(cid, i, bool(event.target.value))
+
+        box.on_update(_hold)
+
     return h
 
 
@@ -280,6 +300,10 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
     mine = holder == cid
     authorised = m.is_authorised(cid)
     sticks, right, left, _ = m.operator_input()
+    telemetry = m.telemetry
+    flags = int(telemetry.flags) if telemetry is not None else 0
+    # What the board holds (it drops every hold on a mode change or failsafe): the toggles follow it.
+    held = tuple(bool(flags & (TelemetryFlags.HOLD_1 << i)) for i in range(3))
     if mine:
         who = "**You hold control.**"
     elif holder is None:
@@ -300,6 +324,7 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
         "auth": authorised,
         "levers": (right, left),
         "sticks": None if mine else sticks,
+        "held": held,
     }
     if not force and state == h.shown:
         return
@@ -324,4 +349,8 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
         # the holder's sticks (their own sliders are disabled).
         for ch, slider in h.sticks.items():
             slider.value = float(sticks[ch])
+    if force or prev.get("held") != held:
+        for box, on in zip(h.holds, held, strict=True):
+            box_handle: Any = box
+            box_handle.value = on
     h.levers_md.content = f"Right lever **{right.name}** · left lever **{left.name}**"

@@ -27,7 +27,7 @@ faults by writing the RC queue around them.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NewType
 
 from protocol.dbus import FRAME_PERIOD_US
@@ -220,6 +220,25 @@ class HostSession:
         # A seq reused after 256 frames replaces a command that was never answered: its ack is lost.
         self._pending[seq] = (token, int(code), now_us)
         return token
+
+    def hold_lengths(self, lengths_m: Sequence[float], now_us: int) -> CommandToken:
+        """Select length-hold per cable (``HOLD_LENGTHS``), acked like every command.
+
+        Args:
+            lengths_m: one value per cable: ``HOLD_UNCHANGED`` (NaN), ``HOLD_RELEASE`` (-inf),
+                ``HOLD_HERE`` (+inf: hold at the present length) or a length in m to hold at (the
+                board's ``cable_length_m`` frame).
+            now_us: the time it is sent.
+
+        Returns:
+            The token to ask :meth:`ack` with.
+
+        Raises:
+            ValueError: not exactly three values.
+        """
+        if len(lengths_m) != _ARGS_N:
+            raise ValueError(f"HOLD_LENGTHS takes one value per cable ({_ARGS_N}), got {len(lengths_m)}")
+        return self.command(CommandCode.HOLD_LENGTHS, *lengths_m, now_us=now_us)
 
     def ack(self, token: CommandToken) -> CommandAck | None:
         """The latest ack for the command ``token`` (``IN_PROGRESS`` may be followed by the final one).

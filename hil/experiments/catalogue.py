@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..spiral import SpiralDesign
-from . import convergence, dynamic, grasp_range, load, packing, strategy, workspace
+from . import contact, convergence, dynamic, grasp_range, load, packing, strategy, workspace
 from .common import Progress, Row, sized
 
 
@@ -51,6 +51,14 @@ EXPERIMENTS: dict[str, Experiment] = {
             packing.table_rows,
             packing.describe_samples,
             packing.plot_figure,
+        ),
+        Experiment(
+            "contact",
+            "the firmware's contact detector, old and new, vs. the true contact: precision, recall, delay",
+            contact.run_at_size,
+            contact.table_rows,
+            contact.describe_samples,
+            contact.plot_figure,
         ),
         Experiment(
             "strategy",

@@ -61,6 +61,9 @@ from protocol.messages.fields import (
 )
 from protocol.messages.host import (
     HEARTBEAT_PERIOD_US,
+    HOLD_HERE,
+    HOLD_RELEASE,
+    HOLD_UNCHANGED,
     Command,
     Heartbeat,
     ParamRequest,
@@ -73,6 +76,9 @@ __all__ = [
     "ACK_TEXT_MAX",
     "EVENT_TEXT_MAX",
     "HEARTBEAT_PERIOD_US",
+    "HOLD_HERE",
+    "HOLD_RELEASE",
+    "HOLD_UNCHANGED",
     "HOST_TO_BOARD_MAX_PAYLOAD",
     "MAX_SIM_BODIES",
     "MAX_TASKS",

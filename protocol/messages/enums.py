@@ -75,6 +75,12 @@ class TelemetryFlags(IntFlag):
     """A valid RC frame within the RC-lost timeout."""
     SIM = 1 << 4
     """Running against the simulated plant."""
+    HOLD_1 = 1 << 5
+    """Cable 1 is in length-hold (its current comes from the position loop, not a tension)."""
+    HOLD_2 = 1 << 6
+    """Cable 2 is in length-hold."""
+    HOLD_3 = 1 << 7
+    """Cable 3 is in length-hold."""
 
 
 class CommandCode(IntEnum):
@@ -93,6 +99,10 @@ class CommandCode(IntEnum):
     """args = per-cable tension targets in N (DIRECT mode)."""
     REQUIRE_HOST = 10
     """args[0] = 1.0 to require the host heartbeat, 0.0 to stop requiring it."""
+    HOLD_LENGTHS = 11
+    """args = per cable: NaN = unchanged, -inf = release (tension again), +inf = hold at the present
+    length (a held cable keeps its set-point), finite = hold at that cable length in m (the board's
+    ``cable_length_m`` frame)."""
 
 
 class EventKind(IntEnum):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 from typing import ClassVar
@@ -24,6 +25,13 @@ from protocol.messages.registry import Message, _register
 
 HEARTBEAT_PERIOD_US = 100_000
 """The host's ``Heartbeat`` period (10 Hz; the board's default host timeout is five of them)."""
+
+HOLD_UNCHANGED = math.nan
+"""``HOLD_LENGTHS`` argument: leave this cable as it is."""
+HOLD_HERE = math.inf
+"""``HOLD_LENGTHS`` argument: hold this cable at its present length (a held cable keeps its set-point)."""
+HOLD_RELEASE = -math.inf
+"""``HOLD_LENGTHS`` argument: release this cable (its current comes from the tension mapping again)."""
 
 
 @_register

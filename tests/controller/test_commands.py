@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from controller.cables import CableMapper, MotorModel
+from controller.cables import CableMapper, MotorModel, TensionSlew
 from controller.commands import CommandServer, GraspAcks, Params
 from controller.config import PARAMS, FirmwareConfig
 from controller.errors import ConfigError
@@ -12,6 +12,7 @@ from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
+from controller.lengthhold import LengthHold
 from controller.modes import ModeSelector
 from controller.rc import RcInput, ScriptedRcSource
 from controller.transport import MemoryTransport
@@ -77,8 +78,10 @@ class Server:
         grasp = GraspMachine(config, self.events)
         mapper = CableMapper(config)
         self.acks = GraspAcks(True)
+        motors = MotorModel(config)
+        self.hold = LengthHold(config, motors, TensionSlew(config))
         self.modes = ModeSelector(
-            config, self.failsafe, grasp, mapper, MotorModel(config), self.events, self.acks
+            config, self.failsafe, grasp, mapper, motors, self.hold, self.events, self.acks
         )
         self.params = Params(config, self.events, lambda c: None)
         rc_input = RcInput(self.failsafe.on_rc_frame, keep_raw=False)
@@ -90,6 +93,7 @@ class Server:
             self.modes,
             grasp,
             mapper,
+            self.hold,
             self.params,
             self.acks,
             self.events,

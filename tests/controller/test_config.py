@@ -12,6 +12,7 @@ from controller.config import (
     FailsafeConfig,
     FirmwareConfig,
     GraspConfig,
+    HoldConfig,
     MappingConfig,
     MotorDriveConfig,
 )
@@ -106,7 +107,7 @@ def test_sections_group_the_fields_and_the_flat_form_names_every_one() -> None:
     assert flat["host_required"] is True and flat["grasp_pack_n"] == 16.0
     leaves = sum(
         len(dataclasses.fields(section))
-        for section in (MotorDriveConfig, MappingConfig, FailsafeConfig, GraspConfig)
+        for section in (MotorDriveConfig, MappingConfig, FailsafeConfig, GraspConfig, HoldConfig)
     ) + sum(1 for f in dataclasses.fields(FirmwareConfig) if not dataclasses.is_dataclass(getattr(c, f.name)))
     assert len(flat) == leaves  # every leaf once (sections are not leaves)
     assert list(flat)[:3] == ["control_period_us", "link_period_us", "detect_period_us"]

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from controller.cables import CableMapper, MotorModel
+from controller.cables import CableMapper, MotorModel, TensionSlew
 from controller.config import FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
+from controller.lengthhold import LengthHold
 from controller.modes import ModeSelector
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import EventKind, GraspState, Mode, Phase
@@ -31,12 +32,14 @@ class Parts:
         self.failsafe = Failsafe(config, self.events)
         self.grasp = GraspMachine(config, self.events)
         self.listener = Listener()
+        motors = MotorModel(config)
         self.modes = ModeSelector(
             config,
             self.failsafe,
             self.grasp,
             CableMapper(config),
-            MotorModel(config),
+            motors,
+            LengthHold(config, motors, TensionSlew(config)),
             self.events,
             self.listener,
         )

@@ -102,3 +102,15 @@ def test_convergence_tiny_measures_each_step_and_the_pen_stays_outside_the_arm()
         assert s.random_tension_n > 0.0
     rows = EXPERIMENTS["convergence"].rows(r)
     assert rows[0][1] == "1 ms | 0.5 ms"
+
+
+def test_contact_helpers() -> None:
+    from hil.experiments.contact import ReachTrial, bootstrap_median, wilson
+
+    lo, hi = wilson(8, 10)
+    assert lo == pytest.approx(0.4902, abs=1e-3) and hi == pytest.approx(0.9433, abs=1e-3)
+    med, lo, hi = bootstrap_median([1.0, 2.0, 3.0, 4.0, 100.0], seed=0)
+    assert med == 3.0 and lo <= med <= hi
+    nan = float("nan")
+    kinds = [ReachTrial(0, 0, 0, "new", tr, de, "").kind for tr, de in ((1, 2), (2, 1), (1, nan), (nan, nan))]
+    assert kinds == ["TP", "FP", "FN", "TN"]

@@ -84,6 +84,18 @@ def test_values_are_clamped_server_side() -> None:
     assert cmd.args[0] == m.limits.tension_max_n and cmd.args[1] == 0.0
     assert not m.command(1, CommandCode.SET_MODE, (42.0, 0.0, 0.0))
     assert m.command(1, CommandCode.SET_MODE, (float(Mode.DIRECT), 0.0, 0.0))
+    assert m.set_length_hold(1, 2, True)
+    cmd = sent[-1]
+    assert isinstance(cmd, Command) and cmd.code == CommandCode.HOLD_LENGTHS
+    assert math.isnan(cmd.args[0]) and math.isnan(cmd.args[1]) and cmd.args[2] == math.inf
+    assert m.set_length_hold(1, 0, False)
+    assert sent[-1].args[0] == -math.inf  # type: ignore[attr-defined]
+    assert not m.set_length_hold(2, 0, True)  # not the holder
+    with pytest.raises(ValueError):
+        m.set_length_hold(1, 3, True)
+    assert m.command(1, CommandCode.HOLD_LENGTHS, (math.nan, 0.05, -math.inf))
+    cmd = sent[-1]
+    assert isinstance(cmd, Command) and math.isnan(cmd.args[0]) and cmd.args[1:] == (0.05, -math.inf)
 
 
 def test_estop_is_open_to_every_authorised_client_and_forces_safe() -> None:

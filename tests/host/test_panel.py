@@ -27,7 +27,7 @@ from playwright import sync_api
 
 from host.cli import HostApp, HostOptions
 from host.panel import PanelConfig
-from protocol.messages import Phase
+from protocol.messages import Phase, TelemetryFlags
 
 pytestmark = pytest.mark.browser
 
@@ -167,6 +167,16 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     t = m.telemetry
     assert t is not None and any(c > 0 for c in t.commanded_current)
 
+    # The per-cable "hold length" toggle (Direct mode folder): the board reports cable 1 held.
+    def held() -> bool:
+        t = m.telemetry
+        return t is not None and bool(t.flags & TelemetryFlags.HOLD_1)
+
+    page_a.get_by_text("Direct mode", exact=True).first.click()
+    hold_box = stick_input(page_a, "Cable 1 hold length")
+    hold_box.click()
+    assert wait_for(held), f"cable 1 not held: {m.telemetry}"
+
     # A tab without the token can only watch: no control, no E-stop.
     plain = browser.new_page()
     plain.goto(app.url.split("?")[0] + "?fixedDpr=1")
@@ -200,6 +210,8 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
         return t is not None and t.phase == Phase.ESTOP and all(c == 0 for c in t.commanded_current)
 
     assert wait_for(stopped), f"E-stop did not zero the currents: {m.telemetry}"
+    assert not held()  # SAFE dropped the hold, and the toggle follows the board
+    assert wait_for(lambda: not hold_box.is_checked(), 10.0)
     page_b.get_by_text("E-STOP pressed").first.wait_for(timeout=10_000)
     page_a.close()
     page_b.close()

@@ -180,6 +180,7 @@ def test_host_to_board_max_payload() -> None:
 
 def test_wire_enum_values() -> None:
     assert [m.value for m in Mode] == [0, 1, 2, 3]
+    assert [int(c) for c in CommandCode] == list(range(1, 12))
     assert [m.name for m in Phase] == ["GATE", "OK", "RC_LOST", "MOTOR_FAULT", "HOST_LOST", "ESTOP"]
     assert [m.name for m in GraspState] == ["IDLE", "REACH", "WRAP", "HOLD", "RELEASE", "FAILED"]
     assert [int(m) for m in Phase] == list(range(6))
@@ -226,6 +227,32 @@ def test_golden_command_frame() -> None:
     frame = encode(msg, 0)
     assert frame == ref_frame(0x0203, payload, 0)
     assert decode(LinkParser().feed(frame)[0]) == msg
+
+
+def test_golden_hold_lengths_command() -> None:
+    # HOLD_LENGTHS: NaN = unchanged, -inf = release, +inf = hold at the present length, finite = set-point.
+    msg = Command(CommandCode.HOLD_LENGTHS, (math.nan, -math.inf, 0.125))
+    payload = bytes.fromhex("0b0000c07f000080ff0000003e")
+    assert msg.pack() == payload
+    frame = encode(msg, 7)
+    assert frame == ref_frame(0x0203, payload, 7)
+    back = decode(LinkParser().feed(frame)[0])
+    assert isinstance(back, Command) and back.code is CommandCode.HOLD_LENGTHS
+    assert math.isnan(back.args[0]) and back.args[1] == -math.inf and back.args[2] == 0.125
+    assert Command(CommandCode.HOLD_LENGTHS, (math.inf, math.nan, math.nan)).pack()[1:5] == bytes.fromhex(
+        "0000807f"
+    )
+
+
+@given(st.tuples(*[st.one_of(st.just(math.inf), st.just(-math.inf), f32)] * 3))
+def test_hold_lengths_round_trips(args: tuple[float, float, float]) -> None:
+    msg = Command(CommandCode.HOLD_LENGTHS, args)
+    assert decode(LinkParser().feed(encode(msg, 3))[0]) == msg
+
+
+def test_golden_hold_flags() -> None:
+    assert (TelemetryFlags.HOLD_1, TelemetryFlags.HOLD_2, TelemetryFlags.HOLD_3) == (0x20, 0x40, 0x80)
+    assert Telemetry(time_us=0, flags=TelemetryFlags.HOLD_1 | TelemetryFlags.HOLD_3).pack()[11] == 0xA0
 
 
 def test_golden_telemetry_payload() -> None:

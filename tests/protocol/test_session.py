@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -10,6 +12,9 @@ from protocol.dbus import FRAME_PERIOD_US, Lever, RcFrame
 from protocol.link import LinkParser
 from protocol.messages import (
     HEARTBEAT_PERIOD_US,
+    HOLD_HERE,
+    HOLD_RELEASE,
+    HOLD_UNCHANGED,
     PARAM_INDEX_BY_NAME,
     AckResult,
     Command,
@@ -366,3 +371,17 @@ def test_keep_sent_off() -> None:
     session.command(CommandCode.ARM, now_us=0)
     assert session.sent == []
     assert len(_frames(session.data_to_send())) == 2
+
+
+def test_hold_lengths_sends_one_acked_command() -> None:
+    session = HostSession(heartbeats=False)
+    token = session.hold_lengths((HOLD_HERE, HOLD_UNCHANGED, 0.25), now_us=0)
+    (seq, cmd), *_ = _frames(session.data_to_send())
+    assert isinstance(cmd, Command) and cmd.code is CommandCode.HOLD_LENGTHS
+    assert cmd.args[0] == math.inf and math.isnan(cmd.args[1]) and cmd.args[2] == 0.25
+    session.receive_data(_ack(CommandCode.HOLD_LENGTHS, AckResult.ACCEPTED, seq), 1_000)
+    ack = session.ack(token)
+    assert ack is not None and ack.result is AckResult.ACCEPTED
+    assert -math.inf == HOLD_RELEASE
+    with pytest.raises(ValueError):
+        session.hold_lengths((HOLD_HERE,), now_us=0)
