@@ -48,6 +48,8 @@ __all__ = [
     "cable_layout",
     "cable_stiffness_n_per_m",
     "unit_geometry",
+    "wedge_inset_ratio",
+    "wedge_vertices_m",
     "write_mjcf",
 ]
 
@@ -64,6 +66,10 @@ _CABLE_SOLREF = "@cable_solref_"
 # Axial inset of each cable hole beyond the wedge gap, as a fraction of its radius: keeps the two facing
 # holes of a closed joint apart, so the cable keeps a moment arm ≈ r at the limit (no kink in the path).
 _HOLE_INSET = 0.3
+# Sides of the polygon approximating a 3-cable unit's round section: enough that the polygon's flats
+# (1 − cos(π/12) = 3.4 % of the radius) stay under a millimetre on the prototype's 32 mm base unit, and few
+# enough that the convex collision (support-function searches over the vertices) stays cheap.
+_WEDGE_SIDES = 12
 
 
 @dataclass(frozen=True)
@@ -158,6 +164,54 @@ def unit_geometry(design: SpiralDesign, arm: ArmConfig | None = None) -> UnitGeo
     rb = tuple(arm.cable_offset_ratio * 0.5 * w for w in wb)
     rt = tuple(arm.cable_offset_ratio * 0.5 * w for w in wt)
     return UnitGeometry(chords, wb, wt, masses, tuple(stiff), tuple(damp), rb, rt)
+
+
+def wedge_inset_ratio(design: SpiralDesign) -> float:
+    """Sagitta of a unit's inner arc as a fraction of its half-width.
+
+    In the packed coil the inner edge of the unit at θ lies at radius ``a·e^{bθ}`` = ``δ(θ)/(e^{2πb} − 1)``
+    from the pole (``δ`` the width), and over the unit's Δθ its chord stands ``r·(1 − cos(Δθ/2))`` off
+    that arc: ``2·(1 − cos(Δθ/2))/(e^{2πb} − 1)`` of the half-width (4.9 % on the prototype).
+    """
+    return 2.0 * (1.0 - math.cos(0.5 * design.dtheta_rad)) / math.expm1(2.0 * math.pi * design.b)
+
+
+def wedge_vertices_m(
+    geo: UnitGeometry, index: int, dtheta_rad: float, ball: bool, inset_ratio: float = 0.0
+) -> list[tuple[float, float, float]]:
+    """Vertices (unit frame: base-side joint at the origin, the unit along −z) of unit ``index``'s wedge.
+
+    The real unit is the solid between two joint faces. Each face is tilted by Δθ/2 from the plane normal
+    to the unit's axis, receding from the joint point on the axis, so the open gap between two units is a
+    wedge of Δθ on every bending side and closing the joint by Δθ lays the two faces together (the joint
+    limit of Note S3 is that contact). Hinged arms (1-2 cables) bend about y: each face is a roof of two
+    planes meeting in a ridge along y, and the section is a square of the local width (the units scale in
+    all three directions). Ball-jointed arms (3 cables) bend every way: each face is a shallow cone around
+    the axis and the section a regular polygon of the local width (corners on the circle). MuJoCo takes the
+    convex hull of the vertices, which is the solid itself (both ends are convex).
+
+    The real unit's side facing the inside of the packed coil follows the coil's previous turn: a concave
+    arc, which a convex shape can only span by its chord. That chord would stand proud of the arc by its
+    sagitta and push the packed turns apart, so every side is set in by it (``inset_ratio`` of the
+    half-width, the same all round: an arm curls to any side). Packed, the turns then just touch.
+    """
+    tilt = math.tan(0.5 * dtheta_rad)
+    ell = geo.chord_m[index]
+    ends = ((0.0, -1.0, geo.width_base_side_m[index]), (-ell, 1.0, geo.width_tip_side_m[index]))
+    keep = 1.0 - inset_ratio
+    out: list[tuple[float, float, float]] = []
+    for z_joint, inward, width in ends:
+        half = 0.5 * width * keep
+        z_rim = z_joint + inward * half * tilt  # the face recedes from the joint point into the unit
+        if ball:
+            out.append((0.0, 0.0, z_joint))
+            for k in range(_WEDGE_SIDES):
+                phi = 2.0 * math.pi * k / _WEDGE_SIDES
+                out.append((half * math.cos(phi), half * math.sin(phi), z_rim))
+        else:
+            for y in (-half, half):
+                out.extend(((0.0, y, z_joint), (-half, y, z_rim), (half, y, z_rim)))
+    return out
 
 
 def _hole_z(geo: UnitGeometry, index: int, ratio: float) -> tuple[float, float]:
@@ -272,7 +326,7 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         add(f'    <numeric name="{key}" data="{_f(float(value))}"/>')
     add("  </custom>")
     add("  <default>")
-    arm_aff = ARM_CONTYPE | ENV_CONTYPE if arm.self_collision else ENV_CONTYPE
+    arm_aff = ARM_CONTYPE | ENV_CONTYPE if arm.units_collide else ENV_CONTYPE
     con = cfg.contact
     # Every arm and object geom carries the same stated contact (MuJoCo mixes the two sides' solref).
     contact = f'solref="{_v(con.timeconst_s, con.damping_ratio)}" solimp="{_v(*con.solimp)}"'
@@ -286,6 +340,11 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     add('    <material name="tpu" rgba="0.95 0.55 0.15 1"/>')
     add('    <material name="drone" rgba="0.25 0.25 0.3 1"/>')
     add('    <material name="object" rgba="0.3 0.6 0.9 1"/>')
+    if arm.unit_shape == "wedge":
+        for i in range(n):
+            inset = wedge_inset_ratio(design)
+            verts = " ".join(_v(*p) for p in wedge_vertices_m(geo, i, dtheta, ball, inset))
+            add(f'    <mesh name="unit_{i:02d}_mesh" vertex="{verts}"/>')
     add("  </asset>")
     add("  <worldbody>")
     add('    <light name="sun" pos="0 0 3" dir="0 0 -1" directional="true"/>')
@@ -344,10 +403,11 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
                     f'range="{_v(-dtheta, dtheta)}" {common}/>'
                 )
         ell = geo.chord_m[i]
-        add(
-            f'{inner}<geom name="{name}_geom" type="capsule" fromto="0 0 0 0 0 {_f(-ell)}" '
-            f'size="{_f(geo.capsule_radius_m(i))}" mass="{_f(geo.mass_kg[i])}" material="tpu"/>'
-        )
+        if arm.unit_shape == "wedge":
+            shape = f'type="mesh" mesh="{name}_mesh"'
+        else:
+            shape = f'type="capsule" fromto="0 0 0 0 0 {_f(-ell)}" size="{_f(geo.capsule_radius_m(i))}"'
+        add(f'{inner}<geom name="{name}_geom" {shape} mass="{_f(geo.mass_kg[i])}" material="tpu"/>')
         rb, rt = geo.cable_radius_base_side_m[i], geo.cable_radius_tip_side_m[i]
         z_in, z_out = _hole_z(geo, i, lay.hole_offset_ratio)
         for k, psi in enumerate(lay.angles_rad):

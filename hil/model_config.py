@@ -73,9 +73,15 @@ class ArmConfig:
         cable_timeconst_s: ``None``: the cable's limit is its stretch (the three fields above). A number:
             MuJoCo's time-constant form instead, with no physical stiffness (the model before issue 13;
             the benchmark compares against it).
-        self_collision: let non-adjacent units collide. Off by default: Note S3 models units touching by
-            the joint limits, which keeps the packed pose cheap and exact.
+        self_collision: let non-adjacent units collide. ``None``: the shape's own choice (wedges collide,
+            capsules do not: a capsule's rounded ends reach into the packed neighbours' space, so capsules
+            rely on the joint limits alone, as Note S3 models units touching).
         geom_friction: sliding friction coefficient of the unit surfaces.
+        unit_shape: collision shape of each unit. ``"wedge"``: a convex mesh of the real unit, the solid
+            between its two joint faces tilted by ±Δθ/2, tapering from its base-side to its tip-side width
+            (2-cable/1-cable arms: a prism-like wedge; 3 cables: a polygonal truncated cone with conical
+            faces); closing a joint to its limit brings two faces together. ``"capsule"``: a capsule of
+            the unit's mean half-width along its chord.
     """
 
     total_mass_kg: float = 0.0384
@@ -90,8 +96,9 @@ class ArmConfig:
     cable_fill_factor: float = 0.5
     cable_damping_ratio: float = 0.5
     cable_timeconst_s: float | None = None
-    self_collision: bool = False
+    self_collision: bool | None = None
     geom_friction: float = 0.8
+    unit_shape: str = "capsule"
 
     def validate(self) -> None:
         """Raise ``ValueError`` if a value is out of range."""
@@ -115,6 +122,17 @@ class ArmConfig:
         if self.cable_timeconst_s is not None:
             _finite("cable_timeconst_s", self.cable_timeconst_s)
         _finite("geom_friction", self.geom_friction, allow_equal=True)
+        _check(
+            self.unit_shape in ("wedge", "capsule"),
+            f"unit_shape must be 'wedge' or 'capsule', got {self.unit_shape!r}",
+        )
+
+    @property
+    def units_collide(self) -> bool:
+        """Whether non-adjacent units collide (``self_collision``, else the unit shape's choice)."""
+        if self.self_collision is None:
+            return self.unit_shape == "wedge"
+        return self.self_collision
 
     @property
     def cable_axial_stiffness_n(self) -> float:

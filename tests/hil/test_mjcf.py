@@ -202,6 +202,67 @@ def test_arm_does_not_collide_with_itself_by_default() -> None:
     assert m2.geom_contype[a] & m2.geom_conaffinity[b]
 
 
+WEDGE = ModelConfig(arm=ArmConfig(unit_shape="wedge"))
+
+
+@pytest.mark.parametrize("cables", [2, 3])
+def test_wedge_units_are_inline_meshes_that_collide_with_each_other(cables: int) -> None:
+    xml = build_mjcf(PAPER_PROTOTYPE, cables, WEDGE)
+    assert "<mesh " in xml and "file=" not in xml  # one self-contained file
+    m = mujoco.MjModel.from_xml_string(xml)
+    assert m.nmesh == PAPER_PROTOTYPE.units
+    a, b = (name_id(m, mujoco.mjtObj.mjOBJ_GEOM, f"unit_{i:02d}_geom") for i in (3, 9))
+    assert m.geom_type[a] == mujoco.mjtGeom.mjGEOM_MESH
+    assert m.geom_contype[a] & m.geom_conaffinity[b]
+    off = ModelConfig(arm=ArmConfig(unit_shape="wedge", self_collision=False))
+    m2 = load(cables=cables, config=off)
+    assert not m2.geom_contype[a] & m2.geom_conaffinity[b]
+
+
+@pytest.mark.parametrize("cables", [2, 3])
+def test_wedge_faces_meet_when_a_joint_closes_and_packed_turns_just_touch(cables: int) -> None:
+    """At the joint limit the two facing wedge faces lie together (what the limit models); packed, the
+    coil's turns touch without pushing each other apart, and no two units overlap in the straight arm."""
+    m = load(cables=cables, config=WEDGE)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    assert d.ncon == 0  # straight: nothing touches
+    dtheta = PAPER_PROTOTYPE.dtheta_rad
+    for j in range(m.njnt):
+        if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL:
+            adr = m.jnt_qposadr[j]
+            d.qpos[adr : adr + 4] = (math.cos(dtheta / 2), 0.0, -math.sin(dtheta / 2), 0.0)
+        elif m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
+            d.qpos[m.jnt_qposadr[j]] = -dtheta  # every joint closed towards +x
+    mujoco.mj_forward(m, d)
+
+    def rim_vertex(unit: int, z_sign: float) -> np.ndarray:
+        # The wedge vertex on the +x side (the closing side) at one end of the unit, in world coordinates.
+        g = name_id(m, mujoco.mjtObj.mjOBJ_GEOM, f"unit_{unit:02d}_geom")
+        mesh = m.geom_dataid[g]
+        v = m.mesh_vert[m.mesh_vertadr[mesh] : m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+        # MuJoCo stores mesh vertices in the geom's inertial frame: back to world through the geom pose.
+        world = d.geom_xpos[g] + v @ d.geom_xmat[g].reshape(3, 3).T
+        local = (world - d.xpos[m.geom_bodyid[g]]) @ d.xmat[m.geom_bodyid[g]].reshape(3, 3)
+        pick = local[:, 0] > 1e-6
+        pick &= np.abs(local[:, 1]) < 1e-9 if cables == 3 else local[:, 1] > 0
+        zs = local[pick, 2]
+        return np.asarray(world[pick][np.argmax(zs) if z_sign > 0 else np.argmin(zs)])
+
+    for unit in range(1, PAPER_PROTOTYPE.units):
+        parent_tip_side = rim_vertex(unit - 1, -1.0)
+        child_base_side = rim_vertex(unit, +1.0)
+        assert np.linalg.norm(parent_tip_side - child_base_side) < 1e-7
+    depth = [d.contact[i].dist for i in range(d.ncon)]
+    assert depth  # the turns of the coil touch
+    assert min(depth) > -0.1 * 0.001  # and overlap by under 0.1 mm (a chord of the inner arc: see mjcf)
+
+
+def test_unit_shape_is_validated() -> None:
+    with pytest.raises(ValueError, match="unit_shape"):
+        ArmConfig(unit_shape="cube").validate()
+
+
 def test_floor_option() -> None:
     m = load(config=ModelConfig(drone=DroneConfig(floor=True)))
     assert name_id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor") >= 0
