@@ -1,8 +1,9 @@
 """Benchmark of the MuJoCo plant (hil.plant) at a 1 ms control period; prints its figures.
 
 For the default 3-cable prototype and the authors' 24-unit design, with the stiff contacts and stretching
-cable of issue 13 and with the old parameters (``OLD_MODEL``): control periods per second and the
-real-time factor free-swinging, fully packed (every joint limit active) and wrapping a cylinder; then a
+cable of issue 13 (capsule and wedge units) and with the old parameters (``OLD_MODEL``): control periods
+per second and the real-time factor free-swinging, fully packed (every joint limit active) and wrapping
+a cylinder; then a
 stability run of random cable currents up to the current limit (no divergence allowed).
 
 Targets on a 2-core machine (issue 3): free-swinging >= 10x real time, packed >= 3x. Wall-clock figures
@@ -38,7 +39,9 @@ OLD_MODEL = ModelConfig(
     contact=ContactConfig(timeconst_s=0.02, damping_ratio=1.0, solimp=(0.9, 0.95, 0.001, 0.5, 2.0)),
 )
 """The plant before issue 13: MuJoCo's default contact (20 ms, solimp 0.9-0.95) and a time-constant cable."""
-MODELS = (("stiff", ModelConfig()), ("old", OLD_MODEL))
+WEDGE_MODEL = ModelConfig(arm=ArmConfig(unit_shape="wedge"))
+"""The stiff model with wedge-shaped units (convex meshes, colliding with each other) for capsules."""
+MODELS = (("stiff", ModelConfig()), ("stiff wedge", WEDGE_MODEL), ("old", OLD_MODEL))
 
 
 @dataclass(frozen=True)

@@ -524,7 +524,7 @@ def _with_cable_stretch(xml: str, n_cables: int, arm: ArmConfig, layout: CableLa
 def write_mjcf(
     path: str | Path, design: SpiralDesign, cables: int | None = None, config: ModelConfig | None = None
 ) -> Path:
-    """Write :func:`build_mjcf`'s model to ``path`` (one file: the model has no meshes)."""
+    """Write :func:`build_mjcf`'s model to ``path`` (one file: wedge meshes are inline)."""
     target = Path(path)
     target.write_text(build_mjcf(design, cables, config), encoding="utf-8")
     return target
