@@ -1,8 +1,9 @@
 """Benchmark of the MuJoCo plant (hil.plant) at a 1 ms control period; prints its figures.
 
-For the default 3-cable prototype and the authors' 24-unit design: control periods per second and the
-real-time factor free-swinging, fully packed (every joint limit active) and wrapping a cylinder; then a
-stability run of random cable currents up to the current limit (no divergence allowed).
+For the default 3-cable prototype and the authors' 24-unit design, with the stiff contacts and stretching
+cable of issue 13 (capsule and wedge units) and with the old parameters (``OLD_MODEL``): control periods
+per second and the real-time factor free-swinging, fully packed (every joint limit active) and wrapping
+a cylinder; then a stability run of random cable currents up to the current limit (no divergence allowed).
 
 Targets on a 2-core machine (issue 3): free-swinging >= 10x real time, packed >= 3x. Wall-clock figures
 depend on what else the machine runs, so the CPU-time factor (this process only) is printed beside them.
@@ -28,9 +29,18 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 import numpy as np  # noqa: E402
 
 from hil.errors import PlantDivergedError  # noqa: E402
-from hil.model_config import ObjectConfig  # noqa: E402
-from hil.plant import Plant  # noqa: E402
+from hil.model_config import ArmConfig, ContactConfig, ModelConfig, ObjectConfig  # noqa: E402
+from hil.plant import Plant, PlantConfig  # noqa: E402
 from hil.spiral import SpiralDesign  # noqa: E402
+
+OLD_MODEL = ModelConfig(
+    arm=ArmConfig(cable_timeconst_s=0.002),
+    contact=ContactConfig(timeconst_s=0.02, damping_ratio=1.0, solimp=(0.9, 0.95, 0.001, 0.5, 2.0)),
+)
+"""The plant before issue 13: MuJoCo's default contact (20 ms, solimp 0.9-0.95) and a time-constant cable."""
+WEDGE_MODEL = ModelConfig(arm=ArmConfig(unit_shape="wedge"))
+"""The stiff model with wedge-shaped units (convex meshes, colliding with each other) for capsules."""
+MODELS = (("stiff", ModelConfig()), ("stiff wedge", WEDGE_MODEL), ("old", OLD_MODEL))
 
 
 @dataclass(frozen=True)
@@ -81,11 +91,12 @@ def pole_of_packed_spiral(plant: Plant) -> tuple[float, float]:
     return float(pole.real), float(pole.imag)
 
 
-def scenarios(name: str, design: SpiralDesign, seconds: float) -> list[Figure]:
+def scenarios(name: str, design: SpiralDesign, seconds: float, model: ModelConfig) -> list[Figure]:
+    config = PlantConfig(model=model)
     figures = []
     # Free-swinging: no current; released from the packed pose, the arm springs open and keeps swinging
     # under a drone that sways 10 cm at 1 Hz (pose and acceleration updated at 100 Hz, like a MAVLink feed).
-    plant = Plant(design)
+    plant = Plant(design, config)
     plant.set_packed(0)
     home = plant.drone_pose().pos_m
     omega = 2 * math.pi * 1.0
@@ -99,7 +110,7 @@ def scenarios(name: str, design: SpiralDesign, seconds: float) -> list[Figure]:
     figures.append(measure(f"{name}: free-swinging (swaying drone)", plant, seconds, sway))
 
     # Fully packed: one cable at 2.5 A curls the arm until every joint sits on its limit.
-    plant = Plant(design)
+    plant = Plant(design, config)
     plant.apply_currents([2500] + [0] * (design.cables - 1))
     plant.run(1_000_000)
     limits = int(np.sum(np.abs(plant.joint_angles_rad()) > design.dtheta_rad - math.radians(0.5)))
@@ -107,9 +118,9 @@ def scenarios(name: str, design: SpiralDesign, seconds: float) -> list[Figure]:
     figures.append(fig)
 
     # Wrapping a cylinder placed where the curling arm closes around it.
-    probe = Plant(design)
+    probe = Plant(design, config)
     x, z = pole_of_packed_spiral(probe)
-    plant = Plant(design)
+    plant = Plant(design, config)
     radius = design.d_min_m  # a cylinder twice the smallest graspable diameter
     plant.add_object(ObjectConfig("cylinder", radius_m=radius, length_m=0.1, pos_m=(x, 0.0, z)))
     plant.apply_currents([1500] + [0] * (design.cables - 1))
@@ -119,9 +130,9 @@ def scenarios(name: str, design: SpiralDesign, seconds: float) -> list[Figure]:
     return figures
 
 
-def stability(design: SpiralDesign, seconds: float, seed: int) -> str:
+def stability(design: SpiralDesign, seconds: float, seed: int, model: ModelConfig) -> str:
     """Random setpoints up to the current limit, each held 50-300 ms; reports extremes, raises nothing."""
-    plant = Plant(design, rng=np.random.default_rng(seed))
+    plant = Plant(design, PlantConfig(model=model), rng=np.random.default_rng(seed))
     rng = np.random.default_rng(seed + 1)
     limit = round(plant.config.model.motor.current_limit_a * 1000)
     periods = round(seconds * 1e6 / plant.control_period_us)
@@ -173,14 +184,18 @@ def main(argv: list[str] | None = None) -> int:
         ("prototype", SpiralDesign.paper_prototype()),
         ("authors", SpiralDesign.authors_default()),
     ):
-        for fig in scenarios(name, design, args.seconds):
-            print(
-                f"  {fig.label:<52} {fig.periods / fig.wall_s:>10.0f} {fig.rtf_wall:>8.1f}x "
-                f"{fig.rtf_cpu:>7.1f}x {fig.mean_constraints:>6.0f}"
-            )
+        for label, model in MODELS:
+            for fig in scenarios(f"{name} {label}", design, args.seconds, model):
+                print(
+                    f"  {fig.label:<52} {fig.periods / fig.wall_s:>10.0f} {fig.rtf_wall:>8.1f}x "
+                    f"{fig.rtf_cpu:>7.1f}x {fig.mean_constraints:>6.0f}"
+                )
     print()
-    for name, design in (("prototype", SpiralDesign.paper_prototype()),):
-        print(f"  stability ({name}): {stability(design, args.stability_seconds, args.seed)}")
+    design = SpiralDesign.paper_prototype()
+    for label, model in MODELS:
+        print(
+            f"  stability (prototype {label}): {stability(design, args.stability_seconds, args.seed, model)}"
+        )
     return 0
 
 

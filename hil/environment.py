@@ -205,6 +205,7 @@ class Environment:
             duration_us=duration_us,
             samples=self.samples.trim(),
             plant=self.plant_samples.trim(self.samples.n),
+            extremes=board.plant.extremes(),
             sent=list(host.sent),
             telemetry_received_us=[m.time_us for m in host.telemetry],
             decode_errors=host.decode_errors,

@@ -54,7 +54,10 @@ __all__ = [
     "build_mjcf",
     "cable_angles_rad",
     "cable_layout",
+    "cable_stiffness_n_per_m",
     "unit_geometry",
+    "wedge_inset_ratio",
+    "wedge_vertices_m",
     "write_mjcf",
 ]
 
@@ -73,9 +76,15 @@ ENV_CONTYPE = 2
 # Constraint impedance close to 1: MuJoCo lets (1 − d) of the unconstrained acceleration leak through a
 # soft constraint. 0.9999 breaks ball-joint limits under large torque; 0.99-0.995 holds (docs/plant.md).
 _SOLIMP = "0.99 0.995 0.001 0.5 2"
+# Placeholder of cable k's solreflimit until the compiled model gives the tendon's inertia.
+_CABLE_SOLREF = "@cable_solref_"
 # Axial inset of each cable hole beyond the wedge gap, as a fraction of its radius: keeps the two facing
 # holes of a closed joint apart, so the cable keeps a moment arm ≈ r at the limit (no kink in the path).
 _HOLE_INSET = 0.3
+# Sides of the polygon approximating a 3-cable unit's round section: enough that the polygon's flats
+# (1 − cos(π/12) = 3.4 % of the radius) stay under a millimetre on the prototype's 32 mm base unit, and few
+# enough that the convex collision (support-function searches over the vertices) stays cheap.
+_WEDGE_SIDES = 12
 
 
 @dataclass(frozen=True)
@@ -171,6 +180,54 @@ def unit_geometry(design: SpiralDesign, arm: ArmConfig | None = None) -> UnitGeo
     rb = tuple(arm.cable_offset_ratio * 0.5 * w for w in wb)
     rt = tuple(arm.cable_offset_ratio * 0.5 * w for w in wt)
     return UnitGeometry(chords, wb, wt, masses, tuple(stiff), tuple(damp), rb, rt)
+
+
+def wedge_inset_ratio(design: SpiralDesign) -> float:
+    """Sagitta of a unit's inner arc as a fraction of its half-width.
+
+    In the packed coil the inner edge of the unit at θ lies at radius ``a·e^{bθ}`` = ``δ(θ)/(e^{2πb} − 1)``
+    from the pole (``δ`` the width), and over the unit's Δθ its chord stands ``r·(1 − cos(Δθ/2))`` off
+    that arc: ``2·(1 − cos(Δθ/2))/(e^{2πb} − 1)`` of the half-width (4.9 % on the prototype).
+    """
+    return 2.0 * (1.0 - math.cos(0.5 * design.dtheta_rad)) / math.expm1(2.0 * math.pi * design.b)
+
+
+def wedge_vertices_m(
+    geo: UnitGeometry, index: int, dtheta_rad: float, ball: bool, inset_ratio: float = 0.0
+) -> list[tuple[float, float, float]]:
+    """Vertices (unit frame: base-side joint at the origin, the unit along −z) of unit ``index``'s wedge.
+
+    The real unit is the solid between two joint faces. Each face is tilted by Δθ/2 from the plane normal
+    to the unit's axis, receding from the joint point on the axis, so the open gap between two units is a
+    wedge of Δθ on every bending side and closing the joint by Δθ lays the two faces together (the joint
+    limit of Note S3 is that contact). Hinged arms (1-2 cables) bend about y: each face is a roof of two
+    planes meeting in a ridge along y, and the section is a square of the local width (the units scale in
+    all three directions). Ball-jointed arms (3 cables) bend every way: each face is a shallow cone around
+    the axis and the section a regular polygon of the local width (corners on the circle). MuJoCo takes the
+    convex hull of the vertices, which is the solid itself (both ends are convex).
+
+    The real unit's side facing the inside of the packed coil follows the coil's previous turn: a concave
+    arc, which a convex shape can only span by its chord. That chord would stand proud of the arc by its
+    sagitta and push the packed turns apart, so every side is set in by it (``inset_ratio`` of the
+    half-width, the same all round: an arm curls to any side). Packed, the turns then just touch.
+    """
+    tilt = math.tan(0.5 * dtheta_rad)
+    ell = geo.chord_m[index]
+    ends = ((0.0, -1.0, geo.width_base_side_m[index]), (-ell, 1.0, geo.width_tip_side_m[index]))
+    keep = 1.0 - inset_ratio
+    out: list[tuple[float, float, float]] = []
+    for z_joint, inward, width in ends:
+        half = 0.5 * width * keep
+        z_rim = z_joint + inward * half * tilt  # the face recedes from the joint point into the unit
+        if ball:
+            out.append((0.0, 0.0, z_joint))
+            for k in range(_WEDGE_SIDES):
+                phi = 2.0 * math.pi * k / _WEDGE_SIDES
+                out.append((half * math.cos(phi), half * math.sin(phi), z_rim))
+        else:
+            for y in (-half, half):
+                out.extend(((0.0, y, z_joint), (-half, y, z_rim), (half, y, z_rim)))
+    return out
 
 
 def _hole_z(geo: UnitGeometry, index: int, ratio: float) -> tuple[float, float]:
@@ -287,10 +344,13 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         add(f'    <numeric name="{key}" data="{_f(float(value))}"/>')
     add("  </custom>")
     add("  <default>")
-    arm_aff = ARM_CONTYPE | ENV_CONTYPE if arm.self_collision else ENV_CONTYPE
+    arm_aff = ARM_CONTYPE | ENV_CONTYPE if arm.units_collide else ENV_CONTYPE
+    con = cfg.contact
+    # Every arm and object geom carries the same stated contact (MuJoCo mixes the two sides' solref).
+    contact = f'solref="{_v(con.timeconst_s, con.damping_ratio)}" solimp="{_v(*con.solimp)}"'
     add(
         f'    <geom contype="{ARM_CONTYPE}" conaffinity="{arm_aff}" condim="3" '
-        f'friction="{_f(arm.geom_friction)} 0.005 0.0001"/>'
+        f'friction="{_f(arm.geom_friction)} 0.005 0.0001" {contact}/>'
     )
     add(f'    <site size="{_f(arm.cable_diameter_m)}" rgba="0.9 0.9 0.2 1"/>')
     add("  </default>")
@@ -298,6 +358,11 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     add('    <material name="tpu" rgba="0.95 0.55 0.15 1"/>')
     add('    <material name="drone" rgba="0.25 0.25 0.3 1"/>')
     add('    <material name="object" rgba="0.3 0.6 0.9 1"/>')
+    if arm.unit_shape == "wedge":
+        for i in range(n):
+            inset = wedge_inset_ratio(design)
+            verts = " ".join(_v(*p) for p in wedge_vertices_m(geo, i, dtheta, ball, inset))
+            add(f'    <mesh name="unit_{i:02d}_mesh" vertex="{verts}"/>')
     add("  </asset>")
     add("  <worldbody>")
     add('    <light name="sun" pos="0 0 3" dir="0 0 -1" directional="true"/>')
@@ -370,10 +435,11 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
                     f'range="{_v(-dtheta, dtheta)}" {common}/>'
                 )
         ell = geo.chord_m[i]
-        add(
-            f'{inner}<geom name="{name}_geom" type="capsule" fromto="0 0 0 0 0 {_f(-ell)}" '
-            f'size="{_f(geo.capsule_radius_m(i))}" mass="{_f(geo.mass_kg[i])}" material="tpu"/>'
-        )
+        if arm.unit_shape == "wedge":
+            shape = f'type="mesh" mesh="{name}_mesh"'
+        else:
+            shape = f'type="capsule" fromto="0 0 0 0 0 {_f(-ell)}" size="{_f(geo.capsule_radius_m(i))}"'
+        add(f'{inner}<geom name="{name}_geom" {shape} mass="{_f(geo.mass_kg[i])}" material="tpu"/>')
         rb, rt = geo.cable_radius_base_side_m[i], geo.cable_radius_tip_side_m[i]
         z_in, z_out = _hole_z(geo, i, lay.hole_offset_ratio)
         for k, psi in enumerate(lay.angles_rad):
@@ -397,7 +463,7 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         geom = (
             f'<geom name="{obj.name}_geom" type="{obj.shape}" fromto="{_v(*ends)}" size="{_f(obj.radius_m)}" '
             f'contype="{ENV_CONTYPE}" conaffinity="{ARM_CONTYPE | ENV_CONTYPE}" '
-            f'friction="{_f(obj.friction)} 0.005 0.0001" material="object"'
+            f'friction="{_f(obj.friction)} 0.005 0.0001" material="object" {contact}'
         )
         add(f'    <body name="{obj.name}" pos="{_v(*obj.pos_m)}">')
         if obj.mass_kg is None:
@@ -425,7 +491,7 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
     for k in range(n_cables):
         add(
             f'    <spatial name="cable_{k}" range="0 {_f(lay.taut_length_m)}" '
-            f'solreflimit="{_f(arm.cable_timeconst_s)} 1" solimplimit="{_SOLIMP}" '
+            f'solreflimit="{_CABLE_SOLREF}{k}" solimplimit="{_SOLIMP}" '
             f'width="{_f(0.5 * arm.cable_diameter_m)}" rgba="0.1 0.1 0.1 1">'
         )
         add(f'      <site site="cable_{k}_spool"/>')
@@ -446,7 +512,42 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
         add(f'    <tendonlimitfrc name="tension_{k}" tendon="cable_{k}"/>')
     add("  </sensor>")
     add("</mujoco>")
-    return "\n".join(out) + "\n"
+    return _with_cable_stretch("\n".join(out) + "\n", n_cables, arm, lay)
+
+
+def cable_stiffness_n_per_m(arm: ArmConfig, layout: CableLayout) -> float:
+    """Axial stiffness ``E·A/L`` of a cable: ``L`` is its free run from the guide on the drone to the knot
+    at the tip (the spool's lead in the model is a numerical travel, not cable)."""
+    return arm.cable_axial_stiffness_n / (layout.taut_length_m - layout.spool_lead_m)
+
+
+def _with_cable_stretch(xml: str, n_cables: int, arm: ArmConfig, layout: CableLayout) -> str:
+    """Replace each cable's ``solreflimit`` placeholder by its stretch stiffness and damping.
+
+    MuJoCo's direct form ``solref="-k -b"`` sets the constraint's reference acceleration ``−k·r − b·v`` in
+    the tendon's own coordinate, i.e. stiffness per unit of the mass the tendon moves. That mass is
+    ``1 / tendon_invweight0`` (the tendon's inverse inertia in the straight pose, known after compiling),
+    so ``k = K · invweight0`` gives the physical ``K = E·A/L`` [N/m]; ``b = 2ζ√k`` is damping ratio ζ
+    against the same mass. MuJoCo divides by the impedance ``dmax`` (``k/dmax²``, ``b/dmax``), undone here.
+    """
+    if arm.cable_timeconst_s is not None:
+        for k in range(n_cables):
+            xml = xml.replace(f"{_CABLE_SOLREF}{k}", f"{_f(arm.cable_timeconst_s)} 1")
+        return xml
+    import mujoco  # compile-time only: the generator itself has no MuJoCo dependency otherwise
+
+    first = xml
+    for k in range(n_cables):
+        first = first.replace(f"{_CABLE_SOLREF}{k}", "0.002 1")
+    model = mujoco.MjModel.from_xml_string(first)
+    stiffness = cable_stiffness_n_per_m(arm, layout)
+    dmax = float(_SOLIMP.split()[1])
+    for k in range(n_cables):
+        tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, f"cable_{k}")
+        k_acc = stiffness * float(model.tendon_invweight0[tid])
+        b_acc = 2.0 * arm.cable_damping_ratio * math.sqrt(k_acc)
+        xml = xml.replace(f"{_CABLE_SOLREF}{k}", _v(-k_acc * dmax * dmax, -b_acc * dmax))
+    return xml
 
 
 def _actuator_xml(k: int, cfg: ModelConfig, design: SpiralDesign, lay: CableLayout) -> str:
@@ -480,7 +581,7 @@ def _actuator_xml(k: int, cfg: ModelConfig, design: SpiralDesign, lay: CableLayo
 def write_mjcf(
     path: str | Path, design: SpiralDesign, cables: int | None = None, config: ModelConfig | None = None
 ) -> Path:
-    """Write :func:`build_mjcf`'s model to ``path`` (one file: the model has no meshes)."""
+    """Write :func:`build_mjcf`'s model to ``path`` (one file: wedge meshes are inline)."""
     target = Path(path)
     target.write_text(build_mjcf(design, cables, config), encoding="utf-8")
     return target

@@ -17,6 +17,7 @@ __all__ = [
     "MOUNTINGS",
     "ActuatorConfig",
     "ArmConfig",
+    "ContactConfig",
     "DroneConfig",
     "ModelConfig",
     "MotorConfig",
@@ -71,11 +72,26 @@ class ArmConfig:
             tip joints carry ~1e-9 kg·m², and MuJoCo scales constraint softness by inverse inertia, so
             joint limits and the cable would give way under cable loads; 3e-6 keeps them within about a
             degree / a millimetre at the 1 ms step and leaves the first bending mode unchanged.
-        limit_timeconst_s: ``solref`` time constant of the joint limits (unit-on-unit contact).
-        cable_timeconst_s: ``solref`` time constant of the cable (tendon length limit).
-        self_collision: let non-adjacent units collide. Off by default: Note S3 models units touching by
-            the joint limits, which keeps the packed pose cheap and exact.
+        limit_timeconst_s: ``solref`` time constant of the joint limits (unit-on-unit contact of the TPU
+            units); at least twice the physics step (``ModelConfig.validate``).
+        cable_modulus_pa: tensile modulus of the cable's fibre (Dyneema SK75: 109-132 GPa, DSM's fact
+            sheet; the low end, since a braid's fibres are not all along its axis).
+        cable_fill_factor: fraction of the cable's nominal cross-section that is fibre (a braid of round
+            filaments packs about half its circle).
+        cable_damping_ratio: damping ratio of the cable's stretch against the mass it stops (a fibre's
+            loss is small; the value is a modelling choice, see ``docs/plant.md``).
+        cable_timeconst_s: ``None``: the cable's limit is its stretch (the three fields above). A number:
+            MuJoCo's time-constant form instead, with no physical stiffness (the model before issue 13;
+            the benchmark compares against it).
+        self_collision: let non-adjacent units collide. ``None``: the shape's own choice (wedges collide,
+            capsules do not: a capsule's rounded ends reach into the packed neighbours' space, so capsules
+            rely on the joint limits alone, as Note S3 models units touching).
         geom_friction: sliding friction coefficient of the unit surfaces.
+        unit_shape: collision shape of each unit. ``"wedge"``: a convex mesh of the real unit, the solid
+            between its two joint faces tilted by ±Δθ/2, tapering from its base-side to its tip-side width
+            (2-cable/1-cable arms: a prism-like wedge; 3 cables: a polygonal truncated cone with conical
+            faces); closing a joint to its limit brings two faces together. ``"capsule"``: a capsule of
+            the unit's mean half-width along its chord.
     """
 
     total_mass_kg: float = 0.0384
@@ -87,9 +103,13 @@ class ArmConfig:
     cable_diameter_m: float = 0.0005
     joint_armature_kg_m2: float = 3e-6
     limit_timeconst_s: float = 0.002
-    cable_timeconst_s: float = 0.002
-    self_collision: bool = False
+    cable_modulus_pa: float = 109e9
+    cable_fill_factor: float = 0.5
+    cable_damping_ratio: float = 0.5
+    cable_timeconst_s: float | None = None
+    self_collision: bool | None = None
     geom_friction: float = 0.8
+    unit_shape: str = "capsule"
 
     def validate(self) -> None:
         """Raise ``ValueError`` if a value is out of range."""
@@ -108,8 +128,63 @@ class ArmConfig:
         _finite("cable_diameter_m", self.cable_diameter_m)
         _finite("joint_armature_kg_m2", self.joint_armature_kg_m2, allow_equal=True)
         _finite("limit_timeconst_s", self.limit_timeconst_s)
-        _finite("cable_timeconst_s", self.cable_timeconst_s)
+        _finite("cable_modulus_pa", self.cable_modulus_pa)
+        _finite("cable_fill_factor", self.cable_fill_factor)
+        _check(
+            self.cable_fill_factor <= 1.0, f"cable_fill_factor must be <= 1, got {self.cable_fill_factor!r}"
+        )
+        _finite("cable_damping_ratio", self.cable_damping_ratio, allow_equal=True)
+        if self.cable_timeconst_s is not None:
+            _finite("cable_timeconst_s", self.cable_timeconst_s)
         _finite("geom_friction", self.geom_friction, allow_equal=True)
+        _check(
+            self.unit_shape in ("wedge", "capsule"),
+            f"unit_shape must be 'wedge' or 'capsule', got {self.unit_shape!r}",
+        )
+
+    @property
+    def units_collide(self) -> bool:
+        """Whether non-adjacent units collide (``self_collision``, else the unit shape's choice)."""
+        if self.self_collision is None:
+            return self.unit_shape == "wedge"
+        return self.self_collision
+
+    @property
+    def cable_axial_stiffness_n(self) -> float:
+        """The cable's ``E·A`` [N]: its stiffness is this over its length."""
+        return self.cable_modulus_pa * self.cable_fill_factor * math.pi * (0.5 * self.cable_diameter_m) ** 2
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    """Contact parameters of every arm and object geom (MuJoCo's ``solref``/``solimp``).
+
+    MuJoCo's default (20 ms) lets a pen sink 10 mm into the arm; ``docs/plant.md`` gives the measurements
+    behind these defaults.
+
+    Attributes:
+        timeconst_s: ``solref`` time constant: how fast a penetration is pushed out. At least twice the
+            physics step (``ModelConfig.validate``): a shorter one is not resolved by the integrator.
+        damping_ratio: ``solref`` damping ratio (1 = critically damped: no bounce from the contact itself).
+        solimp: ``(dmin, dmax, width_m, midpoint, power)``: the constraint impedance rises from ``dmin`` at
+            zero depth to ``dmax`` at ``width_m`` deep; (1 − d) of the unconstrained push leaks through.
+    """
+
+    timeconst_s: float = 0.002
+    damping_ratio: float = 1.0
+    solimp: tuple[float, float, float, float, float] = (0.99, 0.995, 0.0005, 0.5, 2.0)
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` if a value is out of range."""
+        _finite("contact timeconst_s", self.timeconst_s)
+        _finite("contact damping_ratio", self.damping_ratio)
+        _vector("contact solimp", self.solimp, 5)
+        dmin, dmax, width, mid, power = self.solimp
+        _check(
+            0.0 < dmin <= dmax < 1.0 and width > 0.0 and 0.0 < mid < 1.0 and power >= 1.0,
+            f"contact solimp must have 0 < dmin <= dmax < 1, width > 0, 0 < midpoint < 1, power >= 1, "
+            f"got {self.solimp!r}",
+        )
 
 
 _DRIVE = MotorDriveConfig()
@@ -388,10 +463,13 @@ class ModelConfig:
     objects: tuple[ObjectConfig, ...] = ()
     actuator: ActuatorConfig = field(default_factory=ActuatorConfig)
     mounting: str = "hanging"
+    contact: ContactConfig = field(default_factory=ContactConfig)
 
     def validate(self) -> None:
-        """Raise ``ValueError`` if any part is out of range or object names clash."""
+        """Raise ``ValueError`` if any part is out of range, object names clash, or a constraint's time
+        constant is shorter than two physics steps."""
         self.arm.validate()
+        self.contact.validate()
         self.motor.validate()
         self.drone.validate()
         self.solver.validate()
@@ -406,6 +484,18 @@ class ModelConfig:
         _check(not supports & set(names), f"an object name clashes with another's support body: {names}")
         for o in self.objects:
             o.validate()
+        step = self.solver.timestep_s
+        for what, tau in (
+            ("contact.timeconst_s", self.contact.timeconst_s),
+            ("arm.limit_timeconst_s", self.arm.limit_timeconst_s),
+        ):
+            # MuJoCo's soft constraints need the reference dynamics resolved by the step: a time constant
+            # under 2 steps makes the correction overshoot within one step (contacts pop, limits chatter).
+            _check(
+                tau >= 2.0 * step - 1e-12,
+                f"{what} = {tau * 1e3:g} ms must be at least twice the physics step "
+                f"(solver.timestep_s = {step * 1e3:g} ms): shorten the step or lengthen the time constant",
+            )
 
     @property
     def peak_tension_n(self) -> float:

@@ -33,6 +33,8 @@ from controller.config import FirmwareConfig
 from protocol.dbus import RcFrame
 from protocol.messages import Event, EventKind, Message, Telemetry
 
+from .plant_types import PhysicsExtremes
+
 __all__ = ["Check", "PlantSamples", "RunRecord", "Samples", "ScenarioResult"]
 
 TICK_US = 1000
@@ -78,6 +80,8 @@ class ScenarioResult:
     checks: tuple[Check, ...]
     duration_us: int
     counters: dict[str, int] = field(default_factory=dict)
+    extremes: PhysicsExtremes | None = None
+    """The plant's largest penetration, tension and limit overshoot over the run (None on a port)."""
 
     @property
     def passed(self) -> bool:
@@ -85,7 +89,7 @@ class ScenarioResult:
         return all(c.passed for c in self.checks)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
+        """JSON-ready form (``extremes`` in SI units, or None on a port)."""
         return {
             "name": self.name,
             "seed": self.seed,
@@ -93,6 +97,7 @@ class ScenarioResult:
             "duration_s": self.duration_us / 1e6,
             "checks": [c.as_dict() for c in self.checks],
             "counters": self.counters,
+            "extremes": None if self.extremes is None else self.extremes.as_dict(),
         }
 
 
@@ -199,6 +204,8 @@ class RunRecord:
         samples_through_link: the samples travel over the board link (a port run), so a link outage hides
             the board; a lockstep run samples the firmware directly.
         plant: the plant's true state (lockstep only).
+        extremes: the plant's largest penetration, tension and limit overshoot over the run (lockstep
+            only; a real arm has no such probe).
         rc: every RC frame the board reported receiving, as (board time, frame), before link noise.
         events: the board's events, as (board time, event), before link noise.
         telemetry_sent_us: board times of the telemetry frames the board sent, before link noise.
@@ -218,6 +225,7 @@ class RunRecord:
     link_delay_us: int = TICK_US
     samples_through_link: bool = False
     plant: PlantSamples | None = None
+    extremes: PhysicsExtremes | None = None
     rc: list[tuple[int, RcFrame]] = field(default_factory=list)
     events: list[tuple[int, Event]] = field(default_factory=list)
     telemetry_sent_us: list[int] = field(default_factory=list)

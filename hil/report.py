@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -14,7 +15,8 @@ from .record import RunRecord, ScenarioResult
 
 
 def results_table(results: Sequence[ScenarioResult], clock: str = "simulated time") -> Table:
-    """One row per check: scenario, check, measured value, bound, verdict."""
+    """One row per check: scenario, check, measured value, bound, verdict; then the plant's extremes over
+    the run (lockstep), which have no bound: they say whether the physics behind the checks was sound."""
     table = Table(title=f"scenario checks ({clock})", show_lines=False)
     for col, justify in (
         ("scenario", "left"),
@@ -34,6 +36,17 @@ def results_table(results: Sequence[ScenarioResult], clock: str = "simulated tim
                 f"{c.op} {c.bound:.6g} {c.unit}".strip(),
                 verdict,
             )
+        e = r.extremes
+        if e is not None:
+            for label, value in (
+                ("plant: largest cable tension", f"{e.tension_n:.1f} N"),
+                ("plant: largest joint-limit overshoot", f"{math.degrees(e.limit_overshoot_rad):.2f}°"),
+                (
+                    "plant: largest arm-object penetration",
+                    f"{e.penetration_m * 1000:.2f} mm ({100 * e.penetration_ratio:.0f} % of its radius)",
+                ),
+            ):
+                table.add_row("", f"[dim]{label}[/dim]", value, "", "")
     return table
 
 

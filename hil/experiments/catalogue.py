@@ -9,7 +9,7 @@ from typing import Any
 
 from ..model_config import ModelConfig
 from ..spiral import SpiralDesign
-from . import contact, dynamic, grasp_range, load, packing, sensitivity, strategy, workspace
+from . import contact, convergence, dynamic, grasp_range, load, packing, sensitivity, strategy, workspace
 from .common import DEFAULT_MODEL, Progress, Row, sized
 
 
@@ -101,6 +101,14 @@ EXPERIMENTS: dict[str, Experiment] = {
             sensitivity.table_rows,
             sensitivity.describe_samples,
             sensitivity.plot_figure,
+        ),
+        Experiment(
+            "convergence",
+            "packing tension, a pen's half wrap, penetration and tension extremes at 1, 0.5, 0.25 ms steps",
+            convergence.run_at_size,
+            convergence.table_rows,
+            convergence.describe_samples,
+            convergence.plot_figure,
         ),
     )
 }

@@ -158,4 +158,4 @@ def run_scenario(
     finally:
         if recorder is not None:
             recorder.close()
-    return ScenarioResult(name, seed, checks, scenario.duration_us, run.counters)
+    return ScenarioResult(name, seed, checks, scenario.duration_us, run.counters, run.extremes)

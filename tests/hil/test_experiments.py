@@ -133,6 +133,17 @@ def test_an_object_out_of_reach_is_a_failed_grasp() -> None:
     assert out.state == "FAILED" and not out.held and math.isnan(out.t_hold_s)
 
 
+def test_convergence_tiny_measures_each_step_and_the_pen_stays_outside_the_arm() -> None:
+    r = run_experiment("convergence", size="tiny")
+    assert [s.timestep_s for s in r.steps] == [0.001, 0.0005]
+    for s in r.steps:
+        # the stated contacts' goal (docs/plant.md): under 1 mm for a pen pressed by a 54 N curl
+        assert s.wrap_penetration_m < 1e-3 and s.press_penetration_m < 1e-3
+        assert s.random_tension_n > 0.0
+    rows = EXPERIMENTS["convergence"].rows(r)
+    assert rows[0][1] == "1 ms | 0.5 ms"
+
+
 def test_contact_helpers() -> None:
     from hil.experiments.contact import ReachTrial, bootstrap_median, wilson
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from pathlib import Path
@@ -15,12 +16,14 @@ from hil.mjcf import (
     build_mjcf,
     cable_angles_rad,
     cable_layout,
+    cable_stiffness_n_per_m,
     unit_geometry,
     write_mjcf,
 )
 from hil.model_config import (
     ActuatorConfig,
     ArmConfig,
+    ContactConfig,
     DroneConfig,
     ModelConfig,
     MotorConfig,
@@ -200,6 +203,67 @@ def test_arm_does_not_collide_with_itself_by_default() -> None:
     assert m2.geom_contype[a] & m2.geom_conaffinity[b]
 
 
+WEDGE = ModelConfig(arm=ArmConfig(unit_shape="wedge"))
+
+
+@pytest.mark.parametrize("cables", [2, 3])
+def test_wedge_units_are_inline_meshes_that_collide_with_each_other(cables: int) -> None:
+    xml = build_mjcf(PAPER_PROTOTYPE, cables, WEDGE)
+    assert "<mesh " in xml and "file=" not in xml  # one self-contained file
+    m = mujoco.MjModel.from_xml_string(xml)
+    assert m.nmesh == PAPER_PROTOTYPE.units
+    a, b = (name_id(m, mujoco.mjtObj.mjOBJ_GEOM, f"unit_{i:02d}_geom") for i in (3, 9))
+    assert m.geom_type[a] == mujoco.mjtGeom.mjGEOM_MESH
+    assert m.geom_contype[a] & m.geom_conaffinity[b]
+    off = ModelConfig(arm=ArmConfig(unit_shape="wedge", self_collision=False))
+    m2 = load(cables=cables, config=off)
+    assert not m2.geom_contype[a] & m2.geom_conaffinity[b]
+
+
+@pytest.mark.parametrize("cables", [2, 3])
+def test_wedge_faces_meet_when_a_joint_closes_and_packed_turns_just_touch(cables: int) -> None:
+    """At the joint limit the two facing wedge faces lie together (what the limit models); packed, the
+    coil's turns touch without pushing each other apart, and no two units overlap in the straight arm."""
+    m = load(cables=cables, config=WEDGE)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    assert d.ncon == 0  # straight: nothing touches
+    dtheta = PAPER_PROTOTYPE.dtheta_rad
+    for j in range(m.njnt):
+        if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL:
+            adr = m.jnt_qposadr[j]
+            d.qpos[adr : adr + 4] = (math.cos(dtheta / 2), 0.0, -math.sin(dtheta / 2), 0.0)
+        elif m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
+            d.qpos[m.jnt_qposadr[j]] = -dtheta  # every joint closed towards +x
+    mujoco.mj_forward(m, d)
+
+    def rim_vertex(unit: int, z_sign: float) -> np.ndarray:
+        # The wedge vertex on the +x side (the closing side) at one end of the unit, in world coordinates.
+        g = name_id(m, mujoco.mjtObj.mjOBJ_GEOM, f"unit_{unit:02d}_geom")
+        mesh = m.geom_dataid[g]
+        v = m.mesh_vert[m.mesh_vertadr[mesh] : m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+        # MuJoCo stores mesh vertices in the geom's inertial frame: back to world through the geom pose.
+        world = d.geom_xpos[g] + v @ d.geom_xmat[g].reshape(3, 3).T
+        local = (world - d.xpos[m.geom_bodyid[g]]) @ d.xmat[m.geom_bodyid[g]].reshape(3, 3)
+        pick = local[:, 0] > 1e-6
+        pick &= np.abs(local[:, 1]) < 1e-9 if cables == 3 else local[:, 1] > 0
+        zs = local[pick, 2]
+        return np.asarray(world[pick][np.argmax(zs) if z_sign > 0 else np.argmin(zs)])
+
+    for unit in range(1, PAPER_PROTOTYPE.units):
+        parent_tip_side = rim_vertex(unit - 1, -1.0)
+        child_base_side = rim_vertex(unit, +1.0)
+        assert np.linalg.norm(parent_tip_side - child_base_side) < 1e-7
+    depth = [d.contact[i].dist for i in range(d.ncon)]
+    assert depth  # the turns of the coil touch
+    assert min(depth) > -0.1 * 0.001  # and overlap by under 0.1 mm (a chord of the inner arc: see mjcf)
+
+
+def test_unit_shape_is_validated() -> None:
+    with pytest.raises(ValueError, match="unit_shape"):
+        ArmConfig(unit_shape="cube").validate()
+
+
 def test_floor_option() -> None:
     m = load(config=ModelConfig(drone=DroneConfig(floor=True)))
     assert name_id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor") >= 0
@@ -290,3 +354,42 @@ def test_mountings_set_gravity_and_the_table() -> None:
     assert d.xaxis[hinge].tolist() == pytest.approx([0.0, 0.0, 1.0])  # bends in the horizontal plane
     table = name_id(m, mujoco.mjtObj.mjOBJ_GEOM, "table")
     assert d.geom_xpos[table][2] == pytest.approx(1.0 - 0.5 * unit_geometry(design).width_base_side_m[0])
+
+
+def test_every_arm_and_object_geom_carries_the_stated_contact() -> None:
+    contact = ContactConfig(timeconst_s=0.003, damping_ratio=0.9, solimp=(0.98, 0.99, 0.001, 0.4, 3.0))
+    cfg = dataclasses.replace(ModelConfig(), contact=contact).with_objects(
+        ObjectConfig("pole", 0.01, 0.1, (0.05, 0, 0.8)),
+        ObjectConfig("cup", 0.02, 0.05, (0.1, 0, 0.8), mass_kg=0.05, shape="capsule"),
+    )
+    m = load(config=cfg)
+    checked = 0
+    for g in range(m.ngeom):
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or ""
+        if name.startswith("unit_") or name in ("pole_geom", "cup_geom"):
+            assert m.geom_solref[g] == pytest.approx((0.003, 0.9))
+            assert m.geom_solimp[g] == pytest.approx((0.98, 0.99, 0.001, 0.4, 3.0))
+            checked += 1
+    assert checked == PAPER_PROTOTYPE.units + 2
+
+
+def test_the_cable_limit_is_its_stretch_ea_over_l() -> None:
+    """MuJoCo's direct solref is stiffness per unit of the tendon's mass: times its inertia it is E·A/L."""
+    arm = ArmConfig()
+    m = load(config=ModelConfig(arm=arm))
+    lay = cable_layout(PAPER_PROTOTYPE, 3)
+    k_phys = cable_stiffness_n_per_m(arm, lay)
+    # 0.5 mm Dyneema braid, half of it fibre at 109 GPa, over the ~0.2 m from the drone to the tip
+    assert 3e4 < k_phys < 8e4
+    dmax = m.tendon_solimp_lim[0][1]
+    for k in range(3):
+        ref = m.tendon_solref_lim[k]
+        assert ref[0] < 0 and ref[1] < 0
+        k_acc = -ref[0] / dmax**2
+        assert k_acc / m.tendon_invweight0[k] == pytest.approx(k_phys, rel=1e-6)
+        assert -ref[1] / dmax == pytest.approx(2 * arm.cable_damping_ratio * math.sqrt(k_acc), rel=1e-6)
+
+
+def test_the_old_time_constant_cable_stays_selectable() -> None:
+    m = load(config=ModelConfig(arm=ArmConfig(cable_timeconst_s=0.002)))
+    assert m.tendon_solref_lim[0] == pytest.approx((0.002, 1.0))

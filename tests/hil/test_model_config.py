@@ -7,7 +7,15 @@ import math
 import pytest
 
 from controller.config import MotorDriveConfig
-from hil.model_config import ArmConfig, DroneConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
+from hil.model_config import (
+    ArmConfig,
+    ContactConfig,
+    DroneConfig,
+    ModelConfig,
+    MotorConfig,
+    ObjectConfig,
+    SolverConfig,
+)
 
 
 def test_defaults_are_valid_and_the_motor_shares_the_firmware_drive_constants() -> None:
@@ -48,3 +56,44 @@ def test_with_objects_appends() -> None:
     config = ModelConfig().with_objects(pole).with_objects(cup)
     assert config.objects == (pole, cup)
     config.validate()
+
+
+@pytest.mark.parametrize(
+    ("config", "match"),
+    [
+        (ModelConfig(contact=ContactConfig(timeconst_s=0.0015)), "contact.timeconst_s = 1.5 ms"),
+        (ModelConfig(arm=ArmConfig(limit_timeconst_s=0.001)), "arm.limit_timeconst_s"),
+        (
+            ModelConfig(contact=ContactConfig(timeconst_s=0.0008), solver=SolverConfig(timestep_s=0.0005)),
+            "at least twice the physics step",
+        ),
+    ],
+)
+def test_a_time_constant_under_two_physics_steps_is_refused(config: ModelConfig, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        config.validate()
+
+
+def test_a_short_time_constant_is_fine_with_a_short_step() -> None:
+    ModelConfig(contact=ContactConfig(timeconst_s=0.0005), solver=SolverConfig(timestep_s=0.00025)).validate()
+
+
+@pytest.mark.parametrize(
+    ("contact", "match"),
+    [
+        (ContactConfig(timeconst_s=0.0), "timeconst_s"),
+        (ContactConfig(damping_ratio=-1.0), "damping_ratio"),
+        (ContactConfig(solimp=(0.99, 0.9, 0.001, 0.5, 2.0)), "dmin <= dmax"),
+        (ContactConfig(solimp=(0.9, 0.95, 0.001, 0.5)), "5 finite numbers"),  # type: ignore[arg-type]
+    ],
+)
+def test_contact_config_rejects_bad_values(contact: ContactConfig, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        contact.validate()
+
+
+def test_the_cable_axial_stiffness_is_e_times_the_fibre_area() -> None:
+    arm = ArmConfig()
+    assert arm.cable_axial_stiffness_n == pytest.approx(109e9 * 0.5 * math.pi * 0.00025**2)
+    with pytest.raises(ValueError, match="cable_fill_factor"):
+        ArmConfig(cable_fill_factor=1.5).validate()

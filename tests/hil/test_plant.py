@@ -150,7 +150,9 @@ def test_torque_speed_line_caps_the_delivered_current() -> None:
 def test_steady_tension_matches_torque_constant_over_spool_radius() -> None:
     plant = Plant()
     plant.apply_currents([amps(1.0), 0, 0])
-    plant.run(600_000)
+    # 1.5 s: the cable's stretch (E·A/L) adds a compliant mode against the 1.3 kg spool, so the curl
+    # settles more slowly than with the old rigid cable limit (0.6 s sufficed then).
+    plant.run(1_500_000)
     expected = 1.0 * MOTOR.torque_constant_nm_per_a / MOTOR.spool_radius_m  # 18 N
     tension = float(plant.cable_tensions_n()[0])
     assert abs(tension - expected) <= 0.05 * expected + MOTOR.friction_force_n

@@ -7,7 +7,9 @@ import math
 import numpy as np
 
 from controller.config import FirmwareConfig
-from hil.record import Check, RunRecord, Samples
+from hil.plant_types import PhysicsExtremes
+from hil.record import Check, RunRecord, Samples, ScenarioResult
+from hil.report import results_table
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Event, EventKind, Heartbeat, Phase
 
@@ -50,3 +52,19 @@ def test_queries_measure_what_the_samples_and_messages_say() -> None:
     assert run.last_sent_before(Heartbeat, 9_000) == 0
     run.telemetry_received_us = [0, 10_000, 20_000]
     assert run.received(5_000) == 2 and run.received(0, 10_000) == 1
+
+
+def test_a_scenario_result_carries_the_plant_extremes_into_json_and_the_table() -> None:
+    from rich.console import Console
+
+    extremes = PhysicsExtremes(0.0004, 0.08, 61.5, math.radians(1.25))
+    check = Check("x", 1.0, 2.0, "<=")
+    lockstep = ScenarioResult("grasp", 0, (check,), 1000, extremes=extremes)
+    port = ScenarioResult("grasp", 0, (check,), 1000)
+    assert lockstep.as_dict()["extremes"] == extremes.as_dict()
+    assert port.as_dict()["extremes"] is None
+    console = Console(width=200, record=True)
+    console.print(results_table([lockstep, port]))
+    text = console.export_text()
+    assert "61.5 N" in text and "1.25°" in text and "0.40 mm (8 % of its radius)" in text
+    assert text.count("largest cable tension") == 1  # the port run has no plant to report

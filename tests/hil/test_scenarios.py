@@ -20,6 +20,9 @@ def test_scenario_passes(name: str) -> None:
     failed = [c for c in result.checks if not c.passed]
     assert result.checks and not failed, failed
     assert result.as_dict()["passed"] is True
+    # every lockstep run reports the plant's extremes beside its checks
+    assert result.extremes is not None
+    assert result.as_dict()["extremes"] == result.extremes.as_dict()
 
 
 def test_a_slower_rc_timeout_fails_rc_loss(monkeypatch: pytest.MonkeyPatch) -> None:

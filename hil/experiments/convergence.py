@@ -1,0 +1,275 @@
+"""convergence: the plant's headline numbers at 1, 0.5 and 0.25 ms physics steps, side by side.
+
+Each number is measured on the bare plant (currents straight to the drives, no firmware), so only the
+physics step differs between the columns:
+
+- **packing**: cable 0's current ramped slowly; the tension at which every joint reaches its limit.
+- **pen**: a 5 mm-radius pen on its support beside the tip, a 3 A (54 N) step on cable 0: time to a half
+  wrap, the largest penetration while wrapping (the first 300 ms) and while pressing (the rest).
+- **throw**: a 10 mm-radius object thrown at the hanging arm at each speed: the largest penetration.
+- **random**: random currents up to the limit, each held 50-300 ms: the largest tension and limit overshoot.
+
+If the 1 ms column agrees with the 0.25 ms one, figures measured at the default step can be trusted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..model_config import ModelConfig, ObjectConfig
+from ..plant import Plant, PlantConfig
+from ..spiral import SpiralDesign
+from .common import FAR_M, MS, OBJ, Progress, Row, pyplot, save_figure, sized
+from .parallel import parallel_map
+from .rig import contact_units, contact_wrap_deg, world_m
+
+
+@dataclass(frozen=True)
+class ConvergenceParams:
+    """Attributes:
+    timesteps_s: the physics steps compared (the control period stays 1 ms).
+    ramp_ms: how long cable 0's current takes to rise from 0 to ``ramp_to_a`` (packing).
+    ramp_to_a: the end of the packing ramp.
+    pen: ``(x, z)`` of the pen's centre relative to the base (beside the hanging arm, near its tip).
+    pen_radius_m, pen_mass_kg: the pen (as in the ``dynamic`` experiment).
+    step_a: the current step on cable 0 (3 A = 54 N).
+    pen_ms: how long the pen run lasts; the first 300 ms are its wrap, the rest its press.
+    throw_speeds_m_s: speeds of the thrown object.
+    throw_ms: how long each throw is watched.
+    random_ms: length of the random-current run.
+    model: the plant's model; only its physics step is changed per column.
+    """
+
+    timesteps_s: tuple[float, ...] = (0.001, 0.0005, 0.00025)
+    ramp_ms: int = 3000
+    ramp_to_a: float = 2.0
+    pen: tuple[float, float] = (0.02, -0.17)
+    pen_radius_m: float = 0.005
+    pen_mass_kg: float = 0.015
+    step_a: float = 3.0
+    pen_ms: int = 600
+    throw_speeds_m_s: tuple[float, ...] = (1.0, 2.0, 3.0, 4.0)
+    throw_ms: int = 300
+    random_ms: int = 10_000
+    model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
+
+
+WRAP_MS = 300
+"""The first part of the pen run counts as wrapping, the rest as pressing."""
+
+
+@dataclass(frozen=True)
+class StepFigures:
+    """The headline numbers at one physics step (NaN where the event never happened)."""
+
+    timestep_s: float
+    packing_tension_n: float
+    pen_half_wrap_ms: float
+    wrap_penetration_m: float
+    press_penetration_m: float
+    press_penetration_ratio: float
+    throw_penetration_m: tuple[float, ...]
+    random_tension_n: float
+    random_overshoot_rad: float
+
+
+@dataclass(frozen=True)
+class ConvergenceResult:
+    """Every step's numbers."""
+
+    params: ConvergenceParams
+    seed: int
+    steps: tuple[StepFigures, ...]
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (SI units)."""
+        return {
+            "experiment": "convergence",
+            "seed": self.seed,
+            "steps": [dataclasses.asdict(s) for s in self.steps],
+            "params": {k: v for k, v in dataclasses.asdict(self.params).items() if k != "model"},
+        }
+
+
+def _plant(p: ConvergenceParams, timestep_s: float, seed: int, *objects: ObjectConfig) -> Plant:
+    model = dataclasses.replace(p.model, solver=dataclasses.replace(p.model.solver, timestep_s=timestep_s))
+    if objects:
+        model = model.with_objects(*objects)
+    return Plant(SpiralDesign.paper_prototype(), PlantConfig(model=model), rng=np.random.default_rng(seed))
+
+
+def _amps(plant: Plant, cable0_a: float) -> list[int]:
+    return [round(cable0_a * 1000)] + [0] * (plant.cables - 1)
+
+
+def packing_tension_n(p: ConvergenceParams, timestep_s: float, seed: int) -> float:
+    """Cable 0's tension when the last joint reaches its limit on a slow current ramp (NaN: never)."""
+    plant = _plant(p, timestep_s, seed)
+    limit = plant.design.dtheta_rad - math.radians(0.5)
+    for k in range(p.ramp_ms):
+        plant.apply_currents(_amps(plant, p.ramp_to_a * (k + 1) / p.ramp_ms))
+        plant.step()
+        if bool(np.all(np.abs(plant.joint_angles_rad()) >= limit)):
+            return float(plant.cable_tensions_n()[0])
+    return math.nan
+
+
+def pen_figures(p: ConvergenceParams, timestep_s: float, seed: int) -> tuple[float, float, float, float]:
+    """Half-wrap time [ms], wrap penetration [m], press penetration [m] and its ratio to the radius."""
+    pen = ObjectConfig(OBJ, radius_m=p.pen_radius_m, length_m=0.14, pos_m=FAR_M, mass_kg=p.pen_mass_kg)
+    plant = _plant(p, timestep_s, seed, pen)
+    plant.hold_object(OBJ, world_m(*p.pen))
+    plant.run(200 * MS)
+    plant.reset_extremes()
+    plant.apply_currents(_amps(plant, p.step_a))
+    half = math.nan
+    for k in range(p.pen_ms):
+        plant.step()
+        if k + 1 == WRAP_MS:
+            wrap = plant.extremes().penetration_m
+            plant.reset_extremes()
+        if math.isnan(half) and len(contact_units(plant, OBJ)) >= 3 and contact_wrap_deg(plant, OBJ) >= 180:
+            half = float(k + 1)
+    press = plant.extremes()
+    return half, wrap, press.penetration_m, press.penetration_ratio
+
+
+def throw_penetration_m(p: ConvergenceParams, timestep_s: float, seed: int, speed_m_s: float) -> float:
+    """Largest penetration of a 10 mm-radius, 10 g object thrown at the hanging arm."""
+    obj = ObjectConfig(OBJ, radius_m=0.01, length_m=0.06, pos_m=FAR_M, mass_kg=0.01)
+    plant = _plant(p, timestep_s, seed, obj)
+    plant.hold_object(OBJ)
+    plant.run(300 * MS)
+    plant.hold_object(OBJ, world_m(0.04, -0.12))
+    plant.release_object(OBJ)
+    plant.set_object_velocity(OBJ, (-speed_m_s, 0.0, 0.3))
+    plant.reset_extremes()
+    plant.run(p.throw_ms * MS)
+    return plant.extremes().penetration_m
+
+
+def random_extremes(p: ConvergenceParams, timestep_s: float, seed: int) -> tuple[float, float]:
+    """Largest tension [N] and limit overshoot [rad] under random currents up to the limit."""
+    plant = _plant(p, timestep_s, seed)
+    rng = np.random.default_rng(seed + 1)
+    limit = round(plant.config.model.motor.current_limit_a * 1000)
+    next_change = 0
+    for k in range(p.random_ms):
+        if k >= next_change:
+            plant.apply_currents([int(v) for v in rng.integers(-limit, limit + 1, size=plant.cables)])
+            next_change = k + int(rng.integers(50, 300))
+        plant.step()
+    e = plant.extremes()
+    return e.tension_n, e.limit_overshoot_rad
+
+
+def _one_step(args: tuple[ConvergenceParams, float, int]) -> StepFigures:
+    p, h, seed = args
+    half, wrap, press, ratio = pen_figures(p, h, seed)
+    throws = tuple(throw_penetration_m(p, h, seed, v) for v in p.throw_speeds_m_s)
+    tension, over = random_extremes(p, h, seed)
+    return StepFigures(h, packing_tension_n(p, h, seed), half, wrap, press, ratio, throws, tension, over)
+
+
+def convergence(
+    params: ConvergenceParams | None = None, seed: int = 0, progress: Progress | None = None, jobs: int = 1
+) -> ConvergenceResult:
+    """Measure the headline numbers at each physics step (one step per job)."""
+    p = params or ConvergenceParams()
+    items = [(p, h, seed) for h in p.timesteps_s]
+    return ConvergenceResult(p, seed, tuple(parallel_map(_one_step, items, jobs, progress)))
+
+
+def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
+    """Run the experiment at ``size`` (the prototype always: the numbers are the plant's, not a design's)."""
+    p = sized(
+        size,
+        ConvergenceParams(
+            timesteps_s=(0.001, 0.0005),
+            ramp_ms=300,
+            pen_ms=WRAP_MS + 20,
+            throw_speeds_m_s=(3.0,),
+            throw_ms=60,
+            random_ms=300,
+        ),
+        ConvergenceParams(),
+        ConvergenceParams(throw_speeds_m_s=(1.0, 2.0, 3.0, 4.0, 6.0), random_ms=60_000),
+    )
+    return convergence(p, seed, progress, jobs)
+
+
+def _ms(x: float) -> str:
+    return "never" if math.isnan(x) else f"{x:.0f} ms"
+
+
+def _mm(x: float) -> str:
+    return f"{x * 1000:.2f} mm"
+
+
+def table_rows(r: ConvergenceResult) -> list[Row]:
+    """One row per number: its values at every step side by side (the paper has none of these)."""
+    steps = r.steps
+    head = " | ".join(f"{s.timestep_s * 1e3:g} ms" for s in steps)
+    rows: list[Row] = [("physics step", head, "")]
+
+    def row(name: str, fmt: Any, values: list[float]) -> None:
+        rows.append((name, " | ".join(fmt(v) for v in values), ""))
+
+    row("packing tension, cable 0", lambda v: f"{v:.1f} N", [s.packing_tension_n for s in steps])
+    row(f"pen, {r.params.step_a:g} A step -> half wrap", _ms, [s.pen_half_wrap_ms for s in steps])
+    row("pen penetration while wrapping", _mm, [s.wrap_penetration_m for s in steps])
+    row("pen penetration while pressing", _mm, [s.press_penetration_m for s in steps])
+    for i, v in enumerate(r.params.throw_speeds_m_s):
+        row(f"throw at {v:g} m/s: penetration", _mm, [s.throw_penetration_m[i] for s in steps])
+    row("random currents: largest tension", lambda v: f"{v:.0f} N", [s.random_tension_n for s in steps])
+    row(
+        "random currents: limit overshoot",
+        lambda v: f"{math.degrees(v):.2f}°",
+        [s.random_overshoot_rad for s in steps],
+    )
+    return rows
+
+
+def describe_samples(r: ConvergenceResult) -> str:
+    """The result's sample counts, in words."""
+    p = r.params
+    return (
+        f"{len(r.steps)} physics steps; per step a {p.ramp_ms} ms ramp, a {p.pen_ms} ms pen run, "
+        f"{len(p.throw_speeds_m_s)} throws of {p.throw_ms} ms, {p.random_ms / 1000:g} s of random currents"
+    )
+
+
+def plot_figure(r: ConvergenceResult, out: Path) -> Path:
+    """Penetration against the physics step (one line per measurement); returns ``convergence.png``."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    h = [s.timestep_s * 1e3 for s in r.steps]
+    ax.plot(h, [s.wrap_penetration_m * 1e3 for s in r.steps], "o-", label="pen, wrapping")
+    ax.plot(h, [s.press_penetration_m * 1e3 for s in r.steps], "s-", label="pen, pressing")
+    for i, v in enumerate(r.params.throw_speeds_m_s):
+        ax.plot(h, [s.throw_penetration_m[i] * 1e3 for s in r.steps], "^--", label=f"throw {v:g} m/s")
+    ax.axhline(1.0, color="r", ls=":", lw=0.8, label="goal: 1 mm")
+    ax.set_xscale("log")
+    ax.set_xlabel("physics step [ms]")
+    ax.set_ylabel("largest penetration [mm]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    return save_figure(fig, out / "convergence.png")
+
+
+__all__ = [
+    "ConvergenceParams",
+    "ConvergenceResult",
+    "StepFigures",
+    "convergence",
+    "describe_samples",
+    "plot_figure",
+    "run_at_size",
+    "table_rows",
+]
