@@ -109,7 +109,7 @@ class ArmConfig:
     cable_timeconst_s: float | None = None
     self_collision: bool | None = None
     geom_friction: float = 0.8
-    unit_shape: str = "capsule"
+    unit_shape: str = "wedge"
 
     def validate(self) -> None:
         """Raise ``ValueError`` if a value is out of range."""

@@ -9,6 +9,7 @@ from protocol.dbus import Lever
 from protocol.messages import GraspState
 
 from ..environment import Environment
+from ..experiments.rig import contact_wrap_deg
 from ..model_config import ObjectConfig
 from ..record import Check, RunRecord
 from .base import MS, SAFE, Plan, Scenario, rc
@@ -19,6 +20,9 @@ CAN_AT: Final = (0.04, 0.0, 0.87)
 GRASP_REQUEST_US: Final = 2000 * MS
 HELD_US: Final = 1000 * MS
 """How long the can must stay after its support is removed."""
+HALF_WRAP_DEG: Final = 180.0
+"""A grasp holds once the arm wraps more than half of the object's circumference (the paper's failure
+criterion, Fig. S4D: "cannot wrap around more than 1/2 of its circumference")."""
 
 
 class Grasp(Scenario):
@@ -37,7 +41,9 @@ class Grasp(Scenario):
         self.placed_us: int | None = None
         self.hold_us: int | None = None
         self.units_at_hold = 0
+        self.wrap_at_hold_deg = math.nan
         self.units_after = 0
+        self.wrap_after_deg = math.nan
         self.z_release_m = math.nan
         self.z_low_m = math.nan
         self.end_us = 0
@@ -64,12 +70,14 @@ class Grasp(Scenario):
             if state == GraspState.HOLD:
                 self.hold_us = now
                 self.units_at_hold = len({c.unit for c in plant.contacts() if c.other == name})
+                self.wrap_at_hold_deg = contact_wrap_deg(plant, name)
                 plant.release_object(name)
                 self.z_release_m = self.z_low_m = float(plant.object_pose(name).pos_m[2])
             return
         if now <= self.hold_us + HELD_US:
             self.z_low_m = min(self.z_low_m, float(plant.object_pose(name).pos_m[2]))
             self.units_after = len({c.unit for c in plant.contacts() if c.other == name})
+            self.wrap_after_deg = contact_wrap_deg(plant, name)
 
     def checks(self, run: RunRecord, plan: Plan) -> list[Check]:
         hold_us = self.hold_us
@@ -82,7 +90,16 @@ class Grasp(Scenario):
                 "<=",
                 "s",
             ),
-            Check("arm units touching the can at HOLD", float(self.units_at_hold), 4, ">=", "units"),
+            # At HOLD the can still stands on its support and the wrap is still closing (stiff contacts:
+            # 3 units, 129° on the wedge arm); the grasp is judged once the support is gone and the load is
+            # on the arm, by the paper's criterion (more than half the circumference wrapped).
+            Check(
+                "wrap around the can 1 s after its support was removed",
+                self.wrap_after_deg if after else math.nan,
+                HALF_WRAP_DEG,
+                ">=",
+                "deg",
+            ),
             Check(
                 "arm units touching the can 1 s after its support was removed",
                 float(self.units_after) if after else math.nan,
