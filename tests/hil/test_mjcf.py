@@ -194,13 +194,18 @@ def test_objects_fixed_and_free() -> None:
     assert m.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE
 
 
-def test_arm_does_not_collide_with_itself_by_default() -> None:
-    m = load()
-    g = [name_id(m, mujoco.mjtObj.mjOBJ_GEOM, f"unit_{i:02d}_geom") for i in (3, 9)]
-    a, b = g
-    assert not (m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a])
-    m2 = load(config=ModelConfig(arm=ArmConfig(self_collision=True)))
-    assert m2.geom_contype[a] & m2.geom_conaffinity[b]
+def test_wedge_units_collide_with_each_other_by_default_and_capsules_do_not() -> None:
+    """Wedges (the default) are the real units: packed turns touch. Capsules' rounded ends reach into the
+    packed neighbours' space, so they rely on the joint limits alone unless asked otherwise."""
+
+    def collide(m: mujoco.MjModel) -> bool:
+        a, b = (name_id(m, mujoco.mjtObj.mjOBJ_GEOM, f"unit_{i:02d}_geom") for i in (3, 9))
+        return bool(m.geom_contype[a] & m.geom_conaffinity[b] or m.geom_contype[b] & m.geom_conaffinity[a])
+
+    assert collide(load())
+    assert not collide(load(config=ModelConfig(arm=ArmConfig(unit_shape="capsule"))))
+    assert collide(load(config=ModelConfig(arm=ArmConfig(unit_shape="capsule", self_collision=True))))
+    assert not collide(load(config=ModelConfig(arm=ArmConfig(self_collision=False))))
 
 
 WEDGE = ModelConfig(arm=ArmConfig(unit_shape="wedge"))
