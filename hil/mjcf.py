@@ -526,9 +526,14 @@ def _with_cable_stretch(xml: str, n_cables: int, arm: ArmConfig, layout: CableLa
 
     MuJoCo's direct form ``solref="-k -b"`` sets the constraint's reference acceleration ``−k·r − b·v`` in
     the tendon's own coordinate, i.e. stiffness per unit of the mass the tendon moves. That mass is
-    ``1 / tendon_invweight0`` (the tendon's inverse inertia in the straight pose, known after compiling),
-    so ``k = K · invweight0`` gives the physical ``K = E·A/L`` [N/m]; ``b = 2ζ√k`` is damping ratio ζ
-    against the same mass. MuJoCo divides by the impedance ``dmax`` (``k/dmax²``, ``b/dmax``), undone here.
+    ``1 / tendon_invweight0`` (the tendon's inverse inertia in the straight pose, known after compiling:
+    the spool slider and the arm in series), so ``k = K · invweight0`` gives the physical ``K = E·A/L``
+    [N/m]. The damping is a property of the cable and the arm it pulls, not of the actuator: a viscous
+    ``c = 2ζ·√(K·m_arm)`` [N·s/m], ``m_arm`` the arm's inertia seen at the cable (``invweight0`` less the
+    slider's ``1/m``), so ``b = c · invweight0``. A light slider (10 g against the arm's 31 g) then
+    damps the stretch mode more than ζ (about 1.0 for ζ = 0.5), where ζ against the series mass would
+    leave it ringing at 400 Hz, unload the cable every cycle and slam the slider back into it.
+    MuJoCo divides by the impedance ``dmax`` (``k/dmax²``, ``b/dmax``), undone here.
     """
     if arm.cable_timeconst_s is not None:
         for k in range(n_cables):
@@ -544,8 +549,13 @@ def _with_cable_stretch(xml: str, n_cables: int, arm: ArmConfig, layout: CableLa
     dmax = float(_SOLIMP.split()[1])
     for k in range(n_cables):
         tid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, f"cable_{k}")
-        k_acc = stiffness * float(model.tendon_invweight0[tid])
-        b_acc = 2.0 * arm.cable_damping_ratio * math.sqrt(k_acc)
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"spool_{k}")
+        inv_mass = float(model.tendon_invweight0[tid])
+        # The slider coordinate is the cable length (Jacobian 1) and the slider is apart from the arm in
+        # the mass matrix, so its share of the tendon's inverse inertia is its own 1/m.
+        inv_arm_mass = inv_mass - float(model.dof_invweight0[model.jnt_dofadr[jid]])
+        k_acc = stiffness * inv_mass
+        b_acc = 2.0 * arm.cable_damping_ratio * math.sqrt(stiffness / inv_arm_mass) * inv_mass
         xml = xml.replace(f"{_CABLE_SOLREF}{k}", _v(-k_acc * dmax * dmax, -b_acc * dmax))
     return xml
 

@@ -78,8 +78,9 @@ class ArmConfig:
             sheet; the low end, since a braid's fibres are not all along its axis).
         cable_fill_factor: fraction of the cable's nominal cross-section that is fibre (a braid of round
             filaments packs about half its circle).
-        cable_damping_ratio: damping ratio of the cable's stretch against the mass it stops (a fibre's
-            loss is small; the value is a modelling choice, see ``docs/plant.md``).
+        cable_damping_ratio: damping ratio of the cable's stretch against the arm it pulls; the viscous
+            damping it sets is the cable's, whatever the actuator's mass (a fibre's loss is small; the
+            value is a modelling choice, see ``docs/plant.md``).
         cable_timeconst_s: ``None``: the cable's limit is its stretch (the three fields above). A number:
             MuJoCo's time-constant form instead, with no physical stiffness (the model before issue 13;
             the benchmark compares against it).

@@ -392,7 +392,22 @@ def test_the_cable_limit_is_its_stretch_ea_over_l() -> None:
         assert ref[0] < 0 and ref[1] < 0
         k_acc = -ref[0] / dmax**2
         assert k_acc / m.tendon_invweight0[k] == pytest.approx(k_phys, rel=1e-6)
-        assert -ref[1] / dmax == pytest.approx(2 * arm.cable_damping_ratio * math.sqrt(k_acc), rel=1e-6)
+        # The damping c = 2ζ√(K·m_arm) is the cable's and the arm's: the slider's own 1/m is left out.
+        slider = m.jnt_dofadr[name_id(m, mujoco.mjtObj.mjOBJ_JOINT, f"spool_{k}")]
+        arm_mass_kg = 1.0 / (m.tendon_invweight0[k] - m.dof_invweight0[slider])
+        c_phys = 2 * arm.cable_damping_ratio * math.sqrt(k_phys * arm_mass_kg)
+        assert -ref[1] / dmax / m.tendon_invweight0[k] == pytest.approx(c_phys, rel=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["motor", "tension"])
+def test_the_cable_damping_does_not_depend_on_the_actuator_mass(kind: str) -> None:
+    """A light slider must not take damping away from the cable (with ζ against the series mass it did)."""
+    m = load(config=ModelConfig(actuator=ActuatorConfig(kind=kind)))
+    dmax = m.tendon_solimp_lim[0][1]
+    c = -m.tendon_solref_lim[0][1] / dmax / m.tendon_invweight0[0]
+    ref = load()
+    c_motor = -ref.tendon_solref_lim[0][1] / dmax / ref.tendon_invweight0[0]
+    assert c == pytest.approx(c_motor, rel=1e-6)
 
 
 def test_the_old_time_constant_cable_stays_selectable() -> None:
