@@ -319,7 +319,8 @@ def table_rows(r: WorkspaceResult) -> list[Row]:
     for run in r.runs:
         rows.append(
             (
-                f"taper {run.taper_deg:g}° (b = {run.b:.3f}), {run.cables} cables: area inside ρw / exact",
+                f"taper {run.taper_deg:g}° (b = {run.b:.3f}), {run.cables} cables, {run.variant}: "
+                "area inside ρw / exact",
                 f"{run.envelope_area_m2 * 1e4:.0f} / {run.exact_area_m2 * 1e4:.0f} cm²",
                 "shrinks as b grows",
             )
@@ -331,6 +332,13 @@ def table_rows(r: WorkspaceResult) -> list[Row]:
                 "every point inside is reachable",
             )
         )
+        rows.append(
+            (
+                "  drive time; coverage saturated",
+                f"{run.duration_s:.0f} s; {'yes' if run.saturated else 'no (time limit)'}",
+                "-",
+            )
+        )
     rows.extend(extremes_rows(r.extremes))
     return rows
 
@@ -338,7 +346,8 @@ def table_rows(r: WorkspaceResult) -> list[Row]:
 def describe_samples(r: WorkspaceResult) -> str:
     """The result\'s sample counts, in words."""
     return (
-        f"{len(r.runs)} designs x {r.params.duration_s:g} s of random tensions, "
+        f"{len(r.runs)} design/plant variants x up to {r.params.duration_s:g} s of random tensions "
+        f"(until coverage saturates), "
         f"{sum(x.samples for x in r.runs)} tip samples (every {r.params.sample_ms} ms)"
     )
 
@@ -346,13 +355,13 @@ def describe_samples(r: WorkspaceResult) -> str:
 def plot_figure(r: WorkspaceResult, out: Path) -> Path:
     """Write the figure into the directory ``out``; returns its path (``workspace.png``)."""
     plt = pyplot()
-    cables = sorted({x.cables for x in r.runs})
+    rows_of = sorted({(x.cables, x.variant) for x in r.runs})
     tapers = sorted({x.taper_deg for x in r.runs})
     fig, axes = plt.subplots(
-        len(cables), len(tapers), figsize=(3.6 * len(tapers), 4.2 * len(cables)), squeeze=False
+        len(rows_of), len(tapers), figsize=(3.6 * len(tapers), 4.2 * len(rows_of)), squeeze=False
     )
     for run in r.runs:
-        ax = axes[cables.index(run.cables)][tapers.index(run.taper_deg)]
+        ax = axes[rows_of.index((run.cables, run.variant))][tapers.index(run.taper_deg)]
         b = np.array(run.boundary)
         ax.plot(np.array(run.u_m) * 1000, (np.array(run.z_m) - BASE_Z_M) * 1000, ".", ms=1.2, alpha=0.5)
         ax.plot(b[:, 0] * 1000, (b[:, 1] - BASE_Z_M) * 1000, "r-", lw=1.2, label="ρw (Table S1)")
@@ -360,7 +369,7 @@ def plot_figure(r: WorkspaceResult, out: Path) -> Path:
         ax.plot(e[:, 0] * 1000, (e[:, 1] - BASE_Z_M) * 1000, "g-", lw=1.0, label="real tip, base first")
         ax.plot([0], [0], "k^", ms=6, label="base")
         ax.set_title(
-            f"taper {run.taper_deg:g}°, b={run.b:.3f}, {run.cables} cables\n"
+            f"taper {run.taper_deg:g}°, b={run.b:.3f}, {run.cables} cables, {run.variant}\n"
             f"inside ρw {pct(run.inside_share)}, exact {pct(run.inside_share_exact)}; "
             f"reached {pct(run.coverage_exact)} of the exact area",
             fontsize=8,
