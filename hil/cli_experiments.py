@@ -20,7 +20,10 @@ from controller.cli_kit import EXIT_OK, seed
 from .cli_design import add_design_arguments, design_from_args
 from .experiments import EXPERIMENTS, SIZES, run_experiment
 
-__all__ = ["configure_experiment", "run_experiment_command"]
+__all__ = ["EXPERIMENT_HELP", "configure_experiment", "run_experiment_command"]
+
+EXPERIMENT_HELP = "reproduce a result of the paper: " + ", ".join(EXPERIMENTS)
+"""The one-line help of ``spirob-hil experiment``: every experiment of the catalogue, by name."""
 
 
 def configure_experiment(p: argparse.ArgumentParser) -> None:
