@@ -32,7 +32,7 @@ from controller.cli_kit import (
     stop_on_signals,
 )
 from hil.cli_design import add_design_arguments, design_from_args, model_from_args
-from hil.cli_experiments import configure_experiment, run_experiment_command
+from hil.cli_experiments import EXPERIMENT_HELP, configure_experiment, run_experiment_command
 from hil.mjcf import write_mjcf
 from hil.model_config import ModelConfig, ObjectConfig, SolverConfig
 from hil.model_presets import PRESETS
@@ -492,7 +492,7 @@ COMMANDS: list[Command] = [
     ),
     Command(
         "experiment",
-        "reproduce a result of the paper: workspace, packing, strategy, grasp-range, load, dynamic",
+        EXPERIMENT_HELP,
         configure_experiment,
         run_experiment_command,
     ),

@@ -15,13 +15,15 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from controller.cli_kit import EXIT_OK, UsageError, seed
+from controller.cli_kit import EXIT_OK, seed
 
 from .cli_design import add_design_arguments, design_from_args, model_from_args
 from .experiments import EXPERIMENTS, SIZES, run_experiment
-from .model_config import ModelConfig
 
-__all__ = ["configure_experiment", "run_experiment_command"]
+__all__ = ["EXPERIMENT_HELP", "configure_experiment", "run_experiment_command"]
+
+EXPERIMENT_HELP = "reproduce a result of the paper: " + ", ".join(EXPERIMENTS)
+"""The one-line help of ``spirob-hil experiment``: every experiment of the catalogue, by name."""
 
 
 def configure_experiment(p: argparse.ArgumentParser) -> None:
@@ -47,13 +49,7 @@ def run_experiment_command(args: argparse.Namespace) -> int:
     ``--report``."""
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
-    if model_from_args(args) != ModelConfig():
-        # The experiments build their plants with the prototype's model; running them under another
-        # preset's name would mislabel the result.
-        raise UsageError(
-            f"--preset {args.preset}: the experiments run the prototype's plant model; of the presets only "
-            "'prototype' applies (give the authors' design as --a 0.00495 --b 0.1764 --theta0-deg 720)"
-        )
+    model = model_from_args(args)
     design = design_from_args(args)
     exp = EXPERIMENTS[args.name]
     err = Console(stderr=True)
@@ -73,7 +69,13 @@ def run_experiment_command(args: argparse.Namespace) -> int:
             bar.update(task, completed=done, total=total)
 
         result = run_experiment(
-            args.name, design=design, size=args.size, seed=args.seed, progress=progress, jobs=args.jobs
+            args.name,
+            design=design,
+            size=args.size,
+            seed=args.seed,
+            progress=progress,
+            jobs=args.jobs,
+            model=model,
         )
     elapsed = time.perf_counter() - t0
     figure = None
@@ -86,6 +88,7 @@ def run_experiment_command(args: argparse.Namespace) -> int:
         out = result.as_dict()
         out["samples"] = exp.samples(result)
         out["size"] = args.size
+        out["preset"] = args.preset
         out["elapsed_s"] = round(elapsed, 1)
         if figure is not None:
             out["figure"] = str(figure)
@@ -99,7 +102,10 @@ def run_experiment_command(args: argparse.Namespace) -> int:
         table.add_row(quantity, ours, paper)
     console = Console()
     console.print(table)
-    console.print(f"samples: {exp.samples(result)}; seed {args.seed}; size {args.size}; {elapsed:.0f} s")
+    console.print(
+        f"samples: {exp.samples(result)}; preset {args.preset or 'prototype'}; seed {args.seed}; "
+        f"size {args.size}; {elapsed:.0f} s"
+    )
     if figure is not None:
         console.print(f"figure: {figure}")
     return EXIT_OK

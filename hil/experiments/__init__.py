@@ -1,6 +1,7 @@
 """Experiments that reproduce the paper's simulation results with the plant and the firmware (issue 8).
 
-Each experiment is a pure function of ``(design, params, seed, model)`` that runs the virtual board in
+Each experiment is a pure function of ``(design, params, seed, model)`` (``model``: the plant's
+:class:`~hil.model_config.ModelConfig`, a preset or a variant) that runs the virtual board in
 lockstep (firmware + plant, :class:`hil.board.VirtualBoard`) and returns a frozen, picklable result with
 ``as_dict()``; a ``progress(done, total)`` callback reports how far it is. Each experiment is one module
 (its parameters, its run, its table rows and its figure); the rig, the grasp trial, the geometry and the
@@ -18,12 +19,19 @@ packing        Note S3, Fig. S5C: packed spiral = design b one cable's tension r
 strategy       Note S4, Fig. S6, Fig. 3C                   the GRASP state machine (left lever): strategy
                                                            off, on, on with the true-contact oracle, at
                                                            the same jittered placements; Wilson, McNemar
+contact        (issue 13: the detector, not in the paper)  the strategy's reach at its placements, old
+                                                           and new contact detector against the true
+                                                           contact: precision, recall (Wilson), delay
+                                                           (bootstrap)
 grasp-range    eq. (14), (15): d_min, d_max                a strategy-on grasp, then a growing pull along
                                                            +x: pull-out force vs. diameter, bootstrap CI
 load           eq. (16), Fig. 2F: M(φ, d, F_max)           grasps at 2.5-20 N and friction 0-0.8, then a
                                                            growing downward load: slope of held mass vs. F
-dynamic        Fig. S11: 0.06 s grasp, 120 ms capture      a current step on one cable (DIRECT); a thrown
-                                                           object against the arm with one cable held
+dynamic        Fig. S11: 0.06 s grasp, 120 ms capture      45 cm arm: a current step on one cable
+                                                           (DIRECT); thrown objects with cable 0 held at
+                                                           length (HOLD_LENGTHS) or at a tension; Wilson
+sensitivity    which conclusions survive ±50 % on the      packing, dynamic and strategy re-run per
+               model's uncertain parameters                variant of the model; holds / fails table
 =============  ==========================================  =============================================
 
 Geometry: the drone sits at (0, 0, 1) m and the arm's base (its mount) 20 mm below it; the arm hangs

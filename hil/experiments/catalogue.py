@@ -55,14 +55,6 @@ EXPERIMENTS: dict[str, Experiment] = {
             packing.plot_figure,
         ),
         Experiment(
-            "contact",
-            "the firmware's contact detector, old and new, vs. the true contact: precision, recall, delay",
-            contact.run_at_size,
-            contact.table_rows,
-            contact.describe_samples,
-            contact.plot_figure,
-        ),
-        Experiment(
             "strategy",
             "paired grasps, strategy off / on / on with true contact: Wilson intervals, McNemar (Note S4)",
             strategy.run_at_size,
@@ -71,8 +63,16 @@ EXPERIMENTS: dict[str, Experiment] = {
             strategy.plot_figure,
         ),
         Experiment(
+            "contact",
+            "the firmware's contact detector, old and new, vs. the true contact: precision, recall, delay",
+            contact.run_at_size,
+            contact.table_rows,
+            contact.describe_samples,
+            contact.plot_figure,
+        ),
+        Experiment(
             "grasp-range",
-            "the smallest and largest cylinder wrapped at least half way vs. d_min, d_max (eq. 14, 15)",
+            "pull-out force against diameter (bootstrap intervals) vs. d_min, d_max (eq. 14, 15)",
             grasp_range.run_at_size,
             grasp_range.table_rows,
             grasp_range.describe_samples,
@@ -80,7 +80,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         ),
         Experiment(
             "load",
-            "the heaviest object held per diameter at a fixed cable force vs. M(φ, d, F) (eq. 16)",
+            "held mass against wrap force 2.5-20 N at three frictions: slope and interval vs. eq. 16",
             load.run_at_size,
             load.table_rows,
             load.describe_samples,
@@ -88,7 +88,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         ),
         Experiment(
             "dynamic",
-            "a current step grasping a pen, objects thrown at the arm (Fig. S11)",
+            "45 cm arm: a current step grasps a pen; throws, one cable held at length or tension (Fig. S11)",
             dynamic.run_at_size,
             dynamic.table_rows,
             dynamic.describe_samples,

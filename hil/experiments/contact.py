@@ -1,39 +1,51 @@
 """contact (issue 13, item 4): the firmware's contact detector against the simulator's true contact.
 
-The grasp reach of the strategy experiment's placements (:mod:`.strategy`), run through the firmware's
-GRASP mode; each trial records the first true arm-object contact during REACH (``plant.contacts()``)
-and the moment the firmware's detector ended REACH (WRAP). Per detector (the old stall-only rule: the
-new rules' parameters at 0; and the present one):
+The grasp reach at the strategy experiment's placements (:func:`.strategy.placements`: jittered, clear of
+the packed coil and the straight arm by :class:`~.geometry.ArmFootprint`), set up as its strategy-on grasp
+(:func:`.grasp.grasp_rig`) and run through the firmware's GRASP mode; each trial records the first true
+arm-object contact during REACH (``plant.contacts()``) and the moment the firmware's detector ended REACH
+(WRAP). Per detector (the old stall-only rule: the new rules' parameters at 0; and the present one):
 
 - true positive: detected at or after the first true contact; false positive: detected before any
   true contact; false negative: a true contact during REACH and no detection before the reach ended;
 - precision TP / (TP + FP) and recall TP / (TP + FN), each with a Wilson 95 % interval;
 - detection delay after the first true contact (TPs): median with a bootstrap 95 % interval.
 
-The Wilson and bootstrap helpers are private to this module (a shared ``stats`` module is being
-written elsewhere; they can move there).
+The intervals are :mod:`.stats`'s.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from controller.config import FirmwareConfig
-from protocol.dbus import Lever
 from protocol.messages import GraspState
 
-from ..model_config import ObjectConfig
+from ..model_config import ModelConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import FAR_M, MS, OBJ, Progress, Row, S, pyplot, save_figure, sized
-from .grasp import grasp_firmware
+from .common import (
+    DEFAULT_MODEL,
+    OBJ,
+    Progress,
+    Row,
+    S,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
+from .grasp import GraspSetup, grasp_firmware, grasp_rig
 from .parallel import parallel_map
-from .rig import Rig, contact_units, rc_frame, world_m
+from .rig import contact_units, world_m
+from .stats import bootstrap_interval, wilson_interval
+from .strategy import TINY, StrategyParams, placements
 
 OLD_DETECTOR = {"grasp_contact_decel_m_per_s2": 0.0, "grasp_contact_wrap_m_per_s": 0.0}
 """The parameters that turn the new rules off: what is left is the stall-only detector it replaces."""
@@ -42,14 +54,11 @@ OLD_DETECTOR = {"grasp_contact_decel_m_per_s2": 0.0, "grasp_contact_wrap_m_per_s
 @dataclass(frozen=True)
 class ContactParams:
     """Attributes:
-    diameters_m: object diameters.
-    xs_m: horizontal distances of the object's centre from the arm's axis (target side, +x).
-    zs_m: heights of the object's centre relative to the base (negative = below).
+    placements: the strategy experiment's placements and objects (its ``hold_s`` and ``oracle`` are not
+        used: a trial ends when REACH does).
     """
 
-    diameters_m: tuple[float, ...] = (0.016, 0.024, 0.036)
-    xs_m: tuple[float, ...] = (0.03, 0.05, 0.07, 0.09)
-    zs_m: tuple[float, ...] = (-0.07, -0.10, -0.13, -0.16)
+    placements: StrategyParams = field(default_factory=StrategyParams)
 
 
 @dataclass(frozen=True)
@@ -63,6 +72,7 @@ class ReachTrial:
     true_s: float
     detected_s: float
     reason: str
+    extremes: PhysicsExtremes
 
     @property
     def kind(self) -> str:
@@ -74,22 +84,14 @@ class ReachTrial:
         return "FN" if touched else "TN"
 
 
-def reach_trial(args: tuple[float, float, float, str, SpiralDesign, int]) -> ReachTrial:
-    """Run one reach until the firmware leaves REACH (pure; picklable in and out)."""
-    x_m, z_m, diameter_m, detector, design, seed = args
-    fw: FirmwareConfig = grasp_firmware(**(OLD_DETECTOR if detector == "old" else {}))
-    fw = fw.replaced(grasp_direction_deg=0.0)
-    obj = ObjectConfig(OBJ, radius_m=diameter_m / 2, length_m=0.06, pos_m=FAR_M, mass_kg=0.02)
-    rig = Rig(
-        design,
-        fw,
-        [(0, rc_frame()), (20 * MS, rc_frame(Lever.UP)), (60 * MS, rc_frame(Lever.UP, Lever.UP))],
-        objects=(obj,),
-        start_packed=True,
-        seed=seed,
-    )
+def reach_trial(args: tuple[GraspSetup, str, SpiralDesign]) -> ReachTrial:
+    """Run one strategy-on reach with ``detector`` (``old`` or ``new``) until the firmware leaves REACH
+    (pure; picklable in and out)."""
+    setup, detector, design = args
+    fw = grasp_firmware(**(OLD_DETECTOR if detector == "old" else {}))
+    rig = grasp_rig(dataclasses.replace(setup, strategy_on=True, firmware=fw), design)
+    x_m, z_m, diameter_m = setup.x_m, setup.z_m, setup.diameter_m
     plant = rig.plant
-    plant.hold_object(OBJ)
     grasp = rig.firmware.grasp
     t_reach = -1
     t_true = -1
@@ -108,33 +110,15 @@ def reach_trial(args: tuple[float, float, float, str, SpiralDesign, int]) -> Rea
             if state == GraspState.WRAP:
                 t_detect = rig.now_us
             break
+    extremes = plant.extremes()
     rig.close()
 
     def rel(t: int) -> float:
         return (t - t_reach) / S if t >= 0 and t_reach >= 0 else math.nan
 
-    return ReachTrial(x_m, z_m, diameter_m, detector, rel(t_true), rel(t_detect), grasp.detector.reason)
-
-
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """Wilson score interval of a proportion ``k / n`` (NaNs for n = 0)."""
-    if n == 0:
-        return math.nan, math.nan
-    p = k / n
-    den = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / den
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
-def bootstrap_median(values: list[float], seed: int, n_boot: int = 2000) -> tuple[float, float, float]:
-    """Median and its percentile-bootstrap 95 % interval (NaNs without values)."""
-    if not values:
-        return math.nan, math.nan, math.nan
-    a = np.asarray(values)
-    rng = np.random.default_rng(seed)
-    meds = np.median(rng.choice(a, size=(n_boot, len(a)), replace=True), axis=1)
-    return float(np.median(a)), float(np.percentile(meds, 2.5)), float(np.percentile(meds, 97.5))
+    return ReachTrial(
+        x_m, z_m, diameter_m, detector, rel(t_true), rel(t_detect), grasp.detector.reason, extremes
+    )
 
 
 @dataclass(frozen=True)
@@ -151,28 +135,50 @@ class ContactResult:
         counts = {k: sum(1 for t in sel if t.kind == k) for k in ("TP", "FP", "FN", "TN")}
         tp, fp, fn = counts["TP"], counts["FP"], counts["FN"]
         delays = [1000 * (t.detected_s - t.true_s) for t in sel if t.kind == "TP"]
-        med, lo, hi = bootstrap_median(delays, self.seed)
         return {
             **counts,
             "precision": tp / (tp + fp) if tp + fp else math.nan,
-            "precision_ci95": wilson(tp, tp + fp),
+            "precision_ci95": wilson_interval(tp, tp + fp),
             "recall": tp / (tp + fn) if tp + fn else math.nan,
-            "recall_ci95": wilson(tp, tp + fn),
-            "delay_ms_median": med,
-            "delay_ms_ci95": (lo, hi),
+            "recall_ci95": wilson_interval(tp, tp + fn),
+            "delay_ms_median": float(np.median(delays)) if delays else math.nan,
+            "delay_ms_ci95": bootstrap_interval(delays, "median", seed=self.seed),
             "reasons": {r: sum(1 for t in sel if t.reason == r) for r in sorted({t.reason for t in sel})},
         }
 
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every reach."""
+        return worst_extremes(t.extremes for t in self.trials)
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
+        trials = []
+        for t in self.trials:
+            d = {k: v for k, v in dataclasses.asdict(t).items() if k != "extremes"}
+            trials.append({**d, **t.extremes.as_dict(), "kind": t.kind})
         return {
             "experiment": "contact",
             "seed": self.seed,
             "old": self.summary("old"),
             "new": self.summary("new"),
-            "trials": [{**dataclasses.asdict(t), "kind": t.kind} for t in self.trials],
+            "extremes": self.extremes.as_dict(),
+            "trials": trials,
             "params": dataclasses.asdict(self.params),
         }
+
+
+def contact_jobs(
+    design: SpiralDesign, params: ContactParams, seed: int, model: ModelConfig = DEFAULT_MODEL
+) -> list[tuple[GraspSetup, str, SpiralDesign]]:
+    """The reaches of :func:`contact`: each of the strategy's placements (:func:`.strategy.placements`,
+    in its order), with the old then the new detector."""
+    sp = params.placements
+    return [
+        (GraspSetup(x, z, d, mass_kg=sp.mass_kg, model=model, seed=seed), det, design)
+        for x, z, d in placements(design, sp, seed, model)
+        for det in ("old", "new")
+    ]
 
 
 def contact(
@@ -181,32 +187,33 @@ def contact(
     seed: int = 0,
     progress: Progress | None = None,
     jobs: int = 1,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> ContactResult:
-    """Reach every placement with the old and the new detector and compare with the true contact."""
+    """Reach every placement of the strategy experiment with the old and the new detector, on the plant
+    ``model``, and compare with the true contact."""
     design = design or SpiralDesign.paper_prototype()
     p = params or ContactParams()
-    jobs_in = [
-        (x, z, d, det, design, seed)
-        for d in p.diameters_m
-        for z in p.zs_m
-        for x in p.xs_m
-        for det in ("old", "new")
-    ]
-    return ContactResult(p, seed, tuple(parallel_map(reach_trial, jobs_in, jobs, progress)))
+    trials = parallel_map(reach_trial, contact_jobs(design, p, seed, model), jobs, progress)
+    return ContactResult(p, seed, tuple(trials))
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``: the
+    strategy experiment's placements at the same size (``tiny``: its one reference placement)."""
     p = sized(
         size,
-        ContactParams(diameters_m=(0.02,), xs_m=(0.04,), zs_m=(-0.11,)),
+        ContactParams(TINY),
         ContactParams(),
-        ContactParams(
-            xs_m=(0.02, 0.035, 0.05, 0.065, 0.08, 0.095),
-            zs_m=(-0.06, -0.08, -0.1, -0.12, -0.14, -0.16, -0.18),
-        ),
+        ContactParams(StrategyParams(grid=(6, 6))),
     )
-    return contact(design, p, seed, progress, jobs)
+    return contact(design, p, seed, progress, jobs, model)
 
 
 def _fmt(s: dict[str, Any]) -> tuple[str, str, str]:
@@ -230,13 +237,19 @@ def table_rows(r: ContactResult) -> list[Row]:
             (f"{det} detector: recall (Wilson 95 %)", recall, "-"),
             (f"{det} detector: delay after true contact, median (bootstrap 95 %)", delay, "-"),
         ]
+    rows.extend(extremes_rows(r.extremes))
     return rows
 
 
 def describe_samples(r: ContactResult) -> str:
     """The sample counts, in words."""
     n = len(r.trials) // 2
-    return f"{n} placements, each reached with the old and the new detector"
+    sp = r.params.placements
+    return (
+        f"{n} placements (the strategy's: {len(sp.diameters_m)} diameters, {sp.grid[0]} x {sp.grid[1]} "
+        f"jittered cells x {sp.seeds} seeds, clear of the packed coil), each reached with the old and "
+        "the new detector"
+    )
 
 
 def plot_figure(r: ContactResult, out: Path) -> Path:

@@ -25,7 +25,7 @@ import numpy as np
 from ..model_config import ModelConfig, ObjectConfig
 from ..plant import Plant, PlantConfig
 from ..spiral import SpiralDesign
-from .common import FAR_M, MS, OBJ, Progress, Row, pyplot, save_figure, sized
+from .common import DEFAULT_MODEL, FAR_M, MS, OBJ, Progress, Row, pyplot, save_figure, sized
 from .parallel import parallel_map
 from .rig import contact_units, contact_wrap_deg, world_m
 
@@ -186,8 +186,16 @@ def convergence(
     return ConvergenceResult(p, seed, tuple(parallel_map(_one_step, items, jobs, progress)))
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (the prototype always: the numbers are the plant's, not a design's)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` on ``model`` (the prototype's design always: the numbers are the
+    plant's, not a design's; only the physics step changes between columns)."""
     p = sized(
         size,
         ConvergenceParams(
@@ -201,7 +209,7 @@ def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress |
         ConvergenceParams(),
         ConvergenceParams(throw_speeds_m_s=(1.0, 2.0, 3.0, 4.0, 6.0), random_ms=60_000),
     )
-    return convergence(p, seed, progress, jobs)
+    return convergence(dataclasses.replace(p, model=model), seed, progress, jobs)
 
 
 def _ms(x: float) -> str:

@@ -1,29 +1,14 @@
-"""The 45 cm arm of Fig. S11 and a rig on a chosen plant model, for the dynamic and sensitivity experiments.
-
-:class:`~hil.experiments.rig.Rig` builds the default plant model; these two experiments vary the model (the
-45 cm arm's mass and stiffness, a sensitivity variant, a physics step), so :func:`model_direct_rig` builds
-the same board with ``BoardConfig(plant=PlantConfig(model=...))`` and enters DIRECT mode as
-:func:`~hil.experiments.rig.direct_rig` does.
-"""
+"""The 45 cm arm of Fig. S11 and the model it runs on: the prototype's model scaled to it
+(:func:`scaled_model`) at a chosen physics step (:func:`with_timestep`); the dynamic experiment builds its
+rig with :func:`~hil.experiments.rig.direct_rig` on that model."""
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
 
-from controller.config import FirmwareConfig
-from protocol.dbus import Lever
-from protocol.messages import CommandCode, Mode
-
-from ..board import BoardConfig
-from ..environment import Environment
-from ..model_config import ModelConfig, ObjectConfig
-from ..plant import PlantConfig
-from ..radio import RadioScript
+from ..model_config import ModelConfig
 from ..spiral import SpiralDesign
-from .common import MS
-from .rig import Rig, _ThreeMotors, rc_frame
 
 PAPER_ARM_LENGTH_M = 0.45
 """Length of the 2-cable arm of Note S5 and Fig. S11 (the supplement: "a 2-cable SpiRob (45cm in length)")."""
@@ -72,59 +57,3 @@ def scaled_model(model: ModelConfig, design: SpiralDesign, reference: SpiralDesi
 def with_timestep(model: ModelConfig, timestep_s: float) -> ModelConfig:
     """``model`` with another physics step (the 1 ms control period must stay a whole number of them)."""
     return dataclasses.replace(model, solver=dataclasses.replace(model.solver, timestep_s=timestep_s))
-
-
-class ModelRig(Rig):
-    """A :class:`Rig` (lever DOWN, then MIDDLE at 20 ms) on the plant model ``model`` plus ``objects``."""
-
-    def __init__(
-        self,
-        design: SpiralDesign,
-        firmware: FirmwareConfig,
-        model: ModelConfig,
-        *,
-        objects: Sequence[ObjectConfig] = (),
-        start_packed: bool = False,
-        seed: int = 0,
-    ) -> None:
-        cfg = BoardConfig(
-            design=design,
-            plant=PlantConfig(model=model.with_objects(*objects)),
-            firmware=firmware,
-            rc="radio",
-            seed=seed,
-            start_packed=start_packed,
-        )
-        radio = [(0, rc_frame()), (20 * MS, rc_frame(Lever.MIDDLE))]
-        Environment.__init__(self, cfg, radio=RadioScript(radio))
-        if design.cables < 3:
-            self.board.bus.motors = _ThreeMotors(self.board.plant)
-        self.plant = self.board.plant
-        self.firmware = self.board.firmware
-
-
-def model_direct_rig(
-    design: SpiralDesign,
-    firmware: FirmwareConfig,
-    model: ModelConfig,
-    *,
-    objects: Sequence[ObjectConfig] = (),
-    start_packed: bool = False,
-    seed: int = 0,
-) -> Rig:
-    """A :class:`ModelRig` in DIRECT mode (as :func:`~hil.experiments.rig.direct_rig`).
-
-    Raises:
-        RuntimeError: the firmware did not enter DIRECT mode.
-    """
-    rig = ModelRig(design, firmware, model, objects=objects, start_packed=start_packed, seed=seed)
-    for _ in range(200):
-        rig.step()
-        if rig.firmware.mode == Mode.MANUAL:
-            break
-    rig.command(CommandCode.SET_MODE, float(Mode.DIRECT))
-    for _ in range(50):
-        rig.step()
-        if rig.firmware.mode == Mode.DIRECT:
-            return rig
-    raise RuntimeError("the firmware did not enter DIRECT mode")

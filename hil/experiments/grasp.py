@@ -127,15 +127,9 @@ def grasp_firmware(**changes: Any) -> FirmwareConfig:
     return cfg.replaced(**changes) if changes else cfg
 
 
-def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspOutcome:
-    """Run one grasp through the firmware's GRASP mode and measure it (pure; picklable in and out).
-
-    Timeline: lever DOWN, then UP (GRASP mode) at 20 ms, left lever UP (grasp request) at 60 ms. The object
-    waits out of reach on its support and is put at its place, still on its support, when the firmware
-    starts the grasp (the drone bringing the ready arm next to it); the support is removed when the
-    firmware reports HOLD; the trial ends ``hold_s`` later, or when the grasp FAILED.
-    """
-    design = design or SpiralDesign.paper_prototype()
+def grasp_rig(setup: GraspSetup, design: SpiralDesign) -> Rig:
+    """The rig of one grasp: the firmware in GRASP mode (lever UP at 20 ms, the grasp request at 60 ms),
+    packed if the strategy is on, the object waiting out of reach on its support."""
     fw = setup.firmware or grasp_firmware()
     fw = fw.replaced(grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
     obj = ObjectConfig(
@@ -155,8 +149,21 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
         seed=setup.seed,
         model=setup.model,
     )
+    rig.plant.hold_object(OBJ)
+    return rig
+
+
+def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspOutcome:
+    """Run one grasp through the firmware's GRASP mode and measure it (pure; picklable in and out).
+
+    Timeline: lever DOWN, then UP (GRASP mode) at 20 ms, left lever UP (grasp request) at 60 ms. The object
+    waits out of reach on its support and is put at its place, still on its support, when the firmware
+    starts the grasp (the drone bringing the ready arm next to it); the support is removed when the
+    firmware reports HOLD; the trial ends ``hold_s`` later, or when the grasp FAILED.
+    """
+    design = design or SpiralDesign.paper_prototype()
+    rig = grasp_rig(setup, design)
     plant = rig.plant
-    plant.hold_object(OBJ)
     if setup.contact_oracle:
         rig.firmware.grasp.contact_override = lambda _now_us: bool(contact_units(plant, OBJ))
     target = world_m(setup.x_m, setup.z_m)

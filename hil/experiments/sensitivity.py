@@ -4,30 +4,38 @@ The varied parameters (:data:`PARAMETERS`) are the ones with no datasheet behind
 stiffness, the joints' damping ratio, the spool's (rotor) inertia, the drive's output friction and the
 contact friction (arm and objects together: MuJoCo takes the larger of a pair's two coefficients). Each
 variant re-runs every :data:`MEASURES` entry, a function ``(design, model, size, seed, jobs) -> dict``, and
-each of a measure's :class:`Conclusion` s says whether it still holds, with its number. A new measure (the
-grasp strategy's) is one more entry of :data:`MEASURES`.
+each of a measure's :class:`Conclusion` s says whether it still holds, with its number and sample size.
+The variants scale the model the experiment is given (the default model or a preset); a new measure is
+one more entry of :data:`MEASURES`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from controller.config import FirmwareConfig
-
-from ..model_config import ModelConfig, ObjectConfig
+from ..model_config import ModelConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from . import packing as packing_module
-from .common import Progress, Row, pyplot, save_figure, sized
+from .common import (
+    DEFAULT_MODEL,
+    Progress,
+    Row,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from .dynamic import TINY, DynamicParams, dynamic
-from .dynamic_rig import model_direct_rig
-from .packing import PackingParams, PackingResult
+from .packing import PackingParams, packing
 from .parallel import parallel_map
-from .rig import Rig
+from .strategy import TINY as STRATEGY_TINY
+from .strategy import StrategyParams, strategy
 
 FACTORS = (0.5, 1.5)
 """Each parameter is multiplied by these (±50 %)."""
@@ -86,9 +94,11 @@ class Variant:
         return model if self.parameter == BASELINE else PARAMETERS[self.parameter](model, self.factor)
 
 
-def variants() -> tuple[Variant, ...]:
-    """The baseline, then every parameter at every factor."""
-    return (Variant(BASELINE, 1.0), *(Variant(p, f) for p in PARAMETERS for f in FACTORS))
+def variants(size: str = "default") -> tuple[Variant, ...]:
+    """The baseline, then every parameter at every factor (``tiny``, a smoke test: the first parameter
+    only, so that the strategy measure's grasps keep it to seconds)."""
+    params = sized(size, tuple(PARAMETERS)[:1], tuple(PARAMETERS), tuple(PARAMETERS))
+    return (Variant(BASELINE, 1.0), *(Variant(p, f) for p in params for f in FACTORS))
 
 
 @dataclass(frozen=True)
@@ -107,36 +117,8 @@ class Conclusion:
 
 
 Measure = Callable[[SpiralDesign, ModelConfig, str, int, int], dict[str, Any]]
-"""``measure(design, model, size, seed, jobs) -> dict`` of JSON-ready numbers."""
-
-
-def _packing_on_model(
-    design: SpiralDesign, model: ModelConfig, params: PackingParams, seed: int
-) -> PackingResult:
-    """:func:`~hil.experiments.packing.packing` on ``model``.
-
-    The packing run builds its rig with the default plant model (``rig.direct_rig``); until it takes a
-    model, its module's ``direct_rig`` is swapped for one on ``model`` for this call only.
-    """
-
-    def rig_on_model(
-        design: SpiralDesign,
-        firmware: FirmwareConfig,
-        *,
-        objects: Sequence[ObjectConfig] = (),
-        start_packed: bool = False,
-        seed: int = 0,
-    ) -> Rig:
-        return model_direct_rig(
-            design, firmware, model, objects=objects, start_packed=start_packed, seed=seed
-        )
-
-    original = getattr(packing_module, "direct_rig")  # noqa: B009 (packing imports it, not exports it)
-    setattr(packing_module, "direct_rig", rig_on_model)  # noqa: B010
-    try:
-        return packing_module.packing(design, params, seed)
-    finally:
-        setattr(packing_module, "direct_rig", original)  # noqa: B010
+"""``measure(design, model, size, seed, jobs) -> dict`` of JSON-ready numbers, with the worst physics of
+its trials as ``extremes`` (:meth:`~hil.plant_types.PhysicsExtremes.as_dict`)."""
 
 
 def packing_measure(
@@ -144,38 +126,66 @@ def packing_measure(
 ) -> dict[str, Any]:
     """The packing ramp (Note S3) on ``design``: curl order and packing tension."""
     params = sized(size, PackingParams(ramp_s=1.5, hold_s=0.1), PackingParams(), PackingParams(ramp_s=16.0))
-    r = _packing_on_model(design, model, params, seed)
+    r = packing(design, params, seed, model=model)
     return {
         "order_correlation": r.order_correlation,
         "packed": r.packed,
         "pack_tension_n": r.pack_tension_n,
         "b_error": r.b_fit / r.b_design - 1.0,
+        "extremes": r.extremes.as_dict(),
     }
 
 
 def dynamic_measure(
     design: SpiralDesign, model: ModelConfig, size: str, seed: int, jobs: int
 ) -> dict[str, Any]:
-    """Fig. S11 on the 45 cm arm (whatever ``design`` is), at the 1 ms step only."""
+    """Fig. S11 on the 45 cm arm (whatever ``design`` is), at the 1 ms step only, throws with cable 0 held
+    at length (the paper's setup)."""
     params = sized(
         size,
-        dataclasses.replace(TINY, timesteps_s=(0.001,)),
-        DynamicParams(throw_positions=3, timesteps_s=(0.001,)),
-        DynamicParams(timesteps_s=(0.001,)),
+        dataclasses.replace(TINY, timesteps_s=(0.001,), holds=("length",)),
+        DynamicParams(throw_positions=3, timesteps_s=(0.001,), holds=("length",)),
+        DynamicParams(timesteps_s=(0.001,), holds=("length",)),
     )
     r = dynamic(params, seed, None, jobs, model)
     d = r.as_dict()
     return {
         "pen_half_wrap_ms": d["pen_half_wrap_ms"],
         "pen_carried": d["pen_carried"],
-        "captured": d["captured"],
-        "throws": d["throws"],
-        "penetration_m": d["extremes"]["penetration_m"],
+        "captured": d["capture"]["length"]["captured"],
+        "throws": d["capture"]["length"]["throws"],
+        "extremes": d["extremes"],
     }
+
+
+def strategy_measure(
+    design: SpiralDesign, model: ModelConfig, size: str, seed: int, jobs: int
+) -> dict[str, Any]:
+    """Paired grasps (strategy off / on / on with the true-contact oracle) at a few placements of one
+    diameter: per arm, successes and trials (the strategy experiment's success criterion)."""
+    params = sized(
+        size,
+        STRATEGY_TINY,
+        StrategyParams(diameters_m=(0.024,), grid=(2, 2), seeds=1),
+        StrategyParams(diameters_m=(0.024,), grid=(4, 4), seeds=1),
+    )
+    r = strategy(design, params, seed, None, jobs, model)
+    out: dict[str, Any] = {}
+    for arm in ("off", "on", "oracle"):
+        rate = r.rate(arm)
+        out[arm] = rate["successes"]
+        out["n"] = rate["n"]
+    out["extremes"] = r.extremes.as_dict()
+    return out
 
 
 def _ms(x: float) -> str:
     return "never" if math.isnan(x) else f"{x:.0f} ms"
+
+
+def _pair(a: str, b: str) -> Callable[[dict[str, Any]], str]:
+    """The number of a strategy conclusion: both arms' successes out of the placements (the sample)."""
+    return lambda d: f"{a} {d[a]}/{d['n']}, {b} {d[b]}/{d['n']}"
 
 
 MEASURES: dict[str, tuple[Measure, tuple[Conclusion, ...]]] = {
@@ -208,9 +218,24 @@ MEASURES: dict[str, tuple[Measure, tuple[Conclusion, ...]]] = {
                 lambda d: "yes" if d["pen_carried"] else "no",
             ),
             Conclusion(
-                "dynamic: most thrown objects are captured",
+                "dynamic: most thrown objects are captured (cable 0 held at length)",
                 lambda d: 2 * d["captured"] > d["throws"],
                 lambda d: f"{d['captured']}/{d['throws']}",
+            ),
+        ),
+    ),
+    "strategy": (
+        strategy_measure,
+        (
+            Conclusion(
+                "strategy: on (firmware detector) succeeds at least as often as off",
+                lambda d: d["on"] >= d["off"],
+                _pair("on", "off"),
+            ),
+            Conclusion(
+                "strategy: on with the true contact succeeds more often than with the firmware detector",
+                lambda d: d["oracle"] > d["on"],
+                _pair("oracle", "on"),
             ),
         ),
     ),
@@ -247,10 +272,20 @@ class SensitivityResult:
                 out.append((c.name, cells))
         return out
 
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every measure on every variant."""
+        return worst_extremes(
+            PhysicsExtremes(**d["extremes"])
+            for per_variant in self.measured.values()
+            for d in per_variant.values()
+        )
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {
             "experiment": "sensitivity",
+            "extremes": self.extremes.as_dict(),
             "seed": self.seed,
             "size": self.size,
             "variants": list(self.variants),
@@ -263,9 +298,9 @@ class SensitivityResult:
         }
 
 
-def _run_one(item: tuple[str, Variant, SpiralDesign, str, int]) -> dict[str, Any]:
-    name, variant, design, size, seed = item
-    return MEASURES[name][0](design, variant.apply(ModelConfig()), size, seed, 1)
+def _run_one(item: tuple[str, Variant, SpiralDesign, ModelConfig, str, int]) -> dict[str, Any]:
+    name, variant, design, model, size, seed = item
+    return MEASURES[name][0](design, variant.apply(model), size, seed, 1)
 
 
 def sensitivity(
@@ -274,11 +309,13 @@ def sensitivity(
     seed: int = 0,
     progress: Progress | None = None,
     jobs: int = 1,
+    model: ModelConfig = DEFAULT_MODEL,
 ) -> SensitivityResult:
-    """Run every measure on the baseline model and on each ±50 % variant (variants fan out over ``jobs``)."""
+    """Run every measure on the baseline ``model`` and on each ±50 % variant of it (variants fan out over
+    ``jobs``)."""
     design = design or SpiralDesign.paper_prototype()
-    vs = variants()
-    items = [(name, v, design, size, seed) for v in vs for name in MEASURES]
+    vs = variants(size)
+    items = [(name, v, design, model, size, seed) for v in vs for name in MEASURES]
     out = parallel_map(_run_one, items, jobs, progress)
     measured: dict[str, dict[str, dict[str, Any]]] = {name: {} for name in MEASURES}
     for (name, v, *_), d in zip(items, out, strict=True):
@@ -286,10 +323,17 @@ def sensitivity(
     return SensitivityResult(size, seed, tuple(v.label for v in vs), measured)
 
 
-def run_at_size(design: SpiralDesign, size: str, seed: int, progress: Progress | None, jobs: int) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`)."""
+def run_at_size(
+    design: SpiralDesign,
+    size: str,
+    seed: int,
+    progress: Progress | None,
+    jobs: int,
+    model: ModelConfig = DEFAULT_MODEL,
+) -> Any:
+    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) around ``model``."""
     sized(size, 0, 0, 0)
-    return sensitivity(design, size, seed, progress, jobs)
+    return sensitivity(design, size, seed, progress, jobs, model)
 
 
 def _cell(cell: tuple[bool, str]) -> str:
@@ -305,17 +349,25 @@ def table_rows(r: SensitivityResult) -> list[Row]:
         rows.append((name, f"baseline: {_cell(cells[0])}", survives))
         for p in PARAMETERS:
             labels = [Variant(p, f).label for f in FACTORS]
+            if not any(lab in index for lab in labels):
+                continue
             verdicts = " / ".join(_cell(cells[index[lab]]) for lab in labels if lab in index)
             rows.append((f"  {p} x{' / x'.join(f'{f:g}' for f in FACTORS)}", verdicts, ""))
+    rows.extend(extremes_rows(r.extremes))
     return rows
 
 
 def describe_samples(r: SensitivityResult) -> str:
     """The result's sample counts, in words."""
-    return (
-        f"{len(r.variants)} models (baseline, {len(PARAMETERS)} parameters x {len(FACTORS)}) x "
+    text = (
+        f"{len(r.variants)} models (baseline, {(len(r.variants) - 1) // len(FACTORS)} parameters x "
+        f"{len(FACTORS)}) x "
         f"{len(r.measured)} measures ({', '.join(r.measured)}) at size {r.size}"
     )
+    strat = r.measured.get("strategy", {}).get(BASELINE)
+    if strat is not None:
+        text += f"; strategy: {strat['n']} placements x 3 arms per model"
+    return text
 
 
 def plot_figure(r: SensitivityResult, out: Path) -> Path:

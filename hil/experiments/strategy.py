@@ -68,6 +68,12 @@ class StrategyParams:
     oracle: bool = True
 
 
+TINY = StrategyParams(
+    diameters_m=(0.02,), x_range_m=(0.04, 0.04), z_range_m=(-0.11, -0.11), grid=(1, 1), seeds=1
+)
+"""The smoke-test size: the one reference placement (a 20 mm object 40 mm out, 110 mm below the base)."""
+
+
 def arm_of(o: GraspOutcome) -> str:
     """Which of :data:`ARMS` a trial belongs to."""
     if not o.setup.strategy_on:
@@ -233,9 +239,7 @@ def run_at_size(
     """
     p = sized(
         size,
-        StrategyParams(
-            diameters_m=(0.02,), x_range_m=(0.04, 0.04), z_range_m=(-0.11, -0.11), grid=(1, 1), seeds=1
-        ),
+        TINY,
         StrategyParams(),
         StrategyParams(grid=(6, 6)),
     )

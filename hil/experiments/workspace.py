@@ -13,7 +13,7 @@ import numpy.typing as npt
 
 from controller.config import FirmwareConfig, MappingConfig
 
-from ..model_config import ModelConfig
+from ..model_config import ActuatorConfig, ModelConfig
 from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
 from .common import (
@@ -44,16 +44,45 @@ class WorkspaceParams:
     tension_max_n: largest random tension (the firmware's per-cable ceiling).
     cell_m: raster cell of the coverage measure.
     drive: how a random tension set is drawn (see :func:`_random_tensions`).
+    variants: plant variants run for every design (:data:`VARIANTS`): ``as-given`` is the model the
+        experiment was given; Fig. 2E's setup is ``gravity-off`` (the authors' simulation had no gravity)
+        and ``gravity-off-light`` (also a light ideal tension source instead of the M2006 and spool).
+    saturate_window_s: coverage has saturated when it grew less than ``saturate_gain`` (a share of the
+        exact area) over the last ``saturate_window_s``; the drive then stops, at the latest after
+        ``duration_s``.
+    saturate_gain: see ``saturate_window_s``; 0 = never stop early.
     """
 
     tapers_deg: tuple[float, ...] = (5.0, 6.5, 9.0)
-    cables: tuple[int, ...] = (2, 3)
-    duration_s: float = 30.0
+    cables: tuple[int, ...] = (2,)
+    duration_s: float = 240.0
     sample_ms: int = 5
     hold_ms: tuple[int, int] = (50, 300)
     tension_max_n: float = 20.0
     cell_m: float = 0.004
     drive: str = "mixed"
+    variants: tuple[str, ...] = ("as-given", "gravity-off", "gravity-off-light")
+    saturate_window_s: float = 30.0
+    saturate_gain: float = 0.01
+
+
+VARIANTS = ("as-given", "gravity-off", "gravity-off-light")
+"""The plant variants :func:`variant_model` knows."""
+
+
+def variant_model(model: ModelConfig, variant: str) -> ModelConfig:
+    """``model`` as it is, with gravity off, or with gravity off and a light ideal tension source.
+
+    Raises:
+        ValueError: an unknown variant.
+    """
+    if variant == "as-given":
+        return model
+    if variant == "gravity-off":
+        return dataclasses.replace(model, mounting="gravity-off")
+    if variant == "gravity-off-light":
+        return dataclasses.replace(model, mounting="gravity-off", actuator=ActuatorConfig(kind="tension"))
+    raise ValueError(f"unknown workspace variant {variant!r}; choose from {', '.join(VARIANTS)}")
 
 
 @dataclass(frozen=True)
@@ -64,10 +93,13 @@ class WorkspaceRun:
     the virtual tip), ``*_exact`` to the real tip's base-first curve (:func:`base_first_tip_curve`);
     ``inside_share_eta`` allows ρw the discretisation tolerance 1/η. Areas: the half plane on the curl
     side (u >= 0), rastered in ``cell_m`` cells; ``covered_area_m2``: the cells the tip visited.
+    ``coverage_trace``: ``coverage_exact`` after each simulated second; ``saturated``: the drive stopped
+    because coverage stopped growing (see :class:`WorkspaceParams`), after ``duration_s``.
     """
 
     taper_deg: float
     cables: int
+    variant: str
     b: float
     units: int
     samples: int
@@ -79,6 +111,9 @@ class WorkspaceRun:
     envelope_area_m2: float
     exact_area_m2: float
     covered_area_m2: float
+    duration_s: float
+    saturated: bool
+    coverage_trace: tuple[float, ...]
     extremes: PhysicsExtremes
     u_m: tuple[float, ...] = field(repr=False)
     z_m: tuple[float, ...] = field(repr=False)
@@ -137,8 +172,8 @@ def _random_tensions(rng: np.random.Generator, p: WorkspaceParams) -> npt.NDArra
     return out
 
 
-def _workspace_run(args: tuple[float, int, WorkspaceParams, int, ModelConfig]) -> WorkspaceRun:
-    taper_deg, cables, p, seed, model = args
+def _workspace_run(args: tuple[float, int, str, WorkspaceParams, int, ModelConfig]) -> WorkspaceRun:
+    taper_deg, cables, variant, p, seed, model = args
     base = SpiralDesign.paper_prototype()
     design = SpiralDesign.from_physical(
         length_m=0.23,
@@ -148,39 +183,14 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int, ModelConfig]) -
         cables=cables,
     )
     fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=p.tension_max_n))
-    rig = direct_rig(design, fw, seed=seed, model=model)
+    rig = direct_rig(design, fw, seed=seed, model=variant_model(model, variant))
     env = Envelope.of(rig.plant)
-    rng = np.random.default_rng([seed, cables, round(taper_deg * 100)])
-    n = int(p.duration_s * 1000 / p.sample_ms)
-    u = np.empty(n)
-    z = np.empty(n)
-    next_change = 0
-    i = 0
-    warm = 300  # ms before the first sample
-    t = 0
-    while i < n:
-        if t >= next_change:
-            tensions = _random_tensions(rng, p)
-            rig.set_tensions(tensions[:cables].tolist() + [0.0] * (3 - cables))
-            next_change = t + int(rng.integers(p.hold_ms[0], p.hold_ms[1] + 1))
-        rig.step()
-        t += 1
-        if t > warm and t % p.sample_ms == 0:
-            tip = rig.plant.tip_pose().pos_m
-            u[i] = abs(tip[0]) if cables < 3 else math.hypot(tip[0], tip[1])
-            z[i] = tip[2]
-            i += 1
-    extremes = rig.plant.extremes()
-    rig.close()
-    ratios = np.array([env.ratio(float(a), float(b)) for a, b in zip(u, z, strict=True)])
-    exact = np.array([env.exact_ratio(float(a), float(b)) for a, b in zip(u, z, strict=True)])
-    # Coverage: raster cells whose centre is inside an envelope, and those a sample falls in.
+    # The raster, fixed before the drive so coverage can be followed while it runs: cells whose centre is
+    # inside each envelope (a sample outside the grid counts in its edge cell, outside both envelopes).
     bnd = env.boundary()
-    lo_u, hi_u = 0.0, float(max(bnd[:, 0].max(), u.max())) + p.cell_m
-    lo_z, hi_z = (
-        float(min(bnd[:, 1].min(), z.min())) - p.cell_m,
-        float(max(bnd[:, 1].max(), z.max())) + p.cell_m,
-    )
+    margin = 0.02
+    lo_u, hi_u = 0.0, float(bnd[:, 0].max()) + margin
+    lo_z, hi_z = float(bnd[:, 1].min()) - margin, float(bnd[:, 1].max()) + margin
     nu = int((hi_u - lo_u) / p.cell_m) + 1
     nz = int((hi_z - lo_z) / p.cell_m) + 1
     in_w = np.zeros((nu, nz), bool)
@@ -191,9 +201,41 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int, ModelConfig]) -
             in_w[a, b] = env.ratio(cu, cz) <= 1.0
             in_exact[a, b] = env.exact_ratio(cu, cz) <= 1.0
     hit = np.zeros((nu, nz), bool)
-    ia = np.clip(((u - lo_u) / p.cell_m).astype(int), 0, nu - 1)
-    ib = np.clip(((z - lo_z) / p.cell_m).astype(int), 0, nz - 1)
-    hit[ia, ib] = True
+    exact_cells = int(in_exact.sum())
+    rng = np.random.default_rng([seed, cables, round(taper_deg * 100), VARIANTS.index(variant)])
+    limit_ms = int(p.duration_s * 1000)
+    window = max(1, round(p.saturate_window_s))
+    u: list[float] = []
+    z: list[float] = []
+    trace: list[float] = []
+    next_change = 0
+    warm = 300  # ms before the first sample
+    t = 0
+    saturated = False
+    while t < limit_ms + warm and not saturated:
+        if t >= next_change:
+            tensions = _random_tensions(rng, p)
+            rig.set_tensions(tensions[:cables].tolist() + [0.0] * (3 - cables))
+            next_change = t + int(rng.integers(p.hold_ms[0], p.hold_ms[1] + 1))
+        rig.step()
+        t += 1
+        if t > warm and t % p.sample_ms == 0:
+            tip = rig.plant.tip_pose().pos_m
+            uu = abs(tip[0]) if cables < 3 else math.hypot(tip[0], tip[1])
+            u.append(uu)
+            z.append(float(tip[2]))
+            ia = min(max(int((uu - lo_u) / p.cell_m), 0), nu - 1)
+            ib = min(max(int((tip[2] - lo_z) / p.cell_m), 0), nz - 1)
+            hit[ia, ib] = True
+        if t > warm and (t - warm) % 1000 == 0:
+            trace.append(float((hit & in_exact).sum() / exact_cells) if exact_cells else math.nan)
+            grown = trace[-1] - trace[-1 - window] if len(trace) > window else math.inf
+            saturated = p.saturate_gain > 0 and grown < p.saturate_gain
+    extremes = rig.plant.extremes()
+    rig.close()
+    ua, za = np.array(u), np.array(z)
+    ratios = np.array([env.ratio(float(a), float(b)) for a, b in zip(ua, za, strict=True)])
+    exact = np.array([env.exact_ratio(float(a), float(b)) for a, b in zip(ua, za, strict=True)])
     cell_area = p.cell_m**2
 
     def share(mask: npt.NDArray[np.bool_]) -> float:
@@ -203,20 +245,24 @@ def _workspace_run(args: tuple[float, int, WorkspaceParams, int, ModelConfig]) -
     return WorkspaceRun(
         taper_deg,
         cables,
+        variant,
         design.b,
         design.units,
-        n,
-        float(np.mean(ratios <= 1.0)),
-        float(np.mean(ratios <= 1.0 / design.eta)),
-        float(np.mean(exact <= 1.0 + 1e-9)),
+        len(u),
+        float(np.mean(ratios <= 1.0)) if len(u) else math.nan,
+        float(np.mean(ratios <= 1.0 / design.eta)) if len(u) else math.nan,
+        float(np.mean(exact <= 1.0 + 1e-9)) if len(u) else math.nan,
         share(in_w),
         share(in_exact),
         float(in_w.sum()) * cell_area,
         float(in_exact.sum()) * cell_area,
         float(hit.sum()) * cell_area,
+        (t - warm) / 1000.0,
+        saturated,
+        tuple(trace),
         extremes,
-        tuple(float(v) for v in u),
-        tuple(float(v) for v in z),
+        tuple(u),
+        tuple(z),
         tuple((float(a), float(b)) for a, b in bnd),
         tuple((float(a), float(b)) for a, b in env.exact_boundary()),
     )
@@ -229,11 +275,17 @@ def workspace(
     jobs: int = 1,
     model: ModelConfig = DEFAULT_MODEL,
 ) -> WorkspaceResult:
-    """Random per-cable tensions through the firmware (DIRECT mode) on 2- and 3-cable arms of three
-    taper angles, on the plant ``model``; tip samples against the involute envelope ρw (Note S2, Fig. 2E /
-    S4)."""
+    """Random per-cable tensions through the firmware (DIRECT mode) on arms of three taper angles, on the
+    plant ``model`` and its variants (Fig. 2E: a 2-cable arm with gravity off), each until its coverage of
+    the exact envelope saturates; tip samples against the involute envelope ρw (Note S2, Fig. 2E / S4).
+
+    Raises:
+        ValueError: an unknown variant.
+    """
     p = params or WorkspaceParams()
-    items = [(taper, c, p, seed, model) for taper in p.tapers_deg for c in p.cables]
+    for v in p.variants:
+        variant_model(model, v)
+    items = [(taper, c, v, p, seed, model) for taper in p.tapers_deg for c in p.cables for v in p.variants]
     runs = parallel_map(_workspace_run, items, jobs, progress)
     return WorkspaceResult(p, seed, tuple(runs))
 
@@ -249,9 +301,9 @@ def run_at_size(
     """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``."""
     p = sized(
         size,
-        WorkspaceParams(tapers_deg=(6.5,), cables=(2,), duration_s=0.5),
+        WorkspaceParams(tapers_deg=(6.5,), duration_s=2.0, variants=("gravity-off",), saturate_window_s=1.0),
         WorkspaceParams(),
-        WorkspaceParams(duration_s=40.0),
+        WorkspaceParams(cables=(2, 3), duration_s=600.0, saturate_gain=0.005),
     )
     return workspace(p, seed, progress, jobs, model)
 
@@ -267,7 +319,8 @@ def table_rows(r: WorkspaceResult) -> list[Row]:
     for run in r.runs:
         rows.append(
             (
-                f"taper {run.taper_deg:g}° (b = {run.b:.3f}), {run.cables} cables: area inside ρw / exact",
+                f"taper {run.taper_deg:g}° (b = {run.b:.3f}), {run.cables} cables, {run.variant}: "
+                "area inside ρw / exact",
                 f"{run.envelope_area_m2 * 1e4:.0f} / {run.exact_area_m2 * 1e4:.0f} cm²",
                 "shrinks as b grows",
             )
@@ -279,6 +332,13 @@ def table_rows(r: WorkspaceResult) -> list[Row]:
                 "every point inside is reachable",
             )
         )
+        rows.append(
+            (
+                "  drive time; coverage saturated",
+                f"{run.duration_s:.0f} s; {'yes' if run.saturated else 'no (time limit)'}",
+                "-",
+            )
+        )
     rows.extend(extremes_rows(r.extremes))
     return rows
 
@@ -286,7 +346,8 @@ def table_rows(r: WorkspaceResult) -> list[Row]:
 def describe_samples(r: WorkspaceResult) -> str:
     """The result\'s sample counts, in words."""
     return (
-        f"{len(r.runs)} designs x {r.params.duration_s:g} s of random tensions, "
+        f"{len(r.runs)} design/plant variants x up to {r.params.duration_s:g} s of random tensions "
+        f"(until coverage saturates), "
         f"{sum(x.samples for x in r.runs)} tip samples (every {r.params.sample_ms} ms)"
     )
 
@@ -294,13 +355,13 @@ def describe_samples(r: WorkspaceResult) -> str:
 def plot_figure(r: WorkspaceResult, out: Path) -> Path:
     """Write the figure into the directory ``out``; returns its path (``workspace.png``)."""
     plt = pyplot()
-    cables = sorted({x.cables for x in r.runs})
+    rows_of = sorted({(x.cables, x.variant) for x in r.runs})
     tapers = sorted({x.taper_deg for x in r.runs})
     fig, axes = plt.subplots(
-        len(cables), len(tapers), figsize=(3.6 * len(tapers), 4.2 * len(cables)), squeeze=False
+        len(rows_of), len(tapers), figsize=(3.6 * len(tapers), 4.2 * len(rows_of)), squeeze=False
     )
     for run in r.runs:
-        ax = axes[cables.index(run.cables)][tapers.index(run.taper_deg)]
+        ax = axes[rows_of.index((run.cables, run.variant))][tapers.index(run.taper_deg)]
         b = np.array(run.boundary)
         ax.plot(np.array(run.u_m) * 1000, (np.array(run.z_m) - BASE_Z_M) * 1000, ".", ms=1.2, alpha=0.5)
         ax.plot(b[:, 0] * 1000, (b[:, 1] - BASE_Z_M) * 1000, "r-", lw=1.2, label="ρw (Table S1)")
@@ -308,7 +369,7 @@ def plot_figure(r: WorkspaceResult, out: Path) -> Path:
         ax.plot(e[:, 0] * 1000, (e[:, 1] - BASE_Z_M) * 1000, "g-", lw=1.0, label="real tip, base first")
         ax.plot([0], [0], "k^", ms=6, label="base")
         ax.set_title(
-            f"taper {run.taper_deg:g}°, b={run.b:.3f}, {run.cables} cables\n"
+            f"taper {run.taper_deg:g}°, b={run.b:.3f}, {run.cables} cables, {run.variant}\n"
             f"inside ρw {pct(run.inside_share)}, exact {pct(run.inside_share_exact)}; "
             f"reached {pct(run.coverage_exact)} of the exact area",
             fontsize=8,

@@ -6,6 +6,7 @@ import json
 import math
 import pickle
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -22,16 +23,52 @@ from hil.experiments import (
     grasp_trial,
     run_experiment,
 )
+from hil.experiments.contact import ContactParams, ReachTrial, contact_jobs
+from hil.experiments.dynamic_rig import paper_arm_45cm, scaled_model
 from hil.experiments.geometry import ArmFootprint
+from hil.experiments.sensitivity import Variant
 from hil.experiments.strategy import arm_of, placements
 from hil.model_config import ArmConfig, ModelConfig, ObjectConfig
+from hil.plant_types import PhysicsExtremes
 from hil.spiral import SpiralDesign
+
+STIFFER = ModelConfig(arm=ArmConfig(base_stiffness_nm_per_rad=1.2 * ArmConfig().base_stiffness_nm_per_rad))
+"""A non-default model: every experiment must run on the model it is given."""
+
+
+def _stiffnesses_from(model: ModelConfig) -> set[float]:
+    """Base stiffnesses a rig may show when an experiment runs on ``model``: its own, the sensitivity
+    variants' (x0.5, x1.5), and each of them scaled to the dynamic experiment's 45 cm arm."""
+    proto = SpiralDesign.paper_prototype()
+    out: set[float] = set()
+    for f in (0.5, 1.0, 1.5):
+        m = Variant("base stiffness", f).apply(model)
+        out |= {
+            m.arm.base_stiffness_nm_per_rad,
+            scaled_model(m, paper_arm_45cm(), proto).arm.base_stiffness_nm_per_rad,
+        }
+    return out
 
 
 @pytest.mark.parametrize("name", list(EXPERIMENTS))
-def test_each_experiment_runs_tiny_reports_and_plots(name: str, tmp_path: Path) -> None:
+def test_each_experiment_runs_tiny_on_a_given_model_reports_and_plots(
+    name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    seen: list[float] = []
+    build = Rig.__init__
+
+    def recording_init(self: Rig, *args: Any, **kwargs: Any) -> None:
+        build(self, *args, **kwargs)
+        seen.append(self.plant.config.model.arm.base_stiffness_nm_per_rad)
+
+    monkeypatch.setattr(Rig, "__init__", recording_init)
     calls: list[tuple[int, int]] = []
-    result = run_experiment(name, size="tiny", seed=3, progress=lambda d, t: calls.append((d, t)))
+    result = run_experiment(
+        name, size="tiny", seed=3, progress=lambda d, t: calls.append((d, t)), model=STIFFER
+    )
+    # every rig ran on the given model (or a variant or scaling of it), none on the default one
+    assert seen and set(seen) <= _stiffnesses_from(STIFFER)
+    assert not set(seen) & _stiffnesses_from(ModelConfig())
     assert calls and calls[-1][0] == calls[-1][1]  # progress reached its total
     again = pickle.loads(pickle.dumps(result))  # picklable: campaigns can fan out
     assert again.as_dict()["seed"] == 3
@@ -144,13 +181,18 @@ def test_convergence_tiny_measures_each_step_and_the_pen_stays_outside_the_arm()
     assert rows[0][1] == "1 ms | 0.5 ms"
 
 
-def test_contact_helpers() -> None:
-    from hil.experiments.contact import ReachTrial, bootstrap_median, wilson
-
-    lo, hi = wilson(8, 10)
-    assert lo == pytest.approx(0.4902, abs=1e-3) and hi == pytest.approx(0.9433, abs=1e-3)
-    med, lo, hi = bootstrap_median([1.0, 2.0, 3.0, 4.0, 100.0], seed=0)
-    assert med == 3.0 and lo <= med <= hi
+def test_contact_trial_kinds() -> None:
     nan = float("nan")
-    kinds = [ReachTrial(0, 0, 0, "new", tr, de, "").kind for tr, de in ((1, 2), (2, 1), (1, nan), (nan, nan))]
+    none = PhysicsExtremes(0.0, 0.0, 0.0, 0.0)
+    kinds = [
+        ReachTrial(0, 0, 0, "new", tr, de, "", none).kind for tr, de in ((1, 2), (2, 1), (1, nan), (nan, nan))
+    ]
     assert kinds == ["TP", "FP", "FN", "TN"]
+
+
+def test_contact_reaches_at_the_strategys_placements() -> None:
+    design = SpiralDesign.paper_prototype()
+    spots = placements(design, StrategyParams(), seed=0)
+    jobs = contact_jobs(design, ContactParams(), seed=0)
+    assert [(s.x_m, s.z_m, s.diameter_m) for s, det, _ in jobs[::2]] == spots
+    assert {det for _, det, _ in jobs} == {"old", "new"}

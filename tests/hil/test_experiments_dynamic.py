@@ -8,8 +8,7 @@ import pickle
 
 import pytest
 
-from hil.experiments import packing as packing_module
-from hil.experiments.dynamic import TINY, DynamicResult, dynamic, wilson_interval
+from hil.experiments.dynamic import TINY, DynamicResult, dynamic
 from hil.experiments.dynamic_rig import paper_arm_45cm, scaled_model, with_timestep
 from hil.experiments.sensitivity import (
     MEASURES,
@@ -47,14 +46,6 @@ def test_scaling_to_the_prototype_itself_changes_nothing_and_grows_with_size() -
     assert with_timestep(m, 0.00025).solver.timestep_s == 0.00025
 
 
-def test_wilson_interval_known_values() -> None:
-    lo, hi = wilson_interval(8, 16)  # p = 0.5, n = 16
-    assert lo == pytest.approx(0.2800, abs=1e-4) and hi == pytest.approx(0.7200, abs=1e-4)
-    lo, hi = wilson_interval(0, 10)
-    assert lo == 0.0 and hi == pytest.approx(0.2775, abs=1e-4)
-    assert wilson_interval(0, 0) == (0.0, 1.0)
-
-
 @pytest.fixture(scope="module")
 def tiny_dynamic() -> DynamicResult:
     return dynamic(TINY, seed=1)
@@ -65,14 +56,16 @@ def test_dynamic_tiny_reports_every_trial_and_the_convergence(tiny_dynamic: Dyna
     d = r.as_dict()
     json.dumps(d)
     assert d["arm"]["units"] == 24
-    # one pen step and one throw per physics step, the headline at each of them
+    # one pen step and one throw per hold (length, tension) per physics step, the headline at each step
     assert [c["timestep_s"] for c in d["convergence"]] == list(TINY.timesteps_s)
-    assert len(r.runs) == 2 * len(TINY.timesteps_s)
+    assert len(r.runs) == 3 * len(TINY.timesteps_s)
+    assert set(d["capture"]) == {"length", "tension"}
     for run in d["runs"]:
         for key in ("penetration_m", "penetration_ratio", "tension_n", "limit_overshoot_rad"):
             assert run[key] >= 0.0
-    k, n, (lo, hi) = r.capture()
-    assert n == 1 and 0.0 <= lo <= k / n <= hi <= 1.0
+    for hold in ("length", "tension"):
+        k, n, (lo, hi) = r.capture(hold)
+        assert n == 1 and 0.0 <= lo <= k / n <= hi <= 1.0
     # the step on cable 0 reaches the pen (it stands beside the arm, 12 cm up from the tip)
     pen = r.at(TINY.timesteps_s[0], "pen")[0]
     assert not math.isnan(pen.first_contact_ms)
@@ -84,6 +77,7 @@ def test_sensitivity_variants_change_one_parameter_each() -> None:
     vs = variants()
     assert vs[0].label == "baseline" and vs[0].apply(base) == base
     assert len(vs) == 1 + 2 * len(PARAMETERS)
+    assert len(variants("tiny")) == 3
     half = Variant("contact friction", 0.5).apply(base)
     assert half.arm.geom_friction == pytest.approx(0.5 * base.arm.geom_friction)
     assert half.motor == base.motor
@@ -92,12 +86,10 @@ def test_sensitivity_variants_change_one_parameter_each() -> None:
     assert inertia.arm == base.arm
 
 
-def test_packing_measure_runs_on_the_given_model_and_restores_the_module() -> None:
-    original = getattr(packing_module, "direct_rig")  # noqa: B009
+def test_packing_measure_runs_on_the_given_model() -> None:
     proto = SpiralDesign.paper_prototype()
     soft = packing_measure(proto, Variant("base stiffness", 0.5).apply(ModelConfig()), "tiny", 0, 1)
     stiff = packing_measure(proto, Variant("base stiffness", 1.5).apply(ModelConfig()), "tiny", 0, 1)
-    assert getattr(packing_module, "direct_rig") is original  # noqa: B009
     # the base joint sets the packing tension: a stiffer base needs more
     assert soft["pack_tension_n"] < stiff["pack_tension_n"]
 
@@ -110,6 +102,10 @@ def test_sensitivity_tiny_table_and_json() -> None:
     json.dumps(d)
     names = [c.name for _, conclusions in MEASURES.values() for c in conclusions]
     assert list(d["conclusions"]) == names
+    # tiny: the baseline and the first parameter at x0.5 and x1.5
+    assert list(d["variants"]) == ["baseline", "base stiffness x0.5", "base stiffness x1.5"]
     for cells in d["conclusions"].values():
-        assert list(cells) == [v.label for v in variants()]
+        assert list(cells) == [v.label for v in variants("tiny")]
+    strategy = d["measured"]["strategy"]["baseline"]
+    assert strategy["n"] == 1 and {"off", "on", "oracle"} <= set(strategy)
     assert "packing: curls from the tip (rank correlation < -0.8)" in d["survive_all"]
