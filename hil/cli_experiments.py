@@ -4,6 +4,7 @@ table or JSON, figure). The experiments themselves know nothing of argparse, ric
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import time
@@ -16,6 +17,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from controller.cli_kit import EXIT_OK, seed
+from controller.config import CONTROL_PERIOD_US
 
 from .cli_design import add_design_arguments, design_from_args, model_from_args
 from .experiments import EXPERIMENTS, SIZES, run_experiment
@@ -41,6 +43,13 @@ def configure_experiment(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--jobs", type=int, default=2, metavar="N", help="worker processes for independent runs (default 2)"
     )
+    p.add_argument(
+        "--timestep-ms",
+        type=float,
+        metavar="MS",
+        help="physics step [ms] (default: the preset's, 1); the 1 ms control period must be a whole number "
+        "of steps: 1, 0.5, 0.25 ... (to show a result converges)",
+    )
     add_design_arguments(p)
 
 
@@ -50,6 +59,15 @@ def run_experiment_command(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     model = model_from_args(args)
+    if args.timestep_ms is not None:
+        step_s = args.timestep_ms / 1000.0
+        ratio = CONTROL_PERIOD_US * 1e-6 / step_s if step_s > 0 else 0.0
+        if not (step_s > 0 and abs(ratio - round(ratio)) < 1e-9 and round(ratio) >= 1):
+            raise ValueError(
+                f"--timestep-ms must divide the 1 ms control period (1, 0.5, 0.25 ...): {args.timestep_ms:g}"
+            )
+        model = dataclasses.replace(model, solver=dataclasses.replace(model.solver, timestep_s=step_s))
+        model.validate()
     design = design_from_args(args)
     exp = EXPERIMENTS[args.name]
     err = Console(stderr=True)
@@ -89,6 +107,7 @@ def run_experiment_command(args: argparse.Namespace) -> int:
         out["samples"] = exp.samples(result)
         out["size"] = args.size
         out["preset"] = args.preset
+        out["timestep_s"] = model.solver.timestep_s
         out["elapsed_s"] = round(elapsed, 1)
         if figure is not None:
             out["figure"] = str(figure)
@@ -103,7 +122,8 @@ def run_experiment_command(args: argparse.Namespace) -> int:
     console = Console()
     console.print(table)
     console.print(
-        f"samples: {exp.samples(result)}; preset {args.preset or 'prototype'}; seed {args.seed}; "
+        f"samples: {exp.samples(result)}; preset {args.preset or 'prototype'}; "
+        f"step {model.solver.timestep_s * 1000:g} ms; seed {args.seed}; "
         f"size {args.size}; {elapsed:.0f} s"
     )
     if figure is not None:

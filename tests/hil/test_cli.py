@@ -99,6 +99,10 @@ def test_an_experiment_runs_on_the_preset_it_is_given(capsys: pytest.CaptureFixt
     status, out, _ = run(argv, capsys)
     assert status == 0
     assert json.loads(out)["preset"] == "gravity-off"
+    argv = ["experiment", "packing", "--timestep-ms", "0.5", "--size", "tiny", "--json"]
+    status, out, _ = run(argv, capsys)
+    assert status == 0
+    assert json.loads(out)["timestep_s"] == 0.0005
 
 
 @pytest.mark.parametrize(
@@ -117,6 +121,8 @@ def test_an_experiment_runs_on_the_preset_it_is_given(capsys: pytest.CaptureFixt
         ["design", "--preset", "nope"],
         ["model", "export", "-o", "x.xml", "--preset", "nope"],
         ["experiment", "packing", "--preset", "nope"],
+        ["experiment", "packing", "--timestep-ms", "0.3"],
+        ["experiment", "packing", "--timestep-ms", "-1"],
         ["design", "--cables", "4"],
         ["design", "--length", "abc"],
         ["design", "--json", "--load-force", "-1"],
