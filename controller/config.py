@@ -143,7 +143,13 @@ class GraspConfig:
             (the prototype hardly unrolls above half its pack tension).
         reach_rate_n_per_s: reach ramp-down rate.
         wrap_n: tension of the wrap / hold phases (strategy on: on the cables opposite the pack side,
-            which face the object at contact; off: toward the target).
+            which face the object at contact; off: toward the target). It must close the joints that lie
+            on the object, not only the tip: a joint's closing tension scales with its size² (the
+            prototype's base closes at 21 N, its tip at 4.5 N; ``spirob-hil experiment packing``), so the
+            mid-arm joints that meet an object 100-120 mm under the base close at about 9-12 N. At 5 N only
+            the last joints closed: the tip coiled on itself and pinched the object against the unit that
+            touched it (2-3 units, 100-140° at HOLD), and the object slipped out once its support went.
+            15 N (under the 20 N ceiling) closes the arm around it; 18 N snapped the cables (135-290 N).
         wrap_rate_n_per_s: wrap ramp-up rate.
         takeup_n: curl tension that reels in the wrap-side cables' slack before the wrap ramp
             (strategy on; 0 = no take-up). Above the drive friction (about 1 N at the cable) minus the
@@ -179,7 +185,7 @@ class GraspConfig:
     pack_rate_n_per_s: float = 12.0
     reach_n: float = 0.0
     reach_rate_n_per_s: float = 10.0
-    wrap_n: float = 5.0
+    wrap_n: float = 15.0
     wrap_rate_n_per_s: float = 8.0
     takeup_n: float = 1.5
     takeup_speed_m_per_s: float = 0.08
