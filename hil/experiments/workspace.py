@@ -357,9 +357,23 @@ def plot_figure(r: WorkspaceResult, out: Path) -> Path:
     plt = pyplot()
     rows_of = sorted({(x.cables, x.variant) for x in r.runs})
     tapers = sorted({x.taper_deg for x in r.runs})
-    fig, axes = plt.subplots(
-        len(rows_of), len(tapers), figsize=(3.6 * len(tapers), 4.2 * len(rows_of)), squeeze=False
-    )
+    # One row of tip clouds per (cables, variant), one column per taper; the last row: coverage against time.
+    fig = plt.figure(figsize=(3.6 * len(tapers), 4.2 * len(rows_of) + 3.0))
+    grid = fig.add_gridspec(len(rows_of) + 1, len(tapers), height_ratios=[4.2] * len(rows_of) + [3.0])
+    axes = [[fig.add_subplot(grid[i, j]) for j in range(len(tapers))] for i in range(len(rows_of))]
+    cov = fig.add_subplot(grid[len(rows_of), :])
+    for run in r.runs:
+        cov.plot(
+            np.arange(1, len(run.coverage_trace) + 1),
+            100 * np.array(run.coverage_trace),
+            lw=1.0,
+            label=f"{run.cables} cables, {run.variant}, taper {run.taper_deg:g}°",
+        )
+    cov.set_xlabel("drive time [s]", fontsize=7)
+    cov.set_ylabel("share of the exact envelope reached [%]", fontsize=7)
+    cov.grid(alpha=0.3)
+    cov.legend(fontsize=6, ncol=3)
+    cov.tick_params(labelsize=7)
     for run in r.runs:
         ax = axes[rows_of.index((run.cables, run.variant))][tapers.index(run.taper_deg)]
         b = np.array(run.boundary)
