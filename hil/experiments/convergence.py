@@ -24,8 +24,21 @@ import numpy as np
 
 from ..model_config import ModelConfig, ObjectConfig
 from ..plant import Plant, PlantConfig
+from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
-from .common import DEFAULT_MODEL, FAR_M, MS, OBJ, Progress, Row, pyplot, save_figure, sized
+from .common import (
+    DEFAULT_MODEL,
+    FAR_M,
+    MS,
+    OBJ,
+    Progress,
+    Row,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from .parallel import parallel_map
 from .rig import contact_units, contact_wrap_deg, world_m
 
@@ -87,12 +100,32 @@ class ConvergenceResult:
     seed: int
     steps: tuple[StepFigures, ...]
 
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst over every step: the pen's and the throws' penetration, the random runs' tension and
+        overshoot (the throws' object has a 10 mm radius)."""
+        pen_r = self.params.pen_radius_m
+        return worst_extremes(
+            PhysicsExtremes(
+                max(s.wrap_penetration_m, s.press_penetration_m, *s.throw_penetration_m),
+                max(
+                    s.wrap_penetration_m / pen_r,
+                    s.press_penetration_ratio,
+                    *(t / 0.01 for t in s.throw_penetration_m),
+                ),
+                s.random_tension_n,
+                s.random_overshoot_rad,
+            )
+            for s in self.steps
+        )
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (SI units)."""
         return {
             "experiment": "convergence",
             "seed": self.seed,
             "steps": [dataclasses.asdict(s) for s in self.steps],
+            "extremes": self.extremes.as_dict(),
             "params": {k: v for k, v in dataclasses.asdict(self.params).items() if k != "model"},
         }
 
@@ -241,6 +274,7 @@ def table_rows(r: ConvergenceResult) -> list[Row]:
         lambda v: f"{math.degrees(v):.2f}°",
         [s.random_overshoot_rad for s in steps],
     )
+    rows.extend(extremes_rows(r.extremes))
     return rows
 
 
