@@ -1,5 +1,6 @@
 """The 45 cm arm of Fig. S11 and the model it runs on: the prototype's model scaled to it
-(:func:`scaled_model`) at a chosen physics step (:func:`with_timestep`); the dynamic experiment builds its
+(:func:`scaled_model`) at a chosen physics step (:func:`with_timestep`) and contact time constant
+(:func:`with_contact_timeconst`); the dynamic experiment builds its
 rig with :func:`~hil.experiments.rig.direct_rig` on that model."""
 
 from __future__ import annotations
@@ -57,3 +58,8 @@ def scaled_model(model: ModelConfig, design: SpiralDesign, reference: SpiralDesi
 def with_timestep(model: ModelConfig, timestep_s: float) -> ModelConfig:
     """``model`` with another physics step (the 1 ms control period must stay a whole number of them)."""
     return dataclasses.replace(model, solver=dataclasses.replace(model.solver, timestep_s=timestep_s))
+
+
+def with_contact_timeconst(model: ModelConfig, timeconst_s: float) -> ModelConfig:
+    """``model`` with another contact ``solref`` time constant (a stiffer or softer arm-object contact)."""
+    return dataclasses.replace(model, contact=dataclasses.replace(model.contact, timeconst_s=timeconst_s))

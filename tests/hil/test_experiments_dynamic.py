@@ -8,8 +8,23 @@ import pickle
 
 import pytest
 
-from hil.experiments.dynamic import TINY, DynamicResult, dynamic
-from hil.experiments.dynamic_rig import paper_arm_45cm, scaled_model, with_timestep
+from controller.config import FirmwareConfig
+from hil.experiments.common import DEFAULT_MODEL, FAR_M, MS, OBJ
+from hil.experiments.dynamic import (
+    TINY,
+    DynamicParams,
+    DynamicResult,
+    _clear_start_offset_m,
+    _clearance_m,
+    dynamic,
+)
+from hil.experiments.dynamic_rig import (
+    paper_arm_45cm,
+    scaled_model,
+    with_contact_timeconst,
+    with_timestep,
+)
+from hil.experiments.rig import direct_rig, world_m
 from hil.experiments.sensitivity import (
     MEASURES,
     PARAMETERS,
@@ -19,7 +34,7 @@ from hil.experiments.sensitivity import (
     sensitivity,
     variants,
 )
-from hil.model_config import ModelConfig
+from hil.model_config import ModelConfig, ObjectConfig
 from hil.spiral import SpiralDesign
 
 
@@ -44,6 +59,34 @@ def test_scaling_to_the_prototype_itself_changes_nothing_and_grows_with_size() -
     assert big.arm.total_mass_kg > 10 * m.arm.total_mass_kg
     assert big.arm.damping_ratio == m.arm.damping_ratio and big.motor == m.motor
     assert with_timestep(m, 0.00025).solver.timestep_s == 0.00025
+    assert with_contact_timeconst(m, 0.0005).contact.timeconst_s == 0.0005
+
+
+def test_contacts_are_twice_the_first_step_and_the_same_at_every_step() -> None:
+    # only the physics step changes between the convergence columns
+    assert DynamicParams().contact_s == pytest.approx(0.0005)
+    assert DynamicParams(timesteps_s=(0.001,)).contact_s == pytest.approx(0.002)
+    assert DynamicParams(contact_timeconst_s=0.001).contact_s == 0.001
+
+
+def test_a_throw_starts_clear_of_the_hook() -> None:
+    # The hook curled toward +x reaches past the lower aims: started 60 mm out from unit 11 the object
+    # would sit inside the tip units (the 12.6 mm, 72°, 510 N run); the start moves out until it is clear.
+    design = paper_arm_45cm()
+    model = scaled_model(DEFAULT_MODEL, design, SpiralDesign.paper_prototype())
+    p = DynamicParams()
+    obj = ObjectConfig(OBJ, radius_m=0.01, length_m=0.06, pos_m=FAR_M, mass_kg=0.01)
+    rig = direct_rig(design, FirmwareConfig(), objects=(obj,), model=model)
+    plant = rig.plant
+    plant.hold_object(OBJ)
+    rig.set_tensions([p.hold_tension_n, 0.5, 0.5])
+    rig.run(p.settle_ms * MS)
+    unit = plant.unit_poses()[0][11]
+    aim = (float(unit[0]), float(unit[2] - world_m(0.0, 0.0)[2]))
+    offset = _clear_start_offset_m(plant, aim, p)
+    assert offset > p.throw_offset_m
+    assert _clearance_m(plant, p) >= p.throw_clearance_m
+    rig.close()
 
 
 @pytest.fixture(scope="module")
@@ -70,6 +113,11 @@ def test_dynamic_tiny_reports_every_trial_and_the_convergence(tiny_dynamic: Dyna
     pen = r.at(TINY.timesteps_s[0], "pen")[0]
     assert not math.isnan(pen.first_contact_ms)
     assert pen.extremes.tension_n > 10.0
+    # with 0.5 ms contacts every trial stays within the goal (< 10 % of the object's radius)
+    # and no joint passes its limit by more than a few degrees (the 72° run started inside the hook)
+    for run in r.runs:
+        assert run.extremes.penetration_ratio < 0.1
+        assert math.degrees(run.extremes.limit_overshoot_rad) < 5.0
 
 
 def test_sensitivity_variants_change_one_parameter_each() -> None:
