@@ -139,13 +139,15 @@ def packing_measure(
 def dynamic_measure(
     design: SpiralDesign, model: ModelConfig, size: str, seed: int, jobs: int
 ) -> dict[str, Any]:
-    """Fig. S11 on the 45 cm arm (whatever ``design`` is), at the 1 ms step only, throws with cable 0 held
-    at length (the paper's setup)."""
+    """Fig. S11 on the 45 cm arm (whatever ``design`` is), at the dynamic experiment's first step only
+    (0.25 ms with 0.5 ms contacts: where its penetration meets the goal), throws with cable 0 held at length
+    (the paper's setup)."""
+    first = DynamicParams().timesteps_s[:1]
     params = sized(
         size,
-        dataclasses.replace(TINY, timesteps_s=(0.001,), holds=("length",)),
-        DynamicParams(throw_positions=3, timesteps_s=(0.001,), holds=("length",)),
-        DynamicParams(timesteps_s=(0.001,), holds=("length",)),
+        dataclasses.replace(TINY, timesteps_s=first, holds=("length",)),
+        DynamicParams(throw_positions=3, timesteps_s=first, holds=("length",)),
+        DynamicParams(timesteps_s=first, holds=("length",)),
     )
     r = dynamic(params, seed, None, jobs, model)
     d = r.as_dict()
