@@ -181,6 +181,10 @@ class GraspConfig:
         contact_decel_tau_us: low-pass time constant of that deceleration.
         contact_wrap_m_per_s: contact when the wrap-side cables pay out faster than this while the
             pack side has slowed (the object pushes the coil's outer face back); 0 = rule off.
+        contact_rest_m: contact when, after the reach ramp, the pack-side cable has stayed still for
+            ``contact_dwell_us`` having paid out less than this since the reach began (the arm came to
+            rest against something short of its free unroll: 65 mm on the prototype from the 18 N pack);
+            0 = rule off.
         reach_timeout_us: FAILED when no contact within this time after the reach starts.
         release_dwell_us: time spent uncurled after a release before re-packing (IDLE).
         hold_length: HOLD freezes the pulling cables' length (``controller.lengthhold``) instead of
@@ -206,6 +210,7 @@ class GraspConfig:
     contact_decel_m_per_s2: float = 1.0  # the free arm slows at up to 0.66 m/s² after the ramp (prototype)
     contact_decel_tau_us: int = 10_000
     contact_wrap_m_per_s: float = 0.0
+    contact_rest_m: float = 0.06
     reach_timeout_us: int = 4_000_000
     release_dwell_us: int = 500_000
     hold_length: bool = False
@@ -362,6 +367,7 @@ class FirmwareConfig:
         _require(
             "grasp_contact_wrap_m_per_s", 0.0 <= v["grasp_contact_wrap_m_per_s"] <= 10.0, "must be 0..10"
         )
+        _require("grasp_contact_rest_m", 0.0 <= v["grasp_contact_rest_m"] <= 10.0, "must be 0..10 m")
         for name in (
             "grasp_contact_dwell_us",
             "grasp_contact_grace_us",
@@ -520,6 +526,7 @@ PARAM_FIELDS: dict[str, str] = {
     "GRASP_DECEL_TAU": "grasp_contact_decel_tau_us",
     "GRASP_WRAP_M_S": "grasp_contact_wrap_m_per_s",
     "PAYIN_MAX_M_S": "payin_limit_m_per_s",
+    "GRASP_REST_M": "grasp_contact_rest_m",
 }
 """Wire name (at most 16 ASCII characters, MAVLink ``param_id`` style) -> flat ``FirmwareConfig`` field."""
 
