@@ -25,6 +25,14 @@ divided by the gear ratio into the output angle, and times r gives the cable pai
 feedback. The measured current times K_t / r estimates the tension (the same constant the plant must
 use).
 
+**Speed governor** (:meth:`MotorModel.govern`, the output stage of every mode): a spool carries about
+1.3 kg of reflected rotor inertia, so a slack cable reeled in fast snaps taut with ``v·sqrt(k·m)`` of
+tension (0.5 m/s on a 48 kN/m cable: about 125 N; a slack cable under 20 N reels in at metres per
+second). While a cable reels in faster than ``payin_limit_m_per_s`` (from the unfiltered rotor speed:
+the filter's lag would let the spool run away) its tension is cut back toward the pretension,
+linearly, down to it at twice that speed: a slack cable is reeled in slowly and snaps taut gently,
+and a curl that pays cable in faster is slowed to about that speed.
+
 Sign convention: with ``motor_signs[i] = +1`` a positive current reels cable ``i`` in (raises its
 tension) and the rotor angle increases while reeling in; ``-1`` mirrors a motor.
 """
@@ -219,6 +227,8 @@ class MotorModel:
         self.cable_length_m = [0.0] * n
         self.cable_speed_m_s = [0.0] * n
         self.tension_est_n = [0.0] * n
+        self.governed_n = [0.0] * n
+        """The tensions after the speed governor (:meth:`govern`, written in place)."""
         self.configure(config)
 
     def configure(self, config: FirmwareConfig) -> None:
@@ -233,6 +243,29 @@ class MotorModel:
         self._m_per_count = r * 2.0 * math.pi / (ANGLE_COUNTS * motor.gear_ratio)
         self._m_s_per_rpm = r * 2.0 * math.pi / (60.0 * motor.gear_ratio)
         self._tau_us = motor.speed_filter_tau_us
+        self._payin_limit_m_s = motor.payin_limit_m_per_s
+        self._pretension_n = config.mapping.pretension_n
+
+    def govern(self, tensions_n: Sequence[float]) -> list[float]:
+        """The speed governor: ``tensions_n`` with each fast-reeling cable's tension cut (module notes).
+
+        A cable reeling in at ``v`` above the limit ``L`` gets ``pretension + (T - pretension)·(2 - v/L)``
+        (not below the pretension, never above ``T``). Written into :attr:`governed_n`, which is returned.
+        """
+        out = self.governed_n
+        limit = self._payin_limit_m_s
+        pre = self._pretension_n
+        k = self._m_s_per_rpm
+        signs = self._signs
+        rpm = self.speed_rpm
+        for i in range(MOTOR_COUNT):
+            t = tensions_n[i]
+            v = signs[i] * rpm[i] * k
+            if v > limit and t > pre:
+                f = 2.0 - v / limit
+                t = pre + (t - pre) * f if f > 0.0 else pre
+            out[i] = t
+        return out
 
     def tension_to_raw(self, index: int, tension_n: float) -> int:
         """Raw C610 current for cable ``index`` (0-based) to pull ``tension_n`` (< 0 treated as 0).

@@ -70,6 +70,13 @@ class MotorDriveConfig:
         motor_signs: +1 if a positive current reels the cable in (raises tension) on that motor, -1 if
             the motor is mounted mirrored.
         speed_filter_tau_us: low-pass time constant of the cable speed used for contact detection.
+        payin_limit_m_per_s: the speed governor (every mode, after the mapping, slew and length-hold):
+            while a cable reels in faster than this (from the rotor speed) its tension is cut back toward
+            the pretension, linearly, reaching it at twice this speed. A spool carries about 1.3 kg of
+            reflected rotor inertia; reeling a slack cable in at the M2006's no-load speed (0.5 m/s) and
+            stopping it on a taut cable (about 48 kN/m) gives ``v·sqrt(k·m)`` ≈ 125 N, a third of a
+            0.5 mm Dyneema line's breaking load (300-400 N). 0.1 m/s: random DIRECT tensions (<= 20 N,
+            30 s) peak at 242 N instead of 689 N; the 45 cm arm's 3 A step meets the pen 21 ms later.
     """
 
     spool_radius_m: float = 0.010
@@ -78,6 +85,7 @@ class MotorDriveConfig:
     current_limit_a: float = 3.0
     motor_signs: tuple[int, int, int] = (1, 1, 1)
     speed_filter_tau_us: int = 20_000
+    payin_limit_m_per_s: float = 0.1
 
     @property
     def current_limit_raw(self) -> int:
@@ -173,6 +181,10 @@ class GraspConfig:
         contact_decel_tau_us: low-pass time constant of that deceleration.
         contact_wrap_m_per_s: contact when the wrap-side cables pay out faster than this while the
             pack side has slowed (the object pushes the coil's outer face back); 0 = rule off.
+        contact_rest_m: contact when, after the reach ramp, the pack-side cable has stayed still for
+            ``contact_dwell_us`` having paid out less than this since the reach began (the arm came to
+            rest against something short of its free unroll: 65 mm on the prototype from the 18 N pack);
+            0 = rule off.
         reach_timeout_us: FAILED when no contact within this time after the reach starts.
         release_dwell_us: time spent uncurled after a release before re-packing (IDLE).
         hold_length: HOLD freezes the pulling cables' length (``controller.lengthhold``) instead of
@@ -198,6 +210,7 @@ class GraspConfig:
     contact_decel_m_per_s2: float = 1.0  # the free arm slows at up to 0.66 m/s² after the ramp (prototype)
     contact_decel_tau_us: int = 10_000
     contact_wrap_m_per_s: float = 0.0
+    contact_rest_m: float = 0.06
     reach_timeout_us: int = 4_000_000
     release_dwell_us: int = 500_000
     hold_length: bool = False
@@ -354,6 +367,7 @@ class FirmwareConfig:
         _require(
             "grasp_contact_wrap_m_per_s", 0.0 <= v["grasp_contact_wrap_m_per_s"] <= 10.0, "must be 0..10"
         )
+        _require("grasp_contact_rest_m", 0.0 <= v["grasp_contact_rest_m"] <= 10.0, "must be 0..10 m")
         for name in (
             "grasp_contact_dwell_us",
             "grasp_contact_grace_us",
@@ -378,6 +392,7 @@ class FirmwareConfig:
             _require(name, 0.0 <= v[name] <= 10.0, "must be 0..10 m/s")
         _require("hold_speed_imax_n", 0.0 <= v["hold_speed_imax_n"] <= 1000.0, "must be 0..1000 N")
         _require("speed_filter_tau_us", 0 <= v["speed_filter_tau_us"] <= 10_000_000, "must be 0..10 s")
+        _require("payin_limit_m_per_s", 0.0 < v["payin_limit_m_per_s"] <= 10.0, "must be in (0, 10] m/s")
         _require("event_queue_len", 1 <= v["event_queue_len"] <= 4096, "must be 1..4096")
 
     @classmethod
@@ -510,6 +525,8 @@ PARAM_FIELDS: dict[str, str] = {
     "GRASP_DECEL_M_S2": "grasp_contact_decel_m_per_s2",
     "GRASP_DECEL_TAU": "grasp_contact_decel_tau_us",
     "GRASP_WRAP_M_S": "grasp_contact_wrap_m_per_s",
+    "PAYIN_MAX_M_S": "payin_limit_m_per_s",
+    "GRASP_REST_M": "grasp_contact_rest_m",
 }
 """Wire name (at most 16 ASCII characters, MAVLink ``param_id`` style) -> flat ``FirmwareConfig`` field."""
 
@@ -583,6 +600,7 @@ _FLAT_ORDER = (
     "stick_deadband",
     *(f"grasp_{f.name}" for f in dataclasses.fields(GraspConfig)),
     "speed_filter_tau_us",
+    "payin_limit_m_per_s",
     "event_queue_len",
     *(f"hold_{f.name}" for f in dataclasses.fields(HoldConfig)),
 )

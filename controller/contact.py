@@ -13,6 +13,12 @@ tension ramps down and the coil rolls out toward the object, paying the pack-sid
   deceleration of the pay-out above ``grasp_contact_decel_m_per_s2`` (from the low-pass filtered
   speed, so a single frame's noise does not trigger it) while the arm still moves faster than the
   stall speed is contact. This is the late contact (arm moving fast) the stall rule missed.
+- **At rest short of the unroll** (after the ramp): an arm that comes to rest against an object after
+  the ramp has ended is not moving when it meets it, so no speed rule sees it. But a free arm unrolls
+  all the way: its pack-side cable pays out the packed-to-straight length (65 mm on the prototype from
+  the 18 N pack). An arm whose pack-side cable has stayed still (below the stall speed) for the dwell
+  time after the ramp, having paid out less than ``grasp_contact_rest_m`` since the reach began, has
+  met something. The pay-out is the filtered speed integrated (the low-pass keeps the integral).
 - **The wrap-side cables** (opposite the pack side) went slack while the arm unrolled; a contact on
   the coil's outer face pushes the arm back and makes them pay out: their pay-out above
   ``grasp_contact_wrap_m_per_s`` while the pack side has slowed (below its peak's slow ratio) is
@@ -36,13 +42,16 @@ class ContactDetector:
     Attributes:
         peak_payout_m_s: fastest pack-side pay-out seen since :meth:`reset`.
         decel_m_s2: low-pass filtered pack-side pay-out deceleration.
-        reason: which rule fired last (``""`` before any): ``"stall"``, ``"decel"`` or ``"wrap"``.
+        paid_out_m: pack-side cable paid out since :meth:`reset` (the pay-out speed integrated).
+        reason: which rule fired last (``""`` before any): ``"stall"``, ``"decel"``, ``"rest"`` or
+            ``"wrap"``.
     """
 
     def __init__(self, config: FirmwareConfig) -> None:
         """Create the detector (call :meth:`reset` at the start of each reach)."""
         self.peak_payout_m_s = 0.0
         self.decel_m_s2 = 0.0
+        self.paid_out_m = 0.0
         self.reason = ""
         self._t0_us = 0
         self._stall_since_us = -1
@@ -60,12 +69,14 @@ class ContactDetector:
         self._min_tension_n = g.contact_min_tension_n
         self._decel_m_s2 = g.contact_decel_m_per_s2
         self._wrap_m_s = g.contact_wrap_m_per_s
+        self._rest_m = g.contact_rest_m
         self._tau_us = float(g.contact_decel_tau_us)
 
     def reset(self, now_us: int) -> None:
         """Start a reach at ``now_us``."""
         self.peak_payout_m_s = 0.0
         self.decel_m_s2 = 0.0
+        self.paid_out_m = 0.0
         self.reason = ""
         self._t0_us = now_us
         self._stall_since_us = -1
@@ -99,6 +110,7 @@ class ContactDetector:
         if payout > peak:
             peak = self.peak_payout_m_s = payout
         if dt_us > 0:
+            self.paid_out_m += payout * dt_us * 1e-6
             raw = (self._prev_payout_m_s - payout) * 1e6 / dt_us
             self.decel_m_s2 += (raw - self.decel_m_s2) * (dt_us / (self._tau_us + dt_us))
         self._prev_payout_m_s = payout
@@ -118,11 +130,13 @@ class ContactDetector:
         if self._wrap_m_s > 0.0 and slowed and -wrap_speed_m_s > self._wrap_m_s:
             self.reason = "wrap"
             return True
-        if ramping and slowed:
+        # after the ramp: at rest short of the free arm's unroll (0 = rule off)
+        resting = not ramping and payout < stall and self.paid_out_m < self._rest_m
+        if (ramping and slowed) or resting:
             if self._stall_since_us < 0:
                 self._stall_since_us = now_us
             elif now_us - self._stall_since_us >= self._dwell_us:
-                self.reason = "stall"
+                self.reason = "stall" if ramping else "rest"
                 return True
         else:
             self._stall_since_us = -1

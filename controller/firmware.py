@@ -22,6 +22,9 @@ simulated time after every 1 ms plant step. Tasks receive ``now_us`` and never r
 Safety rules (see ``controller.failsafe``): no current before the start-up gate; zero current on the
 first tick after RC (30 ms), a motor (10 ms) or a required host heartbeat is lost, on E-stop, and in
 SAFE mode. Invalid RC frames are counted and never acted on.
+The speed governor (``MotorModel.govern``) is the last stage before the currents in every mode: a
+cable reeling in faster than ``payin_limit_m_per_s`` has its tension cut back toward the pretension,
+so a slack cable snaps taut gently.
 """
 
 from __future__ import annotations
@@ -365,7 +368,11 @@ class Firmware:
         hold = self.hold
         if hold.count:  # only after the SAFE return above: a failsafe always wins over a hold
             hold.step(dt, tensions)
-        self.commanded_currents = self.bus.send_currents(self.motors.tensions_to_raw(tensions, self._raw))
+        motors = self.motors
+        # the speed governor last: it caps whatever mode, slew or length-hold asked for (safety)
+        self.commanded_currents = self.bus.send_currents(
+            motors.tensions_to_raw(motors.govern(tensions), self._raw)
+        )
 
     def _task_detect(self, now_us: int) -> None:
         fs = self.failsafe

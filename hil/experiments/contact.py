@@ -47,7 +47,11 @@ from .rig import contact_units, world_m
 from .stats import bootstrap_interval, wilson_interval
 from .strategy import TINY, StrategyParams, placements
 
-OLD_DETECTOR = {"grasp_contact_decel_m_per_s2": 0.0, "grasp_contact_wrap_m_per_s": 0.0}
+OLD_DETECTOR = {
+    "grasp_contact_decel_m_per_s2": 0.0,
+    "grasp_contact_wrap_m_per_s": 0.0,
+    "grasp_contact_rest_m": 0.0,
+}
 """The parameters that turn the new rules off: what is left is the stall-only detector it replaces."""
 
 

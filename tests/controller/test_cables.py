@@ -176,3 +176,33 @@ def test_measured_current_estimates_tension_and_speed_is_filtered() -> None:
     m2.update(0, fb(0, speed=0), 0)
     m2.update(0, fb(0, speed=3600), 1000)
     assert 0 < m2.cable_speed_m_s[0] < m.cable_speed_m_s[0] / 10
+
+
+def _reeling_in(m: MotorModel, index: int, speed_m_s: float) -> None:
+    """Feed motor ``index`` a frame with the rotor turning so its cable reels in at ``speed_m_s``."""
+    cfg = FirmwareConfig()
+    rpm = round(speed_m_s * 60.0 * cfg.motor.gear_ratio / (2.0 * math.pi * cfg.motor.spool_radius_m))
+    m.update(index, fb(0, rpm), 1000)
+
+
+def test_governor_leaves_slow_cables_and_cuts_fast_reeling_ones_toward_the_pretension() -> None:
+    cfg = FirmwareConfig().replaced(payin_limit_m_per_s=0.2, pretension_n=0.5)
+    m = MotorModel(cfg)
+    _reeling_in(m, 0, 0.1)  # below the limit: untouched
+    _reeling_in(m, 1, 0.3)  # halfway between the limit and twice it: half the excess over the pretension
+    _reeling_in(m, 2, 0.5)  # past twice the limit: the pretension
+    out = m.govern([10.0, 10.5, 10.0])
+    assert out is m.governed_n
+    assert out[0] == 10.0
+    assert out[1] == pytest.approx(0.5 + 10.0 * 0.5, rel=1e-3)
+    assert out[2] == 0.5
+    # paying out fast (the arm pulls the cable) is never cut; nor is a cable already at the pretension
+    _reeling_in(m, 0, -1.0)
+    _reeling_in(m, 1, 1.0)
+    assert m.govern([10.0, 0.5, 0.0]) == [10.0, 0.5, 0.0]
+
+
+def test_governor_follows_a_mirrored_motor() -> None:
+    m = MotorModel(FirmwareConfig().replaced(motor_signs=(1, -1, 1), payin_limit_m_per_s=0.2))
+    _reeling_in(m, 1, -1.0)  # rotor turns backwards: on the mirrored motor that reels in
+    assert m.govern([10.0, 10.0, 10.0])[1] == 0.5

@@ -5,6 +5,8 @@ Every "lost" must give zero current on the first tick after the timeout expires,
 
 from __future__ import annotations
 
+import math
+
 from controller_harness import Rig, frame
 
 from controller.config import FirmwareConfig
@@ -316,3 +318,37 @@ def test_arm_blocker_names_what_holds_the_gate() -> None:
     assert fs.arm_blocker() == ArmBlocker.NONE
     fs.estop(4_000)
     assert fs.arm_blocker() == ArmBlocker.ESTOP_LATCHED
+
+
+# --- speed governor -------------------------------------------------------------------------------
+
+
+def _slack_cable_snap(payin_limit_m_per_s: float) -> tuple[float, float]:
+    """Reel 50 mm of slack in on every cable under a full MANUAL curl; the cables' largest tension and
+    pay-in speed. The fake drives carry the M2006's 1.3 kg of reflected inertia on a stiff cable."""
+    rig = Rig(FirmwareConfig().replaced(payin_limit_m_per_s=payin_limit_m_per_s))
+    for motor in rig.bus.trio.motors:
+        motor.k = 48_000.0  # N/m: a 0.5 mm UHMWPE cable about 0.25 m long
+        motor.j = 1.3 * motor.r**2  # 1.3 kg at the cable
+        motor.b = 5.0 * motor.r**2  # 5 N·s/m at the cable: the drive's 1 N of friction at 0.2 m/s
+        motor.angle_out_rad = -0.05 / motor.r  # 50 mm slack
+    rig.arm()
+    rig.set_rc(frame(right=Lever.MIDDLE, ch3=660))
+    peak_n = peak_m_s = 0.0
+    for _ in range(1500):
+        rig.tick()
+        for motor in rig.bus.trio.motors:
+            peak_n = max(peak_n, motor.cable_tension_n)
+            peak_m_s = max(peak_m_s, motor.speed_out_rad_s * motor.r)
+    return peak_n, peak_m_s
+
+
+def test_governor_a_slack_cable_is_reeled_in_slowly_and_snaps_taut_gently() -> None:
+    off_n, off_m_s = _slack_cable_snap(10.0)  # above any speed the drive reaches: no governing
+    limit_m_s = FirmwareConfig().motor.payin_limit_m_per_s
+    on_n, on_m_s = _slack_cable_snap(limit_m_s)
+    assert off_m_s > 0.5 and off_n > 100.0  # without it: v·sqrt(k·m) of a spool run up by 8.5 N
+    assert 0.0 < on_m_s < 2 * limit_m_s  # the cut reaches the pretension at twice the limit
+    assert on_n > 0.0  # the slack was taken in
+    # it snaps taut at most at twice the limit: v·sqrt(k·m), plus the 8.5 N the curl asked for
+    assert on_n < 0.5 * off_n and on_n < 2 * limit_m_s * math.sqrt(48_000.0 * 1.3) + 8.5
