@@ -113,16 +113,18 @@ def packing(
             t_cmd = pretension + (p.tension_end_n - pretension) * min(1.0, k / ramp_ms)
             rig.set_tensions([t_cmd, pretension, pretension])
         rig.step()
-        commanded = rig.firmware.tensions_n[0]
+        # The cable's true tension at the spool, not the firmware's command: an actuator that cannot
+        # deliver the command (the authors' 5 N muscles) must not be credited with it.
+        tension = float(plant.cable_tensions_n()[0])
         angles = np.abs(plant.joint_angles_rad())
         now_closed = angles >= limit
         newly = now_closed & np.isnan(closed_at)
-        closed_at[newly] = commanded
+        closed_at[newly] = tension
         if k % 20 == 0:
-            ramp_t.append(commanded)
+            ramp_t.append(tension)
             closed_n.append(int(now_closed.sum()))
         if math.isnan(pack_t) and now_closed.all():
-            pack_t = commanded
+            pack_t = tension
             pack_i = abs(plant.commanded_currents_raw()[0]) / 1000.0
         if progress is not None and k % 100 == 0:
             progress(k, total)
