@@ -45,10 +45,13 @@ from protocol.messages import (
     truncate_utf8,
 )
 
-__all__ = ["ACK_TEXT_MAX", "CommandServer", "GraspAcks", "Params"]
+__all__ = ["ACK_TEXT_MAX", "PARAM_VALUES_PER_TICK", "CommandServer", "GraspAcks", "Params"]
 
 ACK_TEXT_MAX = 48
 """Longest ``CommandAck`` text the board sends (bytes)."""
+PARAM_VALUES_PER_TICK = 4
+"""``ParamValue`` answers to a list-all request sent per ``link_rx`` tick (the whole list in 11 ms): a
+flood of list requests costs one bounded slice of each tick, as MAVLink streams its parameter list."""
 
 
 class Params:
@@ -139,6 +142,9 @@ class GraspAcks:
 class CommandServer:
     """The ``link_rx`` task's body: host messages in, answers out.
 
+    A list-all ``ParamRequest`` is answered :data:`PARAM_VALUES_PER_TICK` values per tick, starting with
+    the next tick's :meth:`serve`; a new list request restarts the list.
+
     Attributes:
         virtual_rc_ignored: ``VirtualRc`` frames received while the radio is the RC source.
     """
@@ -170,7 +176,8 @@ class CommandServer:
         self._acks = acks
         self._events = events
         self.virtual_rc_ignored = 0
-        link.stream.undecodable = self._unsupported_command
+        self._list_next = -1  # index of the next ParamValue of a list-all answer, -1 when none is due
+        link.undecodable = self._unsupported_command
 
     def serve(self, now_us: int) -> None:
         """Send the owed acks, then answer every frame received since the last call."""
@@ -180,8 +187,19 @@ class CommandServer:
             for msg in pending:
                 link.send(msg)
             pending.clear()
+        if self._list_next >= 0:
+            self._list_some()
         for seq, msg in link.receive():  # undecodable frames go to _unsupported_command
             self._dispatch(link, now_us, seq, msg)
+
+    def _list_some(self) -> None:
+        start = self._list_next
+        stop = min(start + PARAM_VALUES_PER_TICK, len(PARAMS))
+        config = self._params.config
+        for index in range(start, stop):
+            name = PARAMS[index]
+            self.link.send(ParamValue(index, len(PARAMS), name, config.get_param(name)))
+        self._list_next = stop if stop < len(PARAMS) else -1
 
     def _dispatch(self, link: BoardLink, now_us: int, seq: int, msg: Message) -> None:
         if isinstance(msg, Heartbeat):
@@ -202,8 +220,7 @@ class CommandServer:
                 link.send(ParamValue(PARAMS.index(msg.name), len(PARAMS), msg.name, value))
             else:
                 self._events.push(now_us, EventKind.PARAM, -1, msg.value, f"unknown parameter {msg.name}")
-        else:  # a board -> host message sent to the board
-            link.misdirected += 1
+        # board -> host messages never get here: the board's parser refuses their ids
 
     def _unsupported_command(self, frame: LinkFrame) -> None:
         if frame.cmd_id == Command.CMD_ID and len(frame.payload) == Command.FORMAT.size:
@@ -214,8 +231,10 @@ class CommandServer:
     def _param_request(self, req: ParamRequest) -> None:
         count = len(PARAMS)
         if req.index == PARAM_LIST_ALL:
-            names: Sequence[str] = PARAMS
-        elif req.index == PARAM_INDEX_BY_NAME:
+            self._list_next = 0
+            return
+        names: Sequence[str]
+        if req.index == PARAM_INDEX_BY_NAME:
             names = (req.name,) if req.name in PARAM_FIELDS else ()
         else:
             names = (PARAMS[req.index],) if req.index < count else ()

@@ -108,3 +108,52 @@ def test_board_process_reports_a_busy_port() -> None:
             pytest.raises(HilError, match="failed to start"),
         ):
             board.start(timeout_s=60)
+
+
+def test_long_header_does_not_stall_a_realtime_board() -> None:
+    """Issue 18: ``A5 F4 01 <seq> <crc8>`` (a valid header announcing 500 bytes) once froze link input for
+    238 ms and latched RC_LOST. The board now refuses it as soon as it reads the id that follows."""
+    from protocol.link import SOF, crc8
+    from protocol.messages import Event, EventKind, RawRc
+
+    head = bytes([SOF, 0xF4, 0x01, 0x33])
+    header = head + bytes([crc8(head)])
+    marked = RcFrame((7, 0, 0, 0), Lever.DOWN, Lever.DOWN).pack()  # the first RC frame after the header
+    with VirtualBoardProcess(listen="socket://127.0.0.1:0", fifo=False) as board:
+        url = board.start(timeout_s=60)
+        port = serial.serial_for_url(url, timeout=0)
+        parser = LinkParser()
+        telemetry: list[Telemetry] = []
+        phases: list[int] = []
+        raw: list[bytes] = []
+        injected_at = -1
+        try:
+            seq = 0
+            deadline = time.monotonic() + 20.0
+            while time.monotonic() < deadline:
+                ok_since = next((i for i, m in enumerate(telemetry) if m.phase == Phase.OK), None)
+                if injected_at < 0 and ok_since is not None and len(telemetry) - ok_since > 30:
+                    injected_at = len(telemetry)
+                    port.write(header)
+                    data = marked
+                else:
+                    data = RcFrame.neutral().pack()
+                port.write(encode(VirtualRc(data), seq) + encode(Heartbeat(seq, seq), seq + 1))
+                seq = (seq + 2) & 0xFF
+                for f in parser.feed(port.read(65536)):
+                    msg = decode(f)
+                    if isinstance(msg, Telemetry):
+                        telemetry.append(msg)
+                    elif isinstance(msg, Event) and msg.kind == EventKind.PHASE:
+                        phases.append(msg.code)
+                    elif isinstance(msg, RawRc):
+                        raw.append(msg.data)
+                if injected_at >= 0 and len(telemetry) > injected_at + 100:  # about 1 s after it
+                    break
+                time.sleep(0.01)
+        finally:
+            port.close()
+    assert injected_at >= 0, "the board never passed the gate"
+    assert marked in raw  # the frame right after the header was taken
+    assert Phase.RC_LOST not in phases
+    assert all(m.phase == Phase.OK for m in telemetry[injected_at:])
