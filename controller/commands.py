@@ -14,7 +14,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from controller.cables import CableMapper
-from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig
+from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig, runtime_refusal
 from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
@@ -57,32 +57,46 @@ flood of list requests costs one bounded slice of each tick, as MAVLink streams 
 class Params:
     """The runtime configuration and the one way to change it.
 
+    A refused value leaves the old one in force (the ``ParamValue`` answer carries it) and logs a PARAM
+    event ``rejected: <why>``: a value :meth:`FirmwareConfig.validate` refuses, a hardware ceiling, or a
+    safety parameter (``SAFETY_PARAMS``) set outside SAFE (:func:`~controller.config.runtime_refusal`).
+
     Args:
         config: the start-up configuration.
         events: where accepted and rejected changes are logged.
         apply: hands a new configuration to every component (called on each accepted change).
+        safe: True while no current can flow (mode SAFE): safety parameters may change.
     """
 
     def __init__(
-        self, config: FirmwareConfig, events: EventQueue, apply: Callable[[FirmwareConfig], None]
+        self,
+        config: FirmwareConfig,
+        events: EventQueue,
+        apply: Callable[[FirmwareConfig], None],
+        safe: Callable[[], bool],
     ) -> None:
         """Hold ``config`` (already applied by the caller)."""
         self.config = config
         self._events = events
         self._apply = apply
+        self._safe = safe
 
     def set(self, now_us: int, name: str, value: float) -> float:
-        """Set a runtime parameter (wire name) if valid; return the value in force afterwards.
+        """Set a runtime parameter (wire name) if valid and allowed now; return the value in force afterwards.
 
         Raises:
-            ConfigError: unknown name (an invalid value is not an error: the old value stays).
+            ConfigError: unknown name (an invalid or refused value is not an error: the old value stays).
         """
         if name not in PARAM_FIELDS:
             raise ConfigError(f"unknown parameter {name!r}")
-        try:
-            new = self.config.with_param(name, value)
-        except ConfigError as exc:
-            self._events.push(now_us, EventKind.PARAM, PARAMS.index(name), value, f"rejected: {exc}")
+        why = runtime_refusal(self.config, name, value, self._safe())
+        if why is None:
+            try:
+                new = self.config.with_param(name, value)
+            except ConfigError as exc:
+                why = str(exc)
+        if why is not None:
+            self._events.push(now_us, EventKind.PARAM, PARAMS.index(name), value, f"rejected: {why}")
             return self.config.get_param(name)
         self.config = new
         self._apply(new)

@@ -105,7 +105,7 @@ class Firmware:
         self.modes = ModeSelector(
             config, self.failsafe, self.grasp, self.mapper, self.motors, self.hold, self.events, self.acks
         )
-        self.params = Params(config, self.events, self._apply_config)
+        self.params = Params(config, self.events, self._apply_config, self._disarmed)
         self._apply_config(config)
         self.commands = (
             CommandServer(
@@ -316,8 +316,13 @@ class Firmware:
 
     # --- configuration ----------------------------------------------------------------------------
 
+    def _disarmed(self) -> bool:
+        """Safety parameters may change: SAFE, zero current (``Params``)."""
+        return self.modes.mode is _SAFE
+
     def _apply_config(self, config: FirmwareConfig) -> None:
         self.failsafe.configure(config)
+        self.modes.configure(config)
         self.motors.configure(config)
         self.mapper.configure(config)
         self.slew.configure(config)
@@ -327,6 +332,8 @@ class Firmware:
 
     def set_param(self, now_us: int, name: str, value: float) -> float:
         """Set a runtime parameter (wire name) if valid; return the value in force afterwards.
+
+        Safety parameters (``controller.config.SAFETY_PARAMS``) change only in SAFE, as by ``ParamSet``.
 
         Raises:
             ConfigError: unknown name (an invalid value is not an error: the old value stays).
