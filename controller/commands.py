@@ -191,6 +191,7 @@ class CommandServer:
         self._events = events
         self.virtual_rc_ignored = 0
         self._list_next = -1  # index of the next ParamValue of a list-all answer, -1 when none is due
+        self._link_changes = link.link_changes
         link.undecodable = self._unsupported_command
 
     def serve(self, now_us: int) -> None:
@@ -203,8 +204,19 @@ class CommandServer:
             pending.clear()
         if self._list_next >= 0:
             self._list_some()
-        for seq, msg in link.receive():  # undecodable frames go to _unsupported_command
+        received = link.receive()  # undecodable frames go to _unsupported_command
+        if link.link_changes != self._link_changes:
+            self._link_lost(now_us)
+        for seq, msg in received:
             self._dispatch(link, now_us, seq, msg)
+
+    def _link_lost(self, now_us: int) -> None:
+        """A host connected or went away: nothing a host set survives it (DIRECT, its length-holds)."""
+        self._link_changes = self.link.link_changes
+        self._modes.reset_direct()
+        self._hold.release_host()
+        self._list_next = -1
+        self._events.push(now_us, EventKind.INFO, 2, 0.0, "host link changed: DIRECT and holds reset")
 
     def _list_some(self) -> None:
         start = self._list_next

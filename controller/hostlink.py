@@ -47,6 +47,9 @@ class BoardLink:
         rx_bytes_dropped: bytes read but not parsed (over the byte budget).
         rx_frames_dropped: intact frames not handled (over the frame budget).
         rx_over_budget: :meth:`receive` calls that dropped anything.
+        link_changes: host connections made or lost as the transport saw them (``peer_changes``); at
+            each the partial frame of the old host is dropped, and the command server resets what a
+            host set (DIRECT tensions, length-holds).
     """
 
     def __init__(
@@ -73,6 +76,8 @@ class BoardLink:
         self.rx_bytes_dropped = 0
         self.rx_frames_dropped = 0
         self.rx_over_budget = 0
+        self.link_changes = 0
+        self._peer_changes = transport.peer_changes
         self._frames_left = rx_frames_per_tick
         self._seq = 0
 
@@ -93,7 +98,12 @@ class BoardLink:
 
     def receive(self) -> Sequence[Received]:
         """``(seq, message)`` of the messages received since the last call, within the tick's budget."""
-        data = self.transport.read()
+        transport = self.transport
+        data = transport.read()
+        if transport.peer_changes != self._peer_changes:
+            self._peer_changes = transport.peer_changes
+            self.link_changes += 1
+            self.stream.reset()  # a new host starts on a frame boundary
         if not data:
             return _NOTHING  # the idle tick (most of them) allocates nothing
         budget = self.rx_bytes_per_tick

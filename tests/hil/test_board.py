@@ -157,3 +157,55 @@ def test_long_header_does_not_stall_a_realtime_board() -> None:
     assert marked in raw  # the frame right after the header was taken
     assert Phase.RC_LOST not in phases
     assert all(m.phase == Phase.OK for m in telemetry[injected_at:])
+
+
+def test_link_loss_resets_direct_on_a_tcp_board() -> None:
+    """Issue 18: a new client that re-armed and only selected DIRECT got the last session's tensions."""
+    import socket
+
+    from controller.config import FirmwareConfig
+    from controller.firmware import Firmware
+    from controller.motorbus import FakeMotorBus
+    from controller.rc import LinkRcSource
+    from hil.transports import TcpServerTransport
+    from protocol.messages import Command, CommandCode, Mode
+
+    config = FirmwareConfig()
+    transport = TcpServerTransport()
+    fw = Firmware(config, FakeMotorBus(), LinkRcSource(), transport)
+    now = [0]
+
+    def tick(ms: int) -> None:
+        for _ in range(ms):
+            fw.run_due(now[0])
+            now[0] += 1000
+
+    host, port = transport.url.removeprefix("socket://").rsplit(":", 1)
+    try:
+        client = socket.create_connection((host, int(port)), timeout=2)
+        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # no Nagle wait behind a small frame
+        seq = 0
+
+        def send(*msgs: object) -> None:
+            nonlocal seq
+            for msg in msgs:
+                client.sendall(encode(msg, seq))  # type: ignore[arg-type]
+                seq = (seq + 1) & 0xFF
+            time.sleep(0.01)  # loopback delivery
+            tick(1)
+
+        send(VirtualRc(RcFrame.neutral().pack()), Heartbeat(0, 0))
+        tick(5)
+        middle = RcFrame((0, 0, 0, 0), Lever.MIDDLE, Lever.DOWN).pack()
+        send(VirtualRc(middle), Heartbeat(1, 1))
+        send(Command(CommandCode.SET_MODE, (float(Mode.DIRECT), 0.0, 0.0)))
+        send(Command(CommandCode.SET_TENSIONS, (10.0, 10.0, 10.0)), VirtualRc(middle))
+        assert fw.mode == Mode.DIRECT and fw.direct_tensions_n == [10.0] * 3
+        client.close()
+        time.sleep(0.01)
+        tick(1)
+        assert fw.direct_tensions_n == [config.mapping.pretension_n] * 3
+        assert not fw.modes.direct_requested
+        assert fw.link is not None and fw.link.link_changes == 2  # connected, then lost
+    finally:
+        transport.close()
