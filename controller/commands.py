@@ -14,7 +14,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from controller.cables import CableMapper
-from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig
+from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig, runtime_refusal
 from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
@@ -45,41 +45,58 @@ from protocol.messages import (
     truncate_utf8,
 )
 
-__all__ = ["ACK_TEXT_MAX", "CommandServer", "GraspAcks", "Params"]
+__all__ = ["ACK_TEXT_MAX", "PARAM_VALUES_PER_TICK", "CommandServer", "GraspAcks", "Params"]
 
 ACK_TEXT_MAX = 48
 """Longest ``CommandAck`` text the board sends (bytes)."""
+PARAM_VALUES_PER_TICK = 4
+"""``ParamValue`` answers to a list-all request sent per ``link_rx`` tick (the whole list in 11 ms): a
+flood of list requests costs one bounded slice of each tick, as MAVLink streams its parameter list."""
 
 
 class Params:
     """The runtime configuration and the one way to change it.
 
+    A refused value leaves the old one in force (the ``ParamValue`` answer carries it) and logs a PARAM
+    event ``rejected: <why>``: a value :meth:`FirmwareConfig.validate` refuses, a hardware ceiling, or a
+    safety parameter (``SAFETY_PARAMS``) set outside SAFE (:func:`~controller.config.runtime_refusal`).
+
     Args:
         config: the start-up configuration.
         events: where accepted and rejected changes are logged.
         apply: hands a new configuration to every component (called on each accepted change).
+        safe: True while no current can flow (mode SAFE): safety parameters may change.
     """
 
     def __init__(
-        self, config: FirmwareConfig, events: EventQueue, apply: Callable[[FirmwareConfig], None]
+        self,
+        config: FirmwareConfig,
+        events: EventQueue,
+        apply: Callable[[FirmwareConfig], None],
+        safe: Callable[[], bool],
     ) -> None:
         """Hold ``config`` (already applied by the caller)."""
         self.config = config
         self._events = events
         self._apply = apply
+        self._safe = safe
 
     def set(self, now_us: int, name: str, value: float) -> float:
-        """Set a runtime parameter (wire name) if valid; return the value in force afterwards.
+        """Set a runtime parameter (wire name) if valid and allowed now; return the value in force afterwards.
 
         Raises:
-            ConfigError: unknown name (an invalid value is not an error: the old value stays).
+            ConfigError: unknown name (an invalid or refused value is not an error: the old value stays).
         """
         if name not in PARAM_FIELDS:
             raise ConfigError(f"unknown parameter {name!r}")
-        try:
-            new = self.config.with_param(name, value)
-        except ConfigError as exc:
-            self._events.push(now_us, EventKind.PARAM, PARAMS.index(name), value, f"rejected: {exc}")
+        why = runtime_refusal(self.config, name, value, self._safe())
+        if why is None:
+            try:
+                new = self.config.with_param(name, value)
+            except ConfigError as exc:
+                why = str(exc)
+        if why is not None:
+            self._events.push(now_us, EventKind.PARAM, PARAMS.index(name), value, f"rejected: {why}")
             return self.config.get_param(name)
         self.config = new
         self._apply(new)
@@ -139,6 +156,9 @@ class GraspAcks:
 class CommandServer:
     """The ``link_rx`` task's body: host messages in, answers out.
 
+    A list-all ``ParamRequest`` is answered :data:`PARAM_VALUES_PER_TICK` values per tick, starting with
+    the next tick's :meth:`serve`; a new list request restarts the list.
+
     Attributes:
         virtual_rc_ignored: ``VirtualRc`` frames received while the radio is the RC source.
     """
@@ -170,7 +190,9 @@ class CommandServer:
         self._acks = acks
         self._events = events
         self.virtual_rc_ignored = 0
-        link.stream.undecodable = self._unsupported_command
+        self._list_next = -1  # index of the next ParamValue of a list-all answer, -1 when none is due
+        self._link_changes = link.link_changes
+        link.undecodable = self._unsupported_command
 
     def serve(self, now_us: int) -> None:
         """Send the owed acks, then answer every frame received since the last call."""
@@ -180,8 +202,30 @@ class CommandServer:
             for msg in pending:
                 link.send(msg)
             pending.clear()
-        for seq, msg in link.receive():  # undecodable frames go to _unsupported_command
+        if self._list_next >= 0:
+            self._list_some()
+        received = link.receive()  # undecodable frames go to _unsupported_command
+        if link.link_changes != self._link_changes:
+            self._link_lost(now_us)
+        for seq, msg in received:
             self._dispatch(link, now_us, seq, msg)
+
+    def _link_lost(self, now_us: int) -> None:
+        """A host connected or went away: nothing a host set survives it (DIRECT, its length-holds)."""
+        self._link_changes = self.link.link_changes
+        self._modes.reset_direct()
+        self._hold.release_host()
+        self._list_next = -1
+        self._events.push(now_us, EventKind.INFO, 2, 0.0, "host link changed: DIRECT and holds reset")
+
+    def _list_some(self) -> None:
+        start = self._list_next
+        stop = min(start + PARAM_VALUES_PER_TICK, len(PARAMS))
+        config = self._params.config
+        for index in range(start, stop):
+            name = PARAMS[index]
+            self.link.send(ParamValue(index, len(PARAMS), name, config.get_param(name)))
+        self._list_next = stop if stop < len(PARAMS) else -1
 
     def _dispatch(self, link: BoardLink, now_us: int, seq: int, msg: Message) -> None:
         if isinstance(msg, Heartbeat):
@@ -202,8 +246,7 @@ class CommandServer:
                 link.send(ParamValue(PARAMS.index(msg.name), len(PARAMS), msg.name, value))
             else:
                 self._events.push(now_us, EventKind.PARAM, -1, msg.value, f"unknown parameter {msg.name}")
-        else:  # a board -> host message sent to the board
-            link.misdirected += 1
+        # board -> host messages never get here: the board's parser refuses their ids
 
     def _unsupported_command(self, frame: LinkFrame) -> None:
         if frame.cmd_id == Command.CMD_ID and len(frame.payload) == Command.FORMAT.size:
@@ -214,8 +257,10 @@ class CommandServer:
     def _param_request(self, req: ParamRequest) -> None:
         count = len(PARAMS)
         if req.index == PARAM_LIST_ALL:
-            names: Sequence[str] = PARAMS
-        elif req.index == PARAM_INDEX_BY_NAME:
+            self._list_next = 0
+            return
+        names: Sequence[str]
+        if req.index == PARAM_INDEX_BY_NAME:
             names = (req.name,) if req.name in PARAM_FIELDS else ()
         else:
             names = (PARAMS[req.index],) if req.index < count else ()

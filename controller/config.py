@@ -37,15 +37,19 @@ from protocol.c610 import CURRENT_RAW_MAX, M2006_GEAR_RATIO, RAW_PER_AMP
 __all__ = [
     "C610_MAX_A",
     "CONTROL_PERIOD_US",
+    "M2006_NO_LOAD_RPM",
+    "M2006_TORQUE_K_RANGE",
     "MOTOR_COUNT",
     "PARAMS",
     "PARAM_FIELDS",
+    "SAFETY_PARAMS",
     "FailsafeConfig",
     "FirmwareConfig",
     "GraspConfig",
     "HoldConfig",
     "MappingConfig",
     "MotorDriveConfig",
+    "runtime_refusal",
 ]
 
 MOTOR_COUNT = 3
@@ -55,7 +59,13 @@ CONTROL_PERIOD_US = 1_000
 """The control tick (1 kHz, the C-board's chassis/gimbal loop rate): the default of every 1 ms period."""
 
 C610_MAX_A = CURRENT_RAW_MAX / RAW_PER_AMP
-"""The largest current a C610 takes (-10000..10000 raw = -10..10 A)."""
+"""The largest current a C610 takes (-10000..10000 raw = -10..10 A; DJI's C610 manual: 10 A max)."""
+M2006_TORQUE_K_RANGE = (0.1, 0.5)
+"""Torque constants (N·m/A, output shaft) a ``ParamSet`` may give: around DJI's two M2006 P36 figures,
+0.18 (spec sheet) and about 0.33 (1 N·m rated at 3 A). A smaller value asks more current per newton."""
+M2006_NO_LOAD_RPM = 500.0
+"""M2006 P36 no-load output speed (DJI's figure): no cable moves faster than this times the spool's
+circumference, so a pay-in governor above it is no governor (a ``ParamSet`` ceiling)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -532,6 +542,38 @@ PARAM_FIELDS: dict[str, str] = {
 
 PARAMS: tuple[str, ...] = tuple(PARAM_FIELDS)
 """Wire names of the parameters readable and settable over the board link, in index order."""
+
+SAFETY_PARAMS: frozenset[str] = frozenset(
+    {
+        "CURRENT_LIMIT_A",
+        "TENSION_MAX_N",
+        "SPOOL_RADIUS_M",
+        "TORQUE_K_NM_A",
+        "HOST_TIMEOUT_US",
+        "PAYIN_MAX_M_S",
+    }
+)
+"""Parameters that decide how much current flows for a tension, how fast a cable may reel in, or when
+the failsafe acts: a ``ParamSet`` changes them only in SAFE (zero current), never while the arm moves."""
+
+
+def runtime_refusal(config: FirmwareConfig, name: str, value: float, safe: bool) -> str | None:
+    """Why a run-time ``ParamSet`` of ``name`` (wire name) to ``value`` is refused, or None.
+
+    On top of :meth:`FirmwareConfig.validate` (which also bounds the current limit by the C610's 10 A):
+    safety parameters only in SAFE, the torque constant within :data:`M2006_TORQUE_K_RANGE`, the pay-in
+    governor at most the M2006's no-load cable speed on the configured spool.
+    """
+    if name in SAFETY_PARAMS and not safe:
+        return "safety parameter: only in SAFE"
+    if name == "TORQUE_K_NM_A" and not M2006_TORQUE_K_RANGE[0] <= value <= M2006_TORQUE_K_RANGE[1]:
+        lo, hi = M2006_TORQUE_K_RANGE
+        return f"must be {lo:g}..{hi:g} N·m/A (M2006 P36)"
+    if name == "PAYIN_MAX_M_S":
+        top_m_s = M2006_NO_LOAD_RPM / 60.0 * 2.0 * math.pi * config.motor.spool_radius_m
+        if value > top_m_s:
+            return f"must be <= {top_m_s:.3g} m/s (M2006 no-load speed on the spool)"
+    return None
 
 
 def _require(name: str, ok: bool, why: str) -> None:

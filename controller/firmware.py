@@ -105,7 +105,7 @@ class Firmware:
         self.modes = ModeSelector(
             config, self.failsafe, self.grasp, self.mapper, self.motors, self.hold, self.events, self.acks
         )
-        self.params = Params(config, self.events, self._apply_config)
+        self.params = Params(config, self.events, self._apply_config, self._disarmed)
         self._apply_config(config)
         self.commands = (
             CommandServer(
@@ -301,6 +301,10 @@ class Firmware:
             "link_crc_errors": link.crc_errors if link else 0,
             "link_decode_errors": link.decode_errors if link else 0,
             "link_frames_dropped": link.transport.frames_dropped if link else 0,
+            "link_id_errors": link.stream.id_errors if link else 0,
+            "link_oversize_errors": link.stream.oversize_errors if link else 0,
+            "link_rx_bytes_dropped": link.rx_bytes_dropped if link else 0,
+            "link_rx_frames_dropped": link.rx_frames_dropped if link else 0,
             "motor_offline_events": self.failsafe.motor_offline_events,
             "can_errors": self.bus.can_errors,
             "events_dropped": self.events.dropped,
@@ -312,8 +316,13 @@ class Firmware:
 
     # --- configuration ----------------------------------------------------------------------------
 
+    def _disarmed(self) -> bool:
+        """Safety parameters may change: SAFE, zero current (``Params``)."""
+        return self.modes.mode is _SAFE
+
     def _apply_config(self, config: FirmwareConfig) -> None:
         self.failsafe.configure(config)
+        self.modes.configure(config)
         self.motors.configure(config)
         self.mapper.configure(config)
         self.slew.configure(config)
@@ -323,6 +332,8 @@ class Firmware:
 
     def set_param(self, now_us: int, name: str, value: float) -> float:
         """Set a runtime parameter (wire name) if valid; return the value in force afterwards.
+
+        Safety parameters (``controller.config.SAFETY_PARAMS``) change only in SAFE, as by ``ParamSet``.
 
         Raises:
             ConfigError: unknown name (an invalid value is not an error: the old value stays).

@@ -155,6 +155,12 @@ class LengthHold:
                 self.by_grasp[i] = False
             self._count()
 
+    def release_host(self) -> None:
+        """Drop the holds the host engaged (``HOLD_LENGTHS``; on link loss)."""
+        for i in range(MOTOR_COUNT):
+            if self.held[i] and not self.by_grasp[i]:
+                self.release(i)
+
     def release_grasp(self) -> None:
         """Drop the holds the grasp machine engaged."""
         for i in range(MOTOR_COUNT):

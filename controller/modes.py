@@ -8,6 +8,9 @@ DIRECT while the lever is MIDDLE (``SET_MODE``):
 - right lever MIDDLE: MANUAL (sticks), or DIRECT (host tensions) while the host asked for it and its
   heartbeat is fresh; DIRECT ends when the heartbeat is lost.
 
+The DIRECT request and tensions are reset (tensions to the pretension) on every SAFE (disarm, RC loss,
+every failsafe), on heartbeat loss and, through the command server, on link loss.
+
 Every mode change drops every length-hold (``controller.lengthhold``); with ``grasp_hold_length`` the
 grasp's HOLD state holds its pulling cables' length until it ends.
 
@@ -82,9 +85,25 @@ class ModeSelector:
         self._listener = listener
         self.mode = Mode.SAFE
         self.direct_requested = False
-        self.direct_tensions_n = [config.mapping.pretension_n] * MOTOR_COUNT
+        self._pretension_n = config.mapping.pretension_n
+        self.direct_tensions_n = [self._pretension_n] * MOTOR_COUNT
         self._prev_left_lever = 0
         self._prev_grasp_state = GraspState.IDLE
+
+    def configure(self, config: FirmwareConfig) -> None:
+        """Take a new pretension (what :meth:`reset_direct` sets the DIRECT tensions to)."""
+        self._pretension_n = config.mapping.pretension_n
+
+    def reset_direct(self) -> None:
+        """Forget the host's DIRECT request and tensions (every SAFE, heartbeat loss and link loss).
+
+        A host that re-arms and selects DIRECT then starts from the pretension, never from the tensions
+        a previous session (or another host) left behind.
+        """
+        self.direct_requested = False
+        tensions = self.direct_tensions_n
+        for i in range(MOTOR_COUNT):
+            tensions[i] = self._pretension_n
 
     def select(self, now_us: int, phase: Phase, rc: RcFrame | None) -> Mode:
         """The mode for this tick from the phase and the last valid frame ``rc`` (logs a change)."""
@@ -94,7 +113,7 @@ class ModeSelector:
             lever = rc.right_lever
             if lever == _LEVER_MIDDLE:
                 if self.direct_requested and not self._failsafe.host_ok:
-                    self.direct_requested = False
+                    self.reset_direct()
                     self._events.push(now_us, EventKind.INFO, 0, 0.0, "DIRECT ended: no host heartbeat")
                 mode = _DIRECT if self.direct_requested else _MANUAL
             elif lever == _LEVER_UP:
@@ -109,7 +128,9 @@ class ModeSelector:
         self.mode = new
         # A hold belongs to the mode it was set in; SAFE (every failsafe) and any other change drop it.
         self._hold.release_all()
-        if new != Mode.DIRECT and new != Mode.MANUAL:
+        if new == Mode.SAFE:  # every disarm, failsafe and E-stop: the next DIRECT starts from rest
+            self.reset_direct()
+        elif new != Mode.DIRECT and new != Mode.MANUAL:
             self.direct_requested = False  # DIRECT only while the lever stays MIDDLE
         if old == Mode.GRASP:
             self._grasp.reset(now_us)

@@ -35,6 +35,8 @@ class Transport(ABC):
         frames_dropped: frames refused because the outgoing queue was full (or the port failed).
         bytes_dropped: the bytes of those frames.
         errors: read/write errors (the port went away, ...); the transport keeps going.
+        peer_changes: times a host connected or went away, for back ends that see connections (a TCP
+            server); the board treats each as a link loss. Stays 0 on a serial port.
     """
 
     def __init__(self, tx_capacity: int = DEFAULT_TX_CAPACITY) -> None:
@@ -49,6 +51,7 @@ class Transport(ABC):
         self.frames_dropped = 0
         self.bytes_dropped = 0
         self.errors = 0
+        self.peer_changes = 0
         self._tx = bytearray()
         self._closed = False
 

@@ -252,7 +252,12 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
     where.add_argument(
         "--listen",
         metavar="socket://HOST:PORT",
-        help="serve the board link on TCP (e.g. socket://127.0.0.1:5760)",
+        help="serve the board link on TCP (e.g. socket://127.0.0.1:5760); one host at a time",
+    )
+    p.add_argument(
+        "--listen-any",
+        action="store_true",
+        help="allow a --listen address other than loopback: whoever reaches it can drive the arm",
     )
     p.add_argument(
         "--duration", type=positive_duration, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
@@ -267,11 +272,30 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed, default=0, help="seed of the plant's random choices (default 0)")
 
 
+def _is_loopback_listen(listen: str) -> bool:
+    """``socket://HOST:PORT`` binds a loopback address (a malformed URL is left to ``parse_listen``)."""
+    import ipaddress
+
+    host = listen.removeprefix("socket://").rpartition(":")[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return not listen.startswith("socket://")  # not a socket URL: parse_listen says what is wrong
+
+
 def _run_board(args: argparse.Namespace) -> int:
     from controller.clock import RealTimeClock
     from hil.board import BoardConfig, realtime_board, run_realtime
     from hil.plant import PlantConfig
 
+    if args.listen is not None and not args.listen_any and not _is_loopback_listen(args.listen):
+        raise UsageError(
+            f"--listen {args.listen} is reachable from other machines (anyone there can drive the arm): "
+            "use a loopback address, or add --listen-any",
+            f"{PROG} board",
+        )
     design = design_from_args(args)
     plant = PlantConfig(model=model_from_args(args))
     try:

@@ -22,12 +22,14 @@ from __future__ import annotations
 
 import binascii
 import struct
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 __all__ = [
     "CRC8_INIT",
     "CRC16_INIT",
     "HEADER_LEN",
+    "ID_END",
     "MAX_PAYLOAD",
     "OVERHEAD",
     "SOF",
@@ -44,6 +46,8 @@ HEADER_LEN = 5
 """SOF, data_length, seq, CRC8."""
 OVERHEAD = HEADER_LEN + 2 + 2
 """Bytes around the payload: header, cmd_id, CRC16."""
+ID_END = HEADER_LEN + 2
+"""Bytes of a frame up to and including its ``cmd_id``: what a parser with per-id lengths reads first."""
 MAX_PAYLOAD = 2048
 """Largest payload accepted by :func:`encode_frame` and :class:`LinkParser`.
 
@@ -160,27 +164,41 @@ class LinkParser:
     the byte after the 0xA5 that started the bad frame, so a good frame hidden inside a corrupted or
     truncated one is still found. A frame is delivered only if both CRCs match.
 
+    With ``lengths`` (``cmd_id -> longest payload``, the board's receive side) the parser also reads the
+    ``cmd_id`` right after a good header and refuses, at once, an id not in the table and a length above
+    that id's own: no header then makes it wait for more than one real frame of the longest accepted id.
+    (Without the table a corrupted length can hold it for up to ``max_payload`` + 9 bytes.)
+
     Counters (monotonic): ``frames_ok``; ``header_crc_errors``; ``body_crc_errors``; ``oversize_errors``
-    (header CRC good but data_length > ``max_payload``); ``bytes_skipped`` (every byte discarded while
-    hunting for a frame: garbage and the SOF bytes of rejected frames).
+    (header CRC good but data_length > ``max_payload``, or above its id's length); ``id_errors`` (header
+    CRC good but an id not in ``lengths``); ``bytes_skipped`` (every byte discarded while hunting for a
+    frame: garbage and the SOF bytes of rejected frames).
     """
 
-    def __init__(self, max_payload: int = MAX_PAYLOAD) -> None:
+    def __init__(self, max_payload: int = MAX_PAYLOAD, lengths: Mapping[int, int] | None = None) -> None:
         """Create a parser.
 
         Args:
             max_payload: longest payload accepted; longer declared lengths are rejected and counted.
+            lengths: if given, the only ids accepted, each with its longest payload (capped by
+                ``max_payload``).
 
         Raises:
-            ValueError: ``max_payload`` is negative or above 0xFFFF.
+            ValueError: ``max_payload`` or a length is negative or above 0xFFFF.
         """
         if not 0 <= max_payload <= 0xFFFF:
             raise ValueError(f"max_payload must be 0..65535, got {max_payload}")
+        if lengths is not None and not all(0 <= n <= 0xFFFF for n in lengths.values()):
+            raise ValueError(f"lengths must be 0..65535, got {dict(lengths)}")
         self.max_payload = max_payload
+        self.lengths: dict[int, int] | None = (
+            None if lengths is None else {i: min(n, max_payload) for i, n in lengths.items()}
+        )
         self.frames_ok = 0
         self.header_crc_errors = 0
         self.body_crc_errors = 0
         self.oversize_errors = 0
+        self.id_errors = 0
         self.bytes_skipped = 0
         self._buf = bytearray()
 
@@ -191,6 +209,7 @@ class LinkParser:
             "header_crc_errors": self.header_crc_errors,
             "body_crc_errors": self.body_crc_errors,
             "oversize_errors": self.oversize_errors,
+            "id_errors": self.id_errors,
             "bytes_skipped": self.bytes_skipped,
         }
 
@@ -212,6 +231,7 @@ class LinkParser:
         buf = self._buf
         buf += data
         out: list[LinkFrame] = []
+        lengths = self.lengths
         pos = 0
         end = len(buf)
         while True:
@@ -235,6 +255,18 @@ class LinkParser:
                 self.bytes_skipped += 1
                 pos += 1
                 continue
+            if lengths is not None:
+                if end - pos < ID_END:
+                    break
+                cap = lengths.get(buf[pos + 5] | (buf[pos + 6] << 8))
+                if cap is None or n > cap:
+                    if cap is None:
+                        self.id_errors += 1
+                    else:
+                        self.oversize_errors += 1
+                    self.bytes_skipped += 1
+                    pos += 1
+                    continue
             total = n + OVERHEAD
             if end - pos < total:
                 break

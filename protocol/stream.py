@@ -16,7 +16,7 @@ Example:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
 from protocol.errors import DecodeError
@@ -50,17 +50,26 @@ class MessageStream:
     ``undecodable`` hook, if any.
 
     Counters (monotonic): ``frames_ok`` (intact frames, decoded or not), ``crc_errors`` (header and
-    body), ``oversize_errors``, ``bytes_skipped``, ``decode_errors``, ``unknown_ids``.
+    body), ``oversize_errors``, ``id_errors`` (ids refused by ``lengths`` before their payload),
+    ``bytes_skipped``, ``decode_errors``, ``unknown_ids``.
 
     Args:
         max_payload: longest payload accepted (see :class:`~protocol.link.LinkParser`).
         undecodable: called with each intact frame that did not decode.
+        lengths: the only ids accepted, each with its longest payload (the board passes
+            ``HOST_TO_BOARD_LENGTHS``; see :class:`~protocol.link.LinkParser`).
     """
 
     __slots__ = ("decode_errors", "parser", "undecodable", "unknown_ids")
 
-    def __init__(self, max_payload: int = MAX_PAYLOAD, *, undecodable: UndecodableHook | None = None) -> None:
-        self.parser = LinkParser(max_payload)
+    def __init__(
+        self,
+        max_payload: int = MAX_PAYLOAD,
+        *,
+        undecodable: UndecodableHook | None = None,
+        lengths: Mapping[int, int] | None = None,
+    ) -> None:
+        self.parser = LinkParser(max_payload, lengths)
         self.undecodable = undecodable
         self.decode_errors = 0
         self.unknown_ids = 0
@@ -79,6 +88,11 @@ class MessageStream:
     def oversize_errors(self) -> int:
         """Headers declaring a payload longer than ``max_payload``."""
         return self.parser.oversize_errors
+
+    @property
+    def id_errors(self) -> int:
+        """Headers whose id the ``lengths`` table does not accept (refused before their payload)."""
+        return self.parser.id_errors
 
     @property
     def bytes_skipped(self) -> int:

@@ -31,8 +31,8 @@ MAX_TASKS = 32
 MAX_SIM_BODIES = 64
 """Most bodies in one ``SimPoses`` (drone + 63 units: 1801 bytes of payload)."""
 HOST_TO_BOARD_MAX_PAYLOAD = 20
-"""Largest host -> board payload (``ParamSet``). The board's parser uses it as ``max_payload``: then a
-corrupted length field stalls the board's input by at most 29 bytes instead of a whole ``MAX_PAYLOAD``."""
+"""Largest host -> board payload (``ParamSet``). The board's parser caps each id at its own length
+(``HOST_TO_BOARD_LENGTHS``), so a corrupted or hostile length stalls its input by at most one such frame."""
 PARAM_INDEX_BY_NAME = -1
 """``ParamRequest.index``: look the parameter up by ``name``."""
 PARAM_LIST_ALL = -2

@@ -202,3 +202,15 @@ class ParamSet(Message):
         _check_len(payload, cls.FORMAT.size, "ParamSet")
         name, value = cls.FORMAT.unpack(payload)
         return cls(_unpack_name(name, "ParamSet.name"), value)
+
+
+HOST_TO_BOARD_LENGTHS: dict[int, int] = {
+    Heartbeat.CMD_ID: Heartbeat.FORMAT.size,
+    VirtualRc.CMD_ID: DBUS_FRAME_LEN,
+    Command.CMD_ID: Command.FORMAT.size,
+    ParamRequest.CMD_ID: ParamRequest.FORMAT.size,
+    ParamSet.CMD_ID: ParamSet.FORMAT.size,
+}
+"""``cmd_id -> payload length`` of every host -> board message (all fixed-length): the board's parser
+refuses any other id, and any longer announced length, as soon as it has read the id, so no header holds
+its input longer than one real frame."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+from controller_harness import Rig, frame
 
 from controller.cables import CableMapper, MotorModel, TensionSlew
 from controller.commands import CommandServer, GraspAcks, Params
@@ -16,16 +17,19 @@ from controller.lengthhold import LengthHold
 from controller.modes import ModeSelector
 from controller.rc import RcInput, ScriptedRcSource
 from controller.transport import MemoryTransport
+from protocol.dbus import Lever
 from protocol.link import LinkParser, encode_frame
 from protocol.messages import (
     AckResult,
     Command,
     CommandAck,
     CommandCode,
+    Event,
     EventKind,
     GraspState,
     Heartbeat,
     Message,
+    Mode,
     ParamRequest,
     ParamSet,
     ParamValue,
@@ -39,7 +43,7 @@ from protocol.messages import (
 def test_params_set_applies_valid_values_and_keeps_the_old_one_otherwise() -> None:
     events = EventQueue(16)
     applied: list[FirmwareConfig] = []
-    params = Params(FirmwareConfig(), events, applied.append)
+    params = Params(FirmwareConfig(), events, applied.append, lambda: True)
     assert params.set(5, "PRETENSION_N", 1.0) == 1.0
     assert params.config.mapping.pretension_n == 1.0 and applied == [params.config]
     assert params.set(6, "PRETENSION_N", -1.0) == 1.0  # rejected: the old value stays
@@ -83,7 +87,7 @@ class Server:
         self.modes = ModeSelector(
             config, self.failsafe, grasp, mapper, motors, self.hold, self.events, self.acks
         )
-        self.params = Params(config, self.events, lambda c: None)
+        self.params = Params(config, self.events, lambda c: None, lambda: self.modes.mode == Mode.SAFE)
         rc_input = RcInput(self.failsafe.on_rc_frame, keep_raw=False)
         self.server = CommandServer(
             BoardLink(board),
@@ -159,3 +163,98 @@ def test_owed_acks_go_out_first_and_unknown_codes_are_unsupported() -> None:
         AckResult.UNSUPPORTED,
     )
     assert s.server.link.decode_errors == 1
+
+
+# --- issue 18: safety parameters only in SAFE; DIRECT starts from rest after every disarm and loss ------
+
+
+def _live(rig: Rig, ms: int) -> None:
+    """Tick ``ms`` ms with a host heartbeat every 100 ms (DIRECT needs it)."""
+    for k in range(ms):
+        if k % 100 == 0:
+            rig.send(Heartbeat(rig.now_us, k))
+        rig.tick()
+
+
+def _direct(rig: Rig) -> None:
+    rig.arm()
+    rig.set_rc(frame(right=Lever.MIDDLE))
+    _live(rig, 20)
+    rig.send(Command(CommandCode.SET_MODE, (float(Mode.DIRECT), 0.0, 0.0)))
+    _live(rig, 5)
+    assert rig.fw.mode == Mode.DIRECT
+
+
+def test_armed_param_sets_cannot_raise_the_current() -> None:
+    """The issue's sequence: CURRENT_LIMIT_A=10, TENSION_MAX_N=100, SPOOL_RADIUS_M=0.05 while armed, then
+    SET_TENSIONS(100, 100, 100) once sent 10000 raw to every motor."""
+    rig = Rig(link=True)
+    _direct(rig)
+    rig.drain()
+    for name, value in (("CURRENT_LIMIT_A", 10.0), ("TENSION_MAX_N", 100.0), ("SPOOL_RADIUS_M", 0.05)):
+        rig.send(ParamSet(name, value))
+    rig.send(Command(CommandCode.SET_TENSIONS, (100.0, 100.0, 100.0)))
+    peak = 0
+    for k in range(1000):
+        if k % 100 == 0:
+            rig.send(Heartbeat(rig.now_us, k))
+        rig.tick()
+        peak = max(peak, *(abs(c) for c in rig.currents))
+    assert rig.fw.mode == Mode.DIRECT and peak > 0
+    assert peak <= 3000  # the documented 3 A
+    msgs = rig.drain()
+    echoed = {v.name: v.value for v in msgs if isinstance(v, ParamValue)}
+    assert echoed == {"CURRENT_LIMIT_A": 3.0, "TENSION_MAX_N": 20.0, "SPOOL_RADIUS_M": pytest.approx(0.01)}
+    reasons = [e.text for e in msgs if isinstance(e, Event) and e.kind == EventKind.PARAM]
+    assert reasons == ["rejected: safety parameter: only in SAFE"] * 3
+    # in SAFE the same values are taken (the current limit up to the C610's 10 A, the operator's call)
+    rig.set_rc(frame(right=Lever.DOWN))
+    _live(rig, 20)
+    assert rig.fw.mode == Mode.SAFE
+    rig.send(ParamSet("CURRENT_LIMIT_A", 10.0))
+    rig.send(ParamSet("CURRENT_LIMIT_A", 10.5))
+    rig.send(ParamSet("TORQUE_K_NM_A", 0.05))
+    rig.send(ParamSet("PAYIN_MAX_M_S", 2.0))
+    rig.tick(20)
+    echoed_list = [(v.name, v.value) for v in rig.drain() if isinstance(v, ParamValue)]
+    assert echoed_list == [
+        ("CURRENT_LIMIT_A", 10.0),
+        ("CURRENT_LIMIT_A", 10.0),
+        ("TORQUE_K_NM_A", pytest.approx(0.18)),
+        ("PAYIN_MAX_M_S", pytest.approx(0.1)),
+    ]
+
+
+def test_non_safety_params_still_change_while_armed() -> None:
+    rig = Rig(link=True)
+    _direct(rig)
+    rig.send(ParamSet("SLEW_N_S", 80.0))
+    _live(rig, 5)
+    assert rig.fw.config.mapping.slew_n_per_s == 80.0
+
+
+@pytest.mark.parametrize("loss", ["disarm", "rc", "heartbeat"])
+def test_direct_tensions_do_not_survive_a_disarm_or_a_loss(loss: str) -> None:
+    rig = Rig(link=True)
+    _direct(rig)
+    rig.send(Command(CommandCode.SET_TENSIONS, (10.0, 10.0, 10.0)))
+    _live(rig, 500)
+    driven = max(rig.currents)
+    assert driven > 0
+    if loss == "disarm":
+        rig.send(Command(CommandCode.DISARM, (0.0, 0.0, 0.0)))
+        _live(rig, 5)
+        rig.send(Command(CommandCode.ARM, (0.0, 0.0, 0.0)))
+    elif loss == "rc":
+        rig.set_rc(None)
+        _live(rig, 50)
+    else:
+        rig.tick(600)  # no heartbeat: DIRECT ends
+    assert rig.fw.direct_tensions_n == [rig.config.mapping.pretension_n] * 3
+    rig.set_rc(frame(right=Lever.DOWN))
+    _live(rig, 20)
+    _direct(rig)  # a new session only selects DIRECT
+    _live(rig, 500)
+    pre = rig.config.mapping.pretension_n
+    raw = round(pre * rig.config.motor.spool_radius_m / rig.config.motor.torque_constant_nm_per_a * 1000)
+    assert max(rig.currents) <= raw < driven

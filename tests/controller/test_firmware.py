@@ -13,6 +13,7 @@ import pytest
 from controller_harness import Rig, frame, link_rc_rig
 
 from controller.clock import LockstepClock, RealTimeClock
+from controller.commands import PARAM_VALUES_PER_TICK
 from controller.config import PARAMS, FirmwareConfig
 from controller.firmware import Firmware
 from controller.motorbus import FakeMotorBus
@@ -241,11 +242,17 @@ def test_parameters_get_and_set() -> None:
     rig.send(ParamRequest(0))
     rig.send(ParamRequest(PARAM_INDEX_BY_NAME, "NO_SUCH"))
     rig.tick()
+    # single values at once; the list streams PARAM_VALUES_PER_TICK per tick from the next tick on
     values = [m for m in rig.drain() if isinstance(m, ParamValue)]
-    assert len(values) == len(PARAMS) + 2
-    assert [v.name for v in values[: len(PARAMS)]] == list(PARAMS)
-    assert values[-2].name == "PRETENSION_N" and values[-2].value == pytest.approx(0.5)
-    assert values[-1].index == 0 and values[-1].count == len(PARAMS)
+    assert len(values) == 2
+    assert values[0].name == "PRETENSION_N" and values[0].value == pytest.approx(0.5)
+    assert values[1].index == 0 and values[1].count == len(PARAMS)
+    ticks = -(-len(PARAMS) // PARAM_VALUES_PER_TICK)
+    rig.tick(ticks - 1)
+    assert len([m for m in rig.drain() if isinstance(m, ParamValue)]) == (ticks - 1) * PARAM_VALUES_PER_TICK
+    rig.tick()
+    listed = [m for m in rig.drain() if isinstance(m, ParamValue)]
+    assert len(listed) == len(PARAMS) - (ticks - 1) * PARAM_VALUES_PER_TICK
     # a valid set changes the runtime copy and is echoed
     rig.send(ParamSet("PRETENSION_N", 1.25))
     # an invalid one is answered with the value in force

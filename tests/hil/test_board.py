@@ -108,3 +108,104 @@ def test_board_process_reports_a_busy_port() -> None:
             pytest.raises(HilError, match="failed to start"),
         ):
             board.start(timeout_s=60)
+
+
+def test_long_header_does_not_stall_a_realtime_board() -> None:
+    """Issue 18: ``A5 F4 01 <seq> <crc8>`` (a valid header announcing 500 bytes) once froze link input for
+    238 ms and latched RC_LOST. The board now refuses it as soon as it reads the id that follows."""
+    from protocol.link import SOF, crc8
+    from protocol.messages import Event, EventKind, RawRc
+
+    head = bytes([SOF, 0xF4, 0x01, 0x33])
+    header = head + bytes([crc8(head)])
+    marked = RcFrame((7, 0, 0, 0), Lever.DOWN, Lever.DOWN).pack()  # the first RC frame after the header
+    with VirtualBoardProcess(listen="socket://127.0.0.1:0", fifo=False) as board:
+        url = board.start(timeout_s=60)
+        port = serial.serial_for_url(url, timeout=0)
+        parser = LinkParser()
+        telemetry: list[Telemetry] = []
+        phases: list[int] = []
+        raw: list[bytes] = []
+        injected_at = -1
+        try:
+            seq = 0
+            deadline = time.monotonic() + 20.0
+            while time.monotonic() < deadline:
+                ok_since = next((i for i, m in enumerate(telemetry) if m.phase == Phase.OK), None)
+                if injected_at < 0 and ok_since is not None and len(telemetry) - ok_since > 30:
+                    injected_at = len(telemetry)
+                    port.write(header)
+                    data = marked
+                else:
+                    data = RcFrame.neutral().pack()
+                port.write(encode(VirtualRc(data), seq) + encode(Heartbeat(seq, seq), seq + 1))
+                seq = (seq + 2) & 0xFF
+                for f in parser.feed(port.read(65536)):
+                    msg = decode(f)
+                    if isinstance(msg, Telemetry):
+                        telemetry.append(msg)
+                    elif isinstance(msg, Event) and msg.kind == EventKind.PHASE:
+                        phases.append(msg.code)
+                    elif isinstance(msg, RawRc):
+                        raw.append(msg.data)
+                if injected_at >= 0 and len(telemetry) > injected_at + 100:  # about 1 s after it
+                    break
+                time.sleep(0.01)
+        finally:
+            port.close()
+    assert injected_at >= 0, "the board never passed the gate"
+    assert marked in raw  # the frame right after the header was taken
+    assert Phase.RC_LOST not in phases
+    assert all(m.phase == Phase.OK for m in telemetry[injected_at:])
+
+
+def test_link_loss_resets_direct_on_a_tcp_board() -> None:
+    """Issue 18: a new client that re-armed and only selected DIRECT got the last session's tensions."""
+    import socket
+
+    from controller.config import FirmwareConfig
+    from controller.firmware import Firmware
+    from controller.motorbus import FakeMotorBus
+    from controller.rc import LinkRcSource
+    from hil.transports import TcpServerTransport
+    from protocol.messages import Command, CommandCode, Mode
+
+    config = FirmwareConfig()
+    transport = TcpServerTransport()
+    fw = Firmware(config, FakeMotorBus(), LinkRcSource(), transport)
+    now = [0]
+
+    def tick(ms: int) -> None:
+        for _ in range(ms):
+            fw.run_due(now[0])
+            now[0] += 1000
+
+    host, port = transport.url.removeprefix("socket://").rsplit(":", 1)
+    try:
+        client = socket.create_connection((host, int(port)), timeout=2)
+        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)  # no Nagle wait behind a small frame
+        seq = 0
+
+        def send(*msgs: object) -> None:
+            nonlocal seq
+            for msg in msgs:
+                client.sendall(encode(msg, seq))  # type: ignore[arg-type]
+                seq = (seq + 1) & 0xFF
+            time.sleep(0.01)  # loopback delivery
+            tick(1)
+
+        send(VirtualRc(RcFrame.neutral().pack()), Heartbeat(0, 0))
+        tick(5)
+        middle = RcFrame((0, 0, 0, 0), Lever.MIDDLE, Lever.DOWN).pack()
+        send(VirtualRc(middle), Heartbeat(1, 1))
+        send(Command(CommandCode.SET_MODE, (float(Mode.DIRECT), 0.0, 0.0)))
+        send(Command(CommandCode.SET_TENSIONS, (10.0, 10.0, 10.0)), VirtualRc(middle))
+        assert fw.mode == Mode.DIRECT and fw.direct_tensions_n == [10.0] * 3
+        client.close()
+        time.sleep(0.01)
+        tick(1)
+        assert fw.direct_tensions_n == [config.mapping.pretension_n] * 3
+        assert not fw.modes.direct_requested
+        assert fw.link is not None and fw.link.link_changes == 2  # connected, then lost
+    finally:
+        transport.close()

@@ -67,6 +67,8 @@ def test_run_fails_with_nonzero_status_when_a_check_fails(capsys: pytest.Capture
         (["run", "rc-loss", "--fault", "rc-silence@x"], "expected KIND@START"),
         (["replay", "/no/such/file.mcap"], "no such recording"),
         (["board", "--listen", "tcp://1.2.3.4:5"], "socket://HOST:PORT"),
+        (["board", "--listen", "socket://0.0.0.0:5760"], "add --listen-any"),
+        (["board", "--listen", "socket://example.org:5760"], "add --listen-any"),
         (["run", "rc-loss", "--record", "/no/such/dir/x.mcap"], "cannot record"),
         (["run", "rc-loss", "--seed", "-1"], "--seed: must be a whole number >= 0"),
         (["experiment", "packing", "--seed", "x"], "--seed: must be a whole number >= 0"),

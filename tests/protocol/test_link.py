@@ -139,6 +139,7 @@ def test_parse_whole_stream() -> None:
         "header_crc_errors": 0,
         "body_crc_errors": 0,
         "oversize_errors": 0,
+        "id_errors": 0,
         "bytes_skipped": 0,
     }
     assert p.pending == 0
@@ -208,6 +209,43 @@ def test_small_max_payload() -> None:
     assert p.oversize_errors == 1
     with pytest.raises(ValueError):
         LinkParser(max_payload=-1)
+
+
+def _header(n: int, seq: int = 1) -> bytes:
+    head = bytes([SOF]) + struct.pack("<HB", n, seq)
+    return head + bytes([crc8(head)])
+
+
+def test_per_id_lengths_refuse_a_long_header_at_once() -> None:
+    # A valid header announcing 500 bytes: without per-id lengths the parser waits for 509 bytes.
+    lengths = {0x0201: 0}
+    good = FRAMES[2].encode()  # id 0x0201, empty payload
+    waiting = LinkParser()
+    assert waiting.feed(_header(500) + good) == []
+    assert waiting.pending == 5 + len(good)
+    p = LinkParser(lengths=lengths)
+    assert p.feed(_header(500) + good) == [FRAMES[2]]  # the id read is the next frame's SOF + length
+    assert p.id_errors == 1 and p.pending == 0
+    # a known id announcing more than its own length is refused as soon as the id is read
+    too_long = _header(500) + struct.pack("<H", 0x0201)
+    assert p.feed(too_long) == []
+    assert p.oversize_errors == 1 and p.pending == 0
+    assert p.feed(good) == [FRAMES[2]]
+    # ids outside the table are refused even when the frame is intact
+    assert p.feed(FRAMES[1].encode() + good) == [FRAMES[2]]
+    assert p.id_errors == 2
+
+
+def test_per_id_lengths_wait_only_for_the_id() -> None:
+    p = LinkParser(lengths={0x0201: 0})
+    good = FRAMES[2].encode()
+    out: list[LinkFrame] = []
+    for b in _header(40) + good:  # byte by byte: a header never holds more than the id's 2 bytes
+        out += p.feed(bytes([b]))
+        assert p.pending <= len(good)
+    assert out == [FRAMES[2]]
+    with pytest.raises(ValueError):
+        LinkParser(lengths={1: -1})
 
 
 def test_reset_drops_pending() -> None:
