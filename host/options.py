@@ -78,7 +78,13 @@ def build_parser() -> argparse.ArgumentParser:
     ui.add_argument("--headless", action="store_true", help="no panel")
     ui.add_argument(
         "--token",
-        help="access token for a non-loopback --ui-host (default: a fresh random one, printed at start)",
+        help="the panel's access token (default: a fresh random one, in the URL printed at start)",
+    )
+    ui.add_argument(
+        "--no-token",
+        action="store_true",
+        help="loopback --ui-host only: no access token; any program on this machine may then drive "
+        "the arm through the panel (pages from other origins are still refused)",
     )
     run = p.add_argument_group("run")
     run.add_argument("--duration", type=positive_duration, metavar="S", help="exit after S seconds")
@@ -118,7 +124,7 @@ class HostOptions:
         ui: serve the panel.
         ui_host: panel bind address.
         ui_port: panel port (0 = any free port).
-        token: access token (None on loopback).
+        token: access token of the panel (None: headless, or ``--no-token`` on loopback).
         duration_s: stop after this long (None = until interrupted).
         record: MCAP file to write.
         replay: MCAP file to replay instead of a board.
@@ -178,9 +184,17 @@ class HostOptions:
             raise HostError(f"no such signing key file: {ns.mav_signing_key}")
         if ns.mav_signing_timestamp is not None and ns.mav_signing_key is None:
             raise HostError("--mav-signing-timestamp needs --mav-signing-key")
-        token = ns.token  # an explicit token is honoured on loopback too
-        if not ns.headless and not is_loopback(ns.ui_host):
-            token = token or new_token()
+        token: str | None = None
+        if ns.no_token:
+            if ns.token is not None:
+                raise HostError("--no-token and --token cannot be combined")
+            if not is_loopback(ns.ui_host):
+                raise HostError(
+                    f"--no-token is for a loopback --ui-host only ({ns.ui_host} is reachable from elsewhere)"
+                )
+        elif not ns.headless:
+            # Every bind, loopback too: any program or web page on this machine could drive the arm.
+            token = ns.token or new_token()
         return cls(
             port=ns.port,
             ui=not ns.headless,

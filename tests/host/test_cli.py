@@ -61,16 +61,35 @@ def test_parser_defaults() -> None:
     assert ns.port is None and ns.ui_host == "127.0.0.1" and ns.ui_port == 8080
     assert not ns.headless and ns.duration is None and ns.mav_sysid == 1 and ns.mav_compid == 25
     opts = HostOptions.from_args(ns)
-    assert opts.token is None and opts.ui
+    assert opts.token is not None and len(opts.token) >= 16 and opts.ui
 
 
-def test_non_loopback_ui_requires_a_token() -> None:
-    opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "192.0.2.7"]))
-    assert opts.token is not None and len(opts.token) >= 16
+def test_every_bind_requires_a_token_unless_no_token_on_loopback() -> None:
+    for host in ("192.0.2.7", "127.0.0.1", "::1"):
+        opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", host]))
+        assert opts.token is not None and len(opts.token) >= 16
     opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "192.0.2.7", "--token", "abc"]))
     assert opts.token == "abc"
-    opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "::1"]))
-    assert opts.token is None
+    assert HostOptions.from_args(build_parser().parse_args(["--no-token"])).token is None
+    assert HostOptions.from_args(build_parser().parse_args(["--headless"])).token is None
+
+
+@pytest.mark.parametrize(
+    ("argv", "reason"),
+    [
+        (["--ui-host", "0.0.0.0", "--no-token"], "--no-token is for a loopback --ui-host only"),
+        (["--no-token", "--token", "abc"], "--no-token and --token cannot be combined"),
+    ],
+)
+def test_no_token_refusals(argv: list[str], reason: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([*argv, "--duration", "1"]) == 2
+    assert reason in one_error_line(capsys.readouterr().err)
+
+
+def test_no_token_says_what_it_opens(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--port", peer.url, "--ui-port", "0", "--no-token", "--duration", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "?token=" not in out and "any program or user on this machine can drive the arm" in out
 
 
 def test_virtual_rc_choices() -> None:
@@ -166,7 +185,8 @@ def test_headless_run_for_a_duration(peer: LinkPeer, capsys: pytest.CaptureFixtu
 
 def test_panel_run_prints_the_url(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--port", peer.url, "--ui-port", "0", "--duration", "0.5"]) == 0
-    assert "panel at http://127.0.0.1:" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "panel at http://127.0.0.1:" in out and "/?token=" in out
 
 
 def test_virtual_rc_drives_the_gate_then_manual(peer: LinkPeer) -> None:
