@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 from controller.cli_kit import EXIT_OK
-from host.board_client import BoardClient, BoardLinkError, LinkState
+from host.board_client import BoardClient, BoardLinkError, LinkState, load_scaled_s
 from host.errors import HostError
 from host.model import CLI_CLIENT, UiModel
 from host.options import (
@@ -146,7 +146,7 @@ class HostApp:
         config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
-            url = str(self.board.start(timeout_s=30.0))
+            url = str(self.board.start(timeout_s=load_scaled_s(30.0)))
         except HilError as exc:
             raise HostError(f"virtual board: {exc}") from exc
         # The objects of the plant we asked for (free objects drawn where they start).

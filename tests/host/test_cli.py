@@ -7,6 +7,7 @@ real virtual board (``hil.board``).
 from __future__ import annotations
 
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -321,6 +322,49 @@ def test_virtual_board_over_a_pty_with_manual_rc() -> None:
                 lambda: app.model.telemetry is not None and app.model.telemetry.mode == Mode.MANUAL, 20.0
             )
             assert app.model.poses is not None
+
+
+def test_a_killed_link_process_is_restarted_and_the_board_held_zero_current() -> None:
+    import os
+    import signal
+
+    from host.board_client import LinkState
+    from host.model import CLI_CLIENT
+    from protocol.messages import Message, Telemetry
+
+    after_restart: list[Telemetry] = []
+    with HostApp(HostOptions(ui=False, virtual_rc=Lever.MIDDLE)) as app:
+        app.start()
+        client, m = app.client, app.model
+        assert client is not None
+        assert wait_for(lambda: m.telemetry is not None and m.telemetry.mode == Mode.MANUAL, 30.0)
+        assert m.set_stick(CLI_CLIENT, 3, 500.0)  # curl: current on every cable
+        assert wait_for(lambda: m.telemetry is not None and min(m.telemetry.commanded_current) > 0, 10.0)
+        old_pid = client._proc.pid
+        restarted = threading.Event()
+
+        def collect(msg: Message) -> None:
+            if restarted.is_set() and isinstance(msg, Telemetry):
+                after_restart.append(msg)
+
+        def on_state(state: LinkState) -> None:
+            if state is LinkState.DISCONNECTED:
+                restarted.set()
+
+        client.add_listener(collect)
+        client.add_state_listener(on_state)
+        os.kill(old_pid, signal.SIGKILL)
+        assert wait_for(lambda: client.stats().process_restarts == 1, 10.0)
+        assert wait_for(lambda: client.state is LinkState.CONNECTED and len(after_restart) >= 20, 30.0)
+        assert client._proc.pid != old_pid and client._proc.is_alive()
+        # No RC reached the board while no link process ran (a spawn takes far longer than its 30 ms RC
+        # timeout); the new process sent SAFE frames first: from its first frame on, the board is in
+        # SAFE with the right lever DOWN and sends zero current, and stays there.
+        first = after_restart[0]
+        assert first.mode == Mode.SAFE and first.right_lever == Lever.DOWN, first
+        assert all(t.commanded_current == (0, 0, 0) for t in after_restart), after_restart[-1]
+        assert all(t.mode == Mode.SAFE for t in after_restart)
+        assert any("disconnected" in n.title.lower() for n in m.notices_after(0))
 
 
 def test_scene_objects_from_the_plant_objects() -> None:
