@@ -341,6 +341,8 @@ class HostApp:
             with contextlib.suppress(Exception), contextlib.redirect_stdout(io.StringIO()):
                 self.server.stop()
             self.server = None
+        if self.guard is not None:
+            self.guard.detach()
         if self.drone_link is not None:
             with contextlib.suppress(Exception):
                 self.drone_link.close()

@@ -24,6 +24,8 @@ __all__ = [
     "VIRTUAL_RC_LEVERS",
     "HostOptions",
     "build_parser",
+    "check_board_url",
+    "check_mavlink_url",
     "check_signing_timestamp_writable",
     "check_ui_port_free",
     "is_loopback",
@@ -176,6 +178,10 @@ class HostOptions:
 
             if not is_mcap(ns.replay):
                 raise HostError(f"{ns.replay} is not an MCAP recording")
+        if ns.port is not None:
+            check_board_url(ns.port)
+        if ns.mavlink is not None:
+            check_mavlink_url(ns.mavlink)
         if ns.record is not None and not ns.record.parent.exists():
             raise HostError(f"cannot record to {ns.record}: directory {ns.record.parent} does not exist")
         if ns.mav_signing_key is not None and ns.mavlink is None:
@@ -250,6 +256,51 @@ def check_signing_timestamp_writable(path: Path) -> None:
             f"cannot persist the signing timestamp to {path}: not writable "
             "(choose another place with --mav-signing-timestamp)"
         )
+
+
+_MAV_HOST_PORT = ("tcp", "tcpin", "udp", "udpin", "udpout", "udpbcast", "wsserver", "mcast")
+"""pymavlink connection types followed by ``HOST:PORT``."""
+_MAV_OTHER = ("uds", "unix", "ws", "wss")
+"""pymavlink connection types followed by a path or a URL."""
+
+
+def _check_host_port(flag: str, url: str, rest: str, form: str) -> None:
+    host, sep, port_text = rest.rpartition(":")
+    if not sep or not host or not port_text.isdigit():
+        raise HostError(f"{flag} {url}: expected {form}")
+    if not 1 <= int(port_text) <= 65535:
+        raise HostError(f"{flag} {url}: port {port_text} is out of range 1..65535")
+
+
+def check_board_url(url: str) -> None:
+    """Check a ``--port`` ``socket://`` URL's form before anything starts (pyserial's own errors are
+    not one readable line). Other URLs and device paths are checked when opened.
+
+    Raises:
+        HostError: a malformed ``socket://`` URL.
+    """
+    if url.startswith("socket://"):
+        rest = url[len("socket://") :].split("?", 1)[0].rstrip("/")
+        _check_host_port("--port", url, rest, "socket://HOST:PORT")
+
+
+def check_mavlink_url(url: str) -> None:
+    """Check a ``--mavlink`` connection string's form before the board starts.
+
+    Network types (``udpout:``, ``udpin:``, ``tcp:`` ...) need ``HOST:PORT`` with a port in 1..65535;
+    an unknown ``type:`` prefix is refused; anything else is a serial device, opened at start.
+
+    Raises:
+        HostError: one line saying what is wrong.
+    """
+    kind, sep, rest = url.partition(":")
+    if not sep or "/" in kind or "\\" in kind or len(kind) == 1:  # a device path (or a drive letter)
+        return
+    if kind.lower() in _MAV_HOST_PORT:
+        _check_host_port("--mavlink", url, rest, f"{kind}:HOST:PORT")
+    elif kind.lower() not in _MAV_OTHER:
+        known = ", ".join(f"{k}:" for k in (*_MAV_HOST_PORT, *_MAV_OTHER))
+        raise HostError(f"--mavlink {url}: unknown connection type {kind!r} ({known} or a serial device)")
 
 
 def is_loopback(host: str) -> bool:

@@ -18,16 +18,24 @@ while the server starts, so every request passes :meth:`PanelGuard.check` first:
   constant time.
 
 Refusals are counted (:class:`GuardStats`) and logged at info level, one line each.
+
+A message on an open websocket that viser cannot decode (not msgpack, a text frame, an unknown type,
+missing fields) ends that connection inside viser's handler, which ``websockets`` logs with a
+traceback; a decoded one whose handler raises ends as an asyncio task error, traced too. Both are
+counted instead (``GuardStats.malformed_messages_n``), the first one logged as a warning line and the
+rest at debug level (:meth:`PanelGuard.attach`).
 """
 
 from __future__ import annotations
 
+import asyncio
 import hmac
 import http
 import http.cookies
 import logging
 import threading
 import urllib.parse
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,10 +60,13 @@ class GuardStats:
     Attributes:
         origin_refused_n: websocket upgrades refused for their Origin (or, on loopback, their Host).
         token_refused_n: requests refused for a missing or wrong token.
+        malformed_messages_n: panel messages viser could not decode or handle (each one closes the
+            connection that sent it, or is dropped).
     """
 
     origin_refused_n: int = 0
     token_refused_n: int = 0
+    malformed_messages_n: int = 0
 
 
 def _host_name(host_header: str) -> str | None:
@@ -108,7 +119,61 @@ class PanelGuard:
         self.token = token
         self.loopback = loopback
         self.stats = GuardStats()
+        self.port: int | None = None
+        """The server's port, once it listens (:meth:`attach`)."""
         self._lock = threading.Lock()
+        self._ws_filter: logging.Filter | None = None
+
+    def _malformed(self, what: object) -> None:
+        with self._lock:
+            self.stats.malformed_messages_n += 1
+            n = self.stats.malformed_messages_n
+        level = logging.WARNING if n == 1 else logging.DEBUG
+        _log.log(level, "malformed panel message #%d dropped: %s", n, what)
+
+    def attach(self, server: Any) -> None:
+        """Count, instead of tracing, what viser fails on in ``server``'s messages.
+
+        ``websockets`` logs a failed connection handler on ``websockets.server`` with the connection in
+        the record (``record.websocket``); the filter takes the records of this server's port only.
+        Handler tasks' errors reach the server loop's exception handler (viser's private
+        ``_websock_server._background_event_loop``; without it only the log filter is installed).
+        """
+        self.port = int(server.get_port())
+        guard = self
+
+        class _Malformed(logging.Filter):
+            def filter(self, record: logging.LogRecord) -> bool:
+                if record.getMessage() != "connection handler failed":
+                    return True
+                try:
+                    port = record.websocket.local_address[1]  # type: ignore[attr-defined]
+                except (AttributeError, IndexError, TypeError):
+                    return True
+                if port != guard.port:
+                    return True
+                exc = record.exc_info[1] if record.exc_info else None
+                guard._malformed(f"{type(exc).__name__}: {exc}" if exc is not None else record.getMessage())
+                return False
+
+        self._ws_filter = _Malformed()
+        logging.getLogger("websockets.server").addFilter(self._ws_filter)
+        # viser warns (UserWarning, once per location) when a field does not match its annotation.
+        warnings.filterwarnings("ignore", message=r"\[viser\] .* does not match annotation")
+        loop = getattr(getattr(server, "_websock_server", None), "_background_event_loop", None)
+        if isinstance(loop, asyncio.AbstractEventLoop):
+
+            def on_error(_loop: asyncio.AbstractEventLoop, context: dict[str, Any]) -> None:
+                exc = context.get("exception")
+                self._malformed(f"{type(exc).__name__}: {exc}" if exc is not None else context.get("message"))
+
+            loop.call_soon_threadsafe(loop.set_exception_handler, on_error)
+
+    def detach(self) -> None:
+        """Remove the log filter (the server is stopped); safe twice."""
+        if self._ws_filter is not None:
+            logging.getLogger("websockets.server").removeFilter(self._ws_filter)
+            self._ws_filter = None
 
     def _token_ok(self, path: str, headers: Any) -> bool:
         if self.token is None:
@@ -218,4 +283,5 @@ def start_guarded_server(guard: PanelGuard, **viser_kwargs: Any) -> Any:
     if not installed:
         server.stop()
         raise HostError("the panel's access check could not be installed in this viser version")
+    guard.attach(server)
     return server

@@ -123,6 +123,12 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--record", "/nonexistent/dir/x.mcap", "--port", "loop://"], "does not exist"),
         (["--mav-signing-key", "k.bin"], "needs --mavlink"),
         (["--mavlink", "udpout:127.0.0.1:9", "--mav-signing-timestamp", "t"], "needs --mav-signing-key"),
+        # Checked before anything starts (no virtual board is started for these).
+        (["--port", "socket://nonsense", "--headless"], "expected socket://HOST:PORT"),
+        (["--port", "socket://127.0.0.1:99999", "--headless"], "port 99999 is out of range 1..65535"),
+        (["--mavlink", "udpout:127.0.0.1:99999", "--headless"], "port 99999 is out of range 1..65535"),
+        (["--mavlink", "udpout:127.0.0.1", "--headless"], "expected udpout:HOST:PORT"),
+        (["--mavlink", "bogus:://x", "--headless"], "unknown connection type 'bogus'"),
     ],
 )
 def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
