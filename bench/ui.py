@@ -160,7 +160,7 @@ def main() -> int:
             ws.on("framereceived", lambda _payload: ws_frames.__setitem__(0, ws_frames[0] + 1))
 
         page.on("websocket", on_ws)
-        page.goto(app.url + "?fixedDpr=1")
+        page.goto(app.url + ("&" if "?" in app.url else "?") + "fixedDpr=1")
         page.get_by_role("button", exact=True, name="Take control").wait_for(timeout=60_000)
         time.sleep(2.0)
 

@@ -486,6 +486,8 @@ def _run_replay(args: argparse.Namespace) -> int:
         result = replay(path)
     except HilError as exc:
         raise UsageError(f"{path}: {exc}", f"{PROG} replay") from exc
+    if result.truncated and not args.json:
+        print(f"{path}: truncated (its recorder was killed): replayed up to its last complete tick")
     if args.json:
         print(json.dumps(result.as_dict()))
     elif result.matched:
@@ -496,6 +498,35 @@ def _run_replay(args: argparse.Namespace) -> int:
         differ = f"{result.mismatches} of {result.outputs_compared} outputs differ"
         print(f"{path}: {differ}; first: {result.first_mismatch}")
     return EXIT_OK if result.matched else EXIT_FAILURE
+
+
+def _configure_recover(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", metavar="FILE", help="an MCAP recording whose writer was killed")
+    p.add_argument(
+        "-o", "--output", metavar="OUT", help="the complete file to write (default: FILE.recovered.mcap)"
+    )
+
+
+def _run_recover(args: argparse.Namespace) -> int:
+    from hil.recording import is_mcap, is_truncated, recover
+
+    path = Path(args.file)
+    if not path.is_file():
+        raise UsageError(f"no such recording: {path}", f"{PROG} recover")
+    if not is_mcap(path):
+        raise UsageError(f"{path} is not an MCAP file", f"{PROG} recover")
+    if not is_truncated(path):
+        raise UsageError(f"{path} is complete: nothing to recover", f"{PROG} recover")
+    out = Path(args.output) if args.output else path.with_name(path.name + ".recovered.mcap")
+    if out.resolve() == path.resolve():
+        raise UsageError("--output must differ from FILE", f"{PROG} recover")
+    try:
+        got = recover(path, out)
+    except OSError as exc:
+        raise UsageError(f"cannot write {out}: {exc.strerror or exc}", f"{PROG} recover") from exc
+    until = "" if got.last_time_us is None else f" up to {got.last_time_us / 1e6:.3f} s"
+    print(f"{path}: {got.messages_n} messages{until} recovered into {out}")
+    return EXIT_OK
 
 
 COMMANDS: list[Command] = [
@@ -513,6 +544,12 @@ COMMANDS: list[Command] = [
         "replay a recording through the firmware and compare every output byte",
         _configure_replay,
         _run_replay,
+    ),
+    Command(
+        "recover",
+        "make a killed recording open in the standard MCAP readers (copies its complete records)",
+        _configure_recover,
+        _run_recover,
     ),
     Command(
         "experiment",

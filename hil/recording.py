@@ -4,9 +4,12 @@ Raw channels (``message_encoding`` ``spirob.raw``, no schema) hold the exact byt
 so a recording can be replayed through the firmware byte for byte. Decoded channels hold JSON objects
 with a JSON schema, which Foxglove plots directly.
 
-The writer chunks and compresses (zstd) and flushes a finished chunk every ``flush_every`` messages, so a
-process killed mid-run leaves a file whose complete chunks :func:`read_records` still reads: a truncated
-tail is where reading stops, never an error.
+The writer chunks and compresses (zstd) and flushes a finished chunk every ``flush_every`` messages (and
+the header with the metadata at once), so a process killed mid-run leaves a file whose complete chunks
+:func:`read_records` and :func:`read_metadata` still read: a truncated tail is where reading stops,
+never an error. Such a file has no summary, which the mcap library's normal (seeking) reader needs;
+:func:`recover` copies what it holds into a complete file that reader opens, and
+:func:`is_truncated` tells the two apart.
 
 Timestamps: ``log_time`` is the board's clock in nanoseconds (``time_us * 1000``): simulated time in
 lockstep runs, the monotonic clock in real-time runs; the host's monotonic clock in a recording of a run
@@ -29,7 +32,7 @@ import numpy as np
 import numpy.typing as npt
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Message
+from mcap.records import Channel, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
@@ -130,6 +133,8 @@ class Recorder:
         self.messages_written = 0
         if metadata:
             self._writer.add_metadata(PROFILE, {str(k): str(v) for k, v in metadata.items()})
+        # On disk at once: a file killed before its first chunk still says what it records.
+        self._writer.flush()
 
     def _channel(self, topic: str, raw: bool) -> int:
         channel = self._channels.get(topic)
@@ -194,16 +199,102 @@ def is_mcap(path: str | Path) -> bool:
         return f.read(len(MCAP_MAGIC)) == MCAP_MAGIC
 
 
+TRUNCATED_KEY: Final = "truncated"
+"""Metadata key :func:`recover` sets: the file is complete, the run it records is not."""
+
+
+def _ends_with_magic(f: IO[bytes]) -> bool:
+    """The file ends with MCAP's closing magic (its writer finished); leaves ``f`` at its start."""
+    f.seek(0, 2)
+    ends = False
+    if f.tell() >= 2 * len(MCAP_MAGIC):
+        f.seek(-len(MCAP_MAGIC), 2)
+        ends = f.read() == MCAP_MAGIC
+    f.seek(0)
+    return ends
+
+
+def is_truncated(path: str | Path) -> bool:
+    """True for a recording cut short: no closing magic (its writer never finished), or recovered."""
+    with open(path, "rb") as f:
+        if not _ends_with_magic(f):
+            return True
+    return read_metadata(path).get(TRUNCATED_KEY) == "true"
+
+
 def read_metadata(path: str | Path) -> dict[str, str]:
-    """The ``spirob`` metadata record of a recording (empty if none)."""
+    """The ``spirob`` metadata record of a recording (empty if none), of a truncated file too."""
     with open(path, "rb") as f:
         try:
-            for meta in make_reader(f).iter_metadata():
-                if meta.name == PROFILE:
-                    return dict(meta.metadata)
+            if _ends_with_magic(f):
+                for meta in make_reader(f).iter_metadata():
+                    if meta.name == PROFILE:
+                        return dict(meta.metadata)
+                return {}
+            for rec in StreamReader(f, skip_magic=False).records:
+                if isinstance(rec, Metadata) and rec.name == PROFILE:
+                    return dict(rec.metadata)
         except (McapError, EOFError, struct.error, ValueError):
             pass
     return {}
+
+
+@dataclass(frozen=True, slots=True)
+class Recovered:
+    """What :func:`recover` copied.
+
+    Attributes:
+        messages_n: messages copied.
+        last_time_us: log time of the last one (None without messages).
+    """
+
+    messages_n: int
+    last_time_us: int | None
+
+
+def recover(path: str | Path, out: str | Path) -> Recovered:
+    """Copy every complete record of a (truncated) recording into a complete MCAP file at ``out``.
+
+    Schemas, channels, metadata and messages are kept as they were, in file order; the new file has a
+    summary and an index, so the mcap library's normal reader (and Foxglove) opens it. Its ``spirob``
+    metadata gains ``truncated`` = ``true``: the run it records was cut short all the same.
+    """
+    schema_ids: dict[int, int] = {0: 0}
+    channel_ids: dict[int, int] = {}
+    n = 0
+    last: int | None = None
+    with open(path, "rb") as src, open(out, "wb") as dst:
+        writer = Writer(dst, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
+        started = False
+        try:
+            for rec in StreamReader(src, skip_magic=False).records:
+                if isinstance(rec, Header):
+                    writer.start(profile=rec.profile, library=rec.library)
+                    started = True
+                elif not started:
+                    continue
+                elif isinstance(rec, Schema):
+                    schema_ids[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
+                elif isinstance(rec, Channel) and rec.id not in channel_ids:
+                    channel_ids[rec.id] = writer.register_channel(
+                        rec.topic, rec.message_encoding, schema_ids.get(rec.schema_id, 0), dict(rec.metadata)
+                    )
+                elif isinstance(rec, Metadata):
+                    meta = dict(rec.metadata)
+                    if rec.name == PROFILE:
+                        meta[TRUNCATED_KEY] = "true"  # complete now, but its run was cut short
+                    writer.add_metadata(rec.name, meta)
+                elif isinstance(rec, Message) and rec.channel_id in channel_ids:
+                    channel = channel_ids[rec.channel_id]
+                    writer.add_message(channel, rec.log_time, bytes(rec.data), rec.publish_time, rec.sequence)
+                    n += 1
+                    last = rec.log_time // 1000
+        except (McapError, EOFError, struct.error, ValueError):
+            pass  # the truncated tail
+        if not started:
+            writer.start(profile=PROFILE, library="spirob-teleop")
+        writer.finish()
+    return Recovered(n, last)
 
 
 def read_records(path: str | Path, topics: frozenset[str] | set[str] | None = None) -> Iterator[Record]:

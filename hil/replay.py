@@ -63,6 +63,8 @@ class ReplayResult:
         outputs_compared: output records compared.
         mismatches: how many differed (or were missing / extra).
         first_mismatch: description of the first difference, if any.
+        truncated: the file ends mid-run (its recorder was killed): replayed up to its last complete
+            tick, whose outputs are compared; the board's shutdown frame was never recorded.
     """
 
     path: str
@@ -70,6 +72,7 @@ class ReplayResult:
     outputs_compared: int
     mismatches: int
     first_mismatch: str | None
+    truncated: bool = False
 
     @property
     def matched(self) -> bool:
@@ -85,6 +88,7 @@ class ReplayResult:
             "outputs_compared": self.outputs_compared,
             "mismatches": self.mismatches,
             "first_mismatch": self.first_mismatch,
+            "truncated": self.truncated,
         }
 
 
@@ -183,15 +187,21 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
         for held in segment:
             feed(held)
         tick_us, segment = rec.time_us, []
-    if tick_us is not None:
-        run_tick(tick_us, segment)
-    for held in segment:
-        feed(held)
-    # The board's shutdown sends zero current once after the last tick.
-    bus.shutdown()
-    if bus.sent:
-        last_t = produced[-1][0] if produced else 0
-        produced.extend((last_t, recording.CAN_TX, frame) for frame in bus.sent)
+    truncated = recording.is_truncated(path)
+    if truncated:
+        # The last tick's segment may be cut anywhere: its outputs are not compared (nor run).
+        if tick_us is not None:
+            expected = [e for e in expected if e[0] < tick_us]
+    else:
+        if tick_us is not None:
+            run_tick(tick_us, segment)
+        for held in segment:
+            feed(held)
+        # The board's shutdown sends zero current once after the last tick.
+        bus.shutdown()
+        if bus.sent:
+            last_t = produced[-1][0] if produced else 0
+            produced.extend((last_t, recording.CAN_TX, frame) for frame in bus.sent)
     mismatches = 0
     first: str | None = None
     for i in range(max(len(produced), len(expected))):
@@ -201,7 +211,7 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
             mismatches += 1
             if first is None:
                 first = f"output #{i}: recorded {_describe(want)}, replay produced {_describe(got)}"
-    return ReplayResult(str(path), ticks, len(expected), mismatches, first)
+    return ReplayResult(str(path), ticks, len(expected), mismatches, first, truncated)
 
 
 def _describe(item: tuple[int, str, bytes] | None) -> str:

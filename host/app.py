@@ -13,15 +13,17 @@ from collections.abc import Callable
 from typing import Any
 
 from controller.cli_kit import EXIT_OK
-from host.board_client import BoardClient, BoardLinkError, LinkState
+from host.board_client import BoardClient, BoardLinkError, LinkState, load_scaled_s
 from host.errors import HostError
 from host.model import CLI_CLIENT, UiModel
 from host.options import (
     HostOptions,
     check_signing_timestamp_writable,
     check_ui_port_free,
+    is_loopback,
     signing_timestamp_path,
 )
+from host.panel_guard import PanelGuard, start_guarded_server
 from host.recording import LinkRecording, replay_messages
 from host.scene import DronePose, SceneObject, scene_objects
 from host.shadow import ShadowPlant
@@ -56,6 +58,7 @@ class HostApp:
         self.client: BoardClient | None = None
         self.board: Any = None
         self.server: Any = None
+        self.guard: PanelGuard | None = None
         self.panel: Any = None
         self.recording: LinkRecording | None = None
         self.shadow: ShadowPlant | None = None
@@ -143,7 +146,7 @@ class HostApp:
         config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
-            url = str(self.board.start(timeout_s=30.0))
+            url = str(self.board.start(timeout_s=load_scaled_s(30.0)))
         except HilError as exc:
             raise HostError(f"virtual board: {exc}") from exc
         # The objects of the plant we asked for (free objects drawn where they start).
@@ -176,14 +179,15 @@ class HostApp:
         self.client.add_listener(link.on_board_message)
 
     def _start_ui(self) -> None:
-        import viser
-
         from host.panel import TeleopPanel
 
         o = self.options
         # viser prints its own banner (with a URL lacking the token): ours replaces it.
+        self.guard = PanelGuard(o.token, loopback=is_loopback(o.ui_host))
         with contextlib.redirect_stdout(io.StringIO()):
-            server = viser.ViserServer(host=o.ui_host, port=o.ui_port, label="SpiRob teleop", verbose=False)
+            server = start_guarded_server(
+                self.guard, host=o.ui_host, port=o.ui_port, label="SpiRob teleop", verbose=False
+            )
         self.server = server
         if o.ui_port != 0 and server.get_port() != o.ui_port:
             # viser moved to another port: somebody took ours between the check and the bind.
@@ -206,7 +210,7 @@ class HostApp:
         port = server.get_port()
         self.url = f"http://{host}:{port}/"
         if o.token is not None:
-            self.url += f"?websocket=ws://{host}:{port}/?token={o.token}"
+            self.url += f"?token={o.token}"
 
     # ------------------------------------------------------------------ drone link adapters
 
@@ -337,6 +341,8 @@ class HostApp:
             with contextlib.suppress(Exception), contextlib.redirect_stdout(io.StringIO()):
                 self.server.stop()
             self.server = None
+        if self.guard is not None:
+            self.guard.detach()
         if self.drone_link is not None:
             with contextlib.suppress(Exception):
                 self.drone_link.close()

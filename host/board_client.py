@@ -18,6 +18,7 @@ import enum
 import logging
 import multiprocessing as mp
 import multiprocessing.connection as mpc
+import os
 import queue
 import threading
 import time
@@ -50,6 +51,7 @@ __all__ = [
     "MessageListener",
     "RcSource",
     "StateListener",
+    "load_scaled_s",
     "open_port",
 ]
 
@@ -63,6 +65,20 @@ ByteTap = Callable[[Literal["rx", "tx"], bytes, int], None]
 """Called with the exact bytes read (``rx``) or written (``tx``) and the monotonic time in µs."""
 RcSource = Callable[[], RcFrame | None]
 """Returns the DBUS frame to send now, or None when nobody holds control (then no RC is sent)."""
+
+
+def load_scaled_s(base_s: float) -> float:
+    """``base_s`` stretched by the machine's load per core (1-minute average), never below ``base_s``.
+
+    A start-up wait that is ample on an idle machine (a fresh interpreter importing and opening a
+    port) was measured to run out at a load of 10-15 on two cores; the process was not stuck, only
+    starved.
+    """
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        return base_s
+    return base_s * max(1.0, load / (os.cpu_count() or 1))
 
 
 class LinkState(enum.Enum):
@@ -92,7 +108,8 @@ class BoardClientConfig:
         rt_priority: SCHED_FIFO priority of the link process (None: normal priority). Below the
             virtual board's firmware loop (50) so it never delays it.
         exclusive: lock a device port against a second opener (pyserial ``exclusive``; POSIX devices).
-        open_timeout_s: how long :meth:`BoardClient.start` waits for the port to open.
+        open_timeout_s: how long :meth:`BoardClient.start` waits for the port to open on an idle
+            machine; stretched by the load per core (:func:`load_scaled_s`).
     """
 
     heartbeat_period_us: int = HEARTBEAT_PERIOD_US
@@ -142,6 +159,7 @@ class LinkStats:
         unknown_messages: intact frames with an unknown ``cmd_id``.
         listener_errors: exceptions raised by listeners (logged, never fatal).
         reconnects: successful reconnections after a loss.
+        process_restarts: link processes restarted after dying (each one also a loss).
         rc_late: virtual RC frames sent more than half a period late.
         rc_max_gap_us: longest interval between two consecutive virtual RC frames.
         rc_gaps_over_timeout: intervals longer than the board's 30 ms RC timeout (each one is an RC
@@ -165,6 +183,7 @@ class LinkStats:
     unknown_messages: int = 0
     listener_errors: int = 0
     reconnects: int = 0
+    process_restarts: int = 0
     rc_late: int = 0
     rc_max_gap_us: int = 0
     rc_gaps_over_timeout: int = 0
@@ -248,6 +267,8 @@ class BoardClient:
         self._rx_bytes = 0
         self._listener_errors = 0
         self._reconnects = 0
+        self._process_restarts = 0
+        self._last_restart = float("-inf")
         self._ever_lost = False
         self._last_rx_us: int | None = None
         self._min_offset_us: int | None = None
@@ -296,23 +317,12 @@ class BoardClient:
         self._stop.clear()
         self._shared = LinkShared(self._ctx)
         self._renew_lease()
-        child, parent = self._ctx.Pipe(duplex=False)  # host -> link process requests
-        events = self._ctx.Queue()  # link process -> host: bytes, states, sent frames
-        proc = self._ctx.Process(
-            target=link_main,
-            args=(self.url, self.config, self._shared, child, events, self._reconnect),
-            name="board-link",
-            daemon=True,
-        )
-        proc.start()
-        child.close()
-        self._proc = proc
-        self._conn = parent
-        self._events = events
+        proc, events = self._spawn()
         self._set_state(LinkState.CONNECTING)
-        # Wait for the first word from the link process: open or not.
+        # Wait for the first word from the link process: open or not. A fresh interpreter under load
+        # can take many seconds to import and open, hence the wait scaled by the load.
         first: Any = None
-        deadline = time.monotonic() + self.config.open_timeout_s
+        deadline = time.monotonic() + load_scaled_s(self.config.open_timeout_s)
         while first is None and time.monotonic() < deadline:
             try:
                 item = events.get(timeout=max(0.01, min(0.2, deadline - time.monotonic())))
@@ -336,6 +346,53 @@ class BoardClient:
         self._handle(first)
         self._thread = threading.Thread(target=self._dispatch_loop, name="board-link-rx", daemon=True)
         self._thread.start()
+
+    def _spawn(self) -> tuple[Any, Any]:
+        """Start a link process on the shared memory; returns it and its event queue."""
+        child, parent = self._ctx.Pipe(duplex=False)  # host -> link process requests
+        events = self._ctx.Queue()  # link process -> host: bytes, states, sent frames
+        proc = self._ctx.Process(
+            target=link_main,
+            args=(self.url, self.config, self._shared, child, events, self._reconnect),
+            name="board-link",
+            daemon=True,
+        )
+        proc.start()
+        child.close()
+        self._proc = proc
+        self._conn = parent
+        self._events = events
+        return proc, events
+
+    def _restart_process(self) -> None:
+        """A link process died: say so, and start a new one that begins with SAFE frames.
+
+        While no process runs the board receives neither RC nor heartbeat, so it is at zero current
+        (RC lost after 30 ms); the new process sends only neutral right-lever-DOWN frames until this
+        host has seen its connect and reset the levers (``rc_gen`` back to "no connect seen").
+        """
+        proc = self._proc
+        code = proc.exitcode if proc is not None else None
+        with self._stats_lock:
+            self._process_restarts += 1
+        _log.error(
+            "board link process died (exit code %s); restarting it, the board holds zero current until "
+            "it is back",
+            code,
+        )
+        self._ever_lost = True
+        self._connected.clear()
+        self._set_state(LinkState.DISCONNECTED)
+        self._shutdown_process()
+        if self._shared is not None:
+            self._shared.rc_gen.value = -1
+        # A process that dies at once again is not restarted in a tight loop.
+        pause_s = self._last_restart + self.config.reconnect_period_us / 1e6 - time.monotonic()
+        if pause_s > 0 and self._stop.wait(pause_s):
+            return
+        self._last_restart = time.monotonic()
+        self._renew_lease()
+        self._spawn()
 
     def stop(self) -> None:
         """Send a last SAFE frame, stop the link process and the thread; safe to call twice."""
@@ -447,10 +504,11 @@ class BoardClient:
 
     def _dispatch_loop(self) -> None:
         poll_s = self.config.rc_poll_period_us / 1e6
-        events = self._events
-        proc = self._proc
         next_lease = 0.0
-        while not self._stop.is_set() and events is not None:
+        while not self._stop.is_set():
+            events, proc = self._events, self._proc
+            if events is None:
+                break
             now = time.monotonic()
             if now >= next_lease:
                 next_lease = now + poll_s
@@ -459,13 +517,13 @@ class BoardClient:
                 item = events.get(timeout=poll_s)
             except queue.Empty:
                 if proc is not None and not proc.is_alive() and not self._stop.is_set():
-                    _log.error("board link process ended unexpectedly")
-                    self._connected.clear()
-                    self._set_state(LinkState.DISCONNECTED)
-                    break
+                    self._restart_process()
                 continue
             except (EOFError, OSError, ValueError):
-                break
+                if self._stop.is_set() or proc is None or proc.is_alive():
+                    break
+                self._restart_process()
+                continue
             self._handle(item)
 
     def _handle(self, item: Any) -> None:
@@ -600,6 +658,7 @@ class BoardClient:
                 unknown_messages=stream.unknown_ids,
                 listener_errors=self._listener_errors,
                 reconnects=self._reconnects,
+                process_restarts=self._process_restarts,
                 rc_late=int(sh.rc_late.value) if sh else 0,
                 rc_max_gap_us=int(sh.rc_max_gap_us.value) if sh else 0,
                 rc_gaps_over_timeout=int(sh.rc_gaps.value) if sh else 0,

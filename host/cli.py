@@ -60,8 +60,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{PROG}: board link {source}", flush=True)
             if app.url:
                 print(f"{PROG}: panel at {app.url}", flush=True)
-                if options.token is not None:
-                    print(f"{PROG}: access token {options.token}", flush=True)
+                if options.token is None:
+                    print(
+                        f"{PROG}: --no-token: any program or user on this machine can drive the arm "
+                        "through the panel (pages from other origins are still refused)",
+                        flush=True,
+                    )
             if options.record is not None:
                 print(f"{PROG}: recording to {options.record}", flush=True)
             return app.run(options.duration_s, stop)

@@ -24,6 +24,8 @@ __all__ = [
     "VIRTUAL_RC_LEVERS",
     "HostOptions",
     "build_parser",
+    "check_board_url",
+    "check_mavlink_url",
     "check_signing_timestamp_writable",
     "check_ui_port_free",
     "is_loopback",
@@ -78,7 +80,13 @@ def build_parser() -> argparse.ArgumentParser:
     ui.add_argument("--headless", action="store_true", help="no panel")
     ui.add_argument(
         "--token",
-        help="access token for a non-loopback --ui-host (default: a fresh random one, printed at start)",
+        help="the panel's access token (default: a fresh random one, in the URL printed at start)",
+    )
+    ui.add_argument(
+        "--no-token",
+        action="store_true",
+        help="loopback --ui-host only: no access token; any program on this machine may then drive "
+        "the arm through the panel (pages from other origins are still refused)",
     )
     run = p.add_argument_group("run")
     run.add_argument("--duration", type=positive_duration, metavar="S", help="exit after S seconds")
@@ -118,7 +126,7 @@ class HostOptions:
         ui: serve the panel.
         ui_host: panel bind address.
         ui_port: panel port (0 = any free port).
-        token: access token (None on loopback).
+        token: access token of the panel (None: headless, or ``--no-token`` on loopback).
         duration_s: stop after this long (None = until interrupted).
         record: MCAP file to write.
         replay: MCAP file to replay instead of a board.
@@ -170,6 +178,10 @@ class HostOptions:
 
             if not is_mcap(ns.replay):
                 raise HostError(f"{ns.replay} is not an MCAP recording")
+        if ns.port is not None:
+            check_board_url(ns.port)
+        if ns.mavlink is not None:
+            check_mavlink_url(ns.mavlink)
         if ns.record is not None and not ns.record.parent.exists():
             raise HostError(f"cannot record to {ns.record}: directory {ns.record.parent} does not exist")
         if ns.mav_signing_key is not None and ns.mavlink is None:
@@ -178,9 +190,17 @@ class HostOptions:
             raise HostError(f"no such signing key file: {ns.mav_signing_key}")
         if ns.mav_signing_timestamp is not None and ns.mav_signing_key is None:
             raise HostError("--mav-signing-timestamp needs --mav-signing-key")
-        token = ns.token  # an explicit token is honoured on loopback too
-        if not ns.headless and not is_loopback(ns.ui_host):
-            token = token or new_token()
+        token: str | None = None
+        if ns.no_token:
+            if ns.token is not None:
+                raise HostError("--no-token and --token cannot be combined")
+            if not is_loopback(ns.ui_host):
+                raise HostError(
+                    f"--no-token is for a loopback --ui-host only ({ns.ui_host} is reachable from elsewhere)"
+                )
+        elif not ns.headless:
+            # Every bind, loopback too: any program or web page on this machine could drive the arm.
+            token = ns.token or new_token()
         return cls(
             port=ns.port,
             ui=not ns.headless,
@@ -236,6 +256,51 @@ def check_signing_timestamp_writable(path: Path) -> None:
             f"cannot persist the signing timestamp to {path}: not writable "
             "(choose another place with --mav-signing-timestamp)"
         )
+
+
+_MAV_HOST_PORT = ("tcp", "tcpin", "udp", "udpin", "udpout", "udpbcast", "wsserver", "mcast")
+"""pymavlink connection types followed by ``HOST:PORT``."""
+_MAV_OTHER = ("uds", "unix", "ws", "wss")
+"""pymavlink connection types followed by a path or a URL."""
+
+
+def _check_host_port(flag: str, url: str, rest: str, form: str) -> None:
+    host, sep, port_text = rest.rpartition(":")
+    if not sep or not host or not port_text.isdigit():
+        raise HostError(f"{flag} {url}: expected {form}")
+    if not 1 <= int(port_text) <= 65535:
+        raise HostError(f"{flag} {url}: port {port_text} is out of range 1..65535")
+
+
+def check_board_url(url: str) -> None:
+    """Check a ``--port`` ``socket://`` URL's form before anything starts (pyserial's own errors are
+    not one readable line). Other URLs and device paths are checked when opened.
+
+    Raises:
+        HostError: a malformed ``socket://`` URL.
+    """
+    if url.startswith("socket://"):
+        rest = url[len("socket://") :].split("?", 1)[0].rstrip("/")
+        _check_host_port("--port", url, rest, "socket://HOST:PORT")
+
+
+def check_mavlink_url(url: str) -> None:
+    """Check a ``--mavlink`` connection string's form before the board starts.
+
+    Network types (``udpout:``, ``udpin:``, ``tcp:`` ...) need ``HOST:PORT`` with a port in 1..65535;
+    an unknown ``type:`` prefix is refused; anything else is a serial device, opened at start.
+
+    Raises:
+        HostError: one line saying what is wrong.
+    """
+    kind, sep, rest = url.partition(":")
+    if not sep or "/" in kind or "\\" in kind or len(kind) == 1:  # a device path (or a drive letter)
+        return
+    if kind.lower() in _MAV_HOST_PORT:
+        _check_host_port("--mavlink", url, rest, f"{kind}:HOST:PORT")
+    elif kind.lower() not in _MAV_OTHER:
+        known = ", ".join(f"{k}:" for k in (*_MAV_HOST_PORT, *_MAV_OTHER))
+        raise HostError(f"--mavlink {url}: unknown connection type {kind!r} ({known} or a serial device)")
 
 
 def is_loopback(host: str) -> bool:

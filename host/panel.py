@@ -4,10 +4,10 @@ Areas and who sees what (one module each, a builder returning its handles: ``hos
 ``host.panel_plots``, ``host.panel_health``; the 3-D scene is ``host.scene``):
 
 - **Control** (built per browser tab, ``client.gui``): who holds control and the hand-over buttons,
-  the access-token field (when a token is required), two virtual sticks as four sliders, two
-  three-position levers, arm / disarm, E-STOP (also the Space hotkey), grasp / release / hold, and the
-  per-cable tension sliders of DIRECT mode. Controls are disabled for tabs that do not hold control;
-  the model refuses their input anyway (server-side check and clamp of every value).
+  two virtual sticks as four sliders, two three-position levers, arm / disarm, E-STOP (also the Space
+  hotkey), grasp / release / hold, and the per-cable tension sliders of DIRECT mode. Controls are
+  disabled for tabs that do not hold control; the model refuses their input anyway (server-side check
+  and clamp of every value).
 - **Plots** (shared): uPlot charts of tensions, commanded and measured currents, cable lengths.
 - **Health** (shared): link state, rates, errors, latency, loop statistics (late count, execution and
   lateness p99), RC / motors, failsafe phase, pose source (simulation, shadow plant, none), MAVLink
@@ -17,11 +17,10 @@ Areas and who sees what (one module each, a builder returning its handles: ``hos
 60 Hz when new poses arrive, plots at 10 Hz, health and control state at 4 Hz): the latest value wins,
 nothing queues up behind a slow browser.
 
-Security (docs/host.md): the caller binds 127.0.0.1 unless told
-otherwise; :func:`harden` replaces ``request_share_url`` with a refusal. With a token, a tab is
-authorised when its websocket URL carries ``?token=...`` (the URL printed at start does that through
-viser's ``websocket`` page parameter) or when the token is typed into the panel; an unauthorised tab
-can watch but not act.
+Security (docs/host.md): the caller binds 127.0.0.1 unless told otherwise and starts the server through
+``host.panel_guard``, whose handshake check refuses a websocket from another origin or without the
+token; :func:`harden` replaces ``request_share_url`` with a refusal. The model checks the token of
+every tab again before it may act.
 """
 
 from __future__ import annotations
@@ -29,7 +28,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-import urllib.parse
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -39,6 +37,7 @@ import viser
 
 from host.model import PoseSource, UiModel
 from host.panel_controls import ControlHandles, build_control_panel, refresh_control
+from host.panel_guard import request_token
 from host.panel_health import build_health_panel, health_text
 from host.panel_plots import build_plot_panel
 from host.scene import ArmGeometry, DronePose, SceneObject, SceneView, build_scene, default_hanging_pose
@@ -79,19 +78,18 @@ def harden(server: viser.ViserServer) -> None:
 
 
 def client_url_token(server: viser.ViserServer, client_id: int) -> str | None:
-    """The ``token`` query parameter of a client's websocket URL, if any.
+    """The token a client's websocket request carried (``token`` query parameter or cookie), if any.
 
-    viser 1.1.1 keeps the raw websocket connection (``websockets`` ``ServerConnection``) per client id in
-    ``server._websock_server._live_connections``; its ``request.path`` is the path and query the browser
-    opened. Private API, pinned by ``viser>=1.1,<1.2``; any failure reads as "no token".
+    The handshake already refused a request without a valid one (``host.panel_guard``); the model
+    checks it again. viser 1.1.1 keeps the raw websocket connection (``websockets``
+    ``ServerConnection``) per client id in ``server._websock_server._live_connections``. Private API,
+    pinned by ``viser>=1.1,<1.2``; any failure reads as "no token".
     """
     try:
         conn = server._websock_server._live_connections.get(client_id)
         if conn is None or conn.request is None:
             return None
-        query = urllib.parse.urlsplit(conn.request.path).query
-        values = urllib.parse.parse_qs(query).get("token")
-        return values[0] if values else None
+        return request_token(conn.request.path, conn.request.headers)
     except Exception:
         return None
 
@@ -152,12 +150,8 @@ class TeleopPanel:
     def _on_connect(self, client: viser.ClientHandle) -> None:
         cid = client.client_id
         token = client_url_token(self.server, cid)
-        authorised = self.model.authorise(cid, token)
+        self.model.authorise(cid, token)
         handles = build_control_panel(client, self.model, tension_max_n=self.model.limits.tension_max_n)
-        if handles.token_text is not None and authorised:
-            handles.token_text.visible = False
-            if handles.token_button is not None:
-                handles.token_button.visible = False
         with self._controls_lock:
             self._controls[cid] = handles
         refresh_control(handles, self.model, force=True)

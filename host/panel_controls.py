@@ -34,8 +34,6 @@ class ControlHandles:
     grant: Any
     refuse: Any
     cancel: Any
-    token_text: Any | None
-    token_button: Any | None
     sticks: dict[int, Any]
     centre: Any
     right_lever: Any
@@ -91,12 +89,6 @@ def build_control_panel(
         grant = gui.add_button("Hand control over", color="orange", visible=False)
         refuse = gui.add_button("Keep control", visible=False)
         cancel = gui.add_button("Cancel request", visible=False)
-        token_text = token_button = None
-        if model.token is not None:
-            token_text = gui.add_text(
-                "Access token", initial_value="", hint="printed by spirob-host at start"
-            )
-            token_button = gui.add_button("Unlock")
         estop = gui.add_button("E-STOP  [Space]", color="red", hint="Emergency stop: zero current, latched")
         with gui.add_folder("Sticks"):
             sticks = {
@@ -149,8 +141,6 @@ def build_control_panel(
         grant,
         refuse,
         cancel,
-        token_text,
-        token_button,
         sticks,
         centre,
         right_lever,
@@ -176,7 +166,7 @@ def build_control_panel(
         result = model.request_control(cid)
         if result is ControlResult.DENIED:
             client.add_notification(
-                "Not authorised", "Enter the access token first.", color="red", auto_close_seconds=5
+                "Not authorised", "This tab has no access token.", color="red", auto_close_seconds=5
             )
         elif result is ControlResult.PENDING:
             client.add_notification(
@@ -202,18 +192,6 @@ def build_control_panel(
     def _(event: Any) -> None:
         if own(event):
             model.cancel_request(cid)
-
-    if token_button is not None and token_text is not None:
-        text_handle = token_text
-
-        @token_button.on_click
-        def _(event: Any) -> None:
-            if not own(event):
-                return
-            if model.authorise(cid, str(text_handle.value).strip()):
-                client.add_notification("Unlocked", "This tab may now take control.", auto_close_seconds=4)
-            else:
-                client.add_notification("Wrong token", "Access refused.", color="red", auto_close_seconds=5)
 
     @estop.on_click
     def _(event: Any) -> None:
@@ -307,7 +285,7 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
     if mine:
         who = "**You hold control.**"
     elif holder is None:
-        who = "Nobody holds control." + ("" if authorised else " Enter the access token to act.")
+        who = "Nobody holds control." + ("" if authorised else " This tab may only watch.")
     elif holder == CLI_CLIENT:
         who = "The command line holds control (--virtual-rc). Watching."
     else:
@@ -337,10 +315,6 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
     h.grant.visible = mine and pending is not None
     h.refuse.visible = mine and pending is not None
     h.cancel.visible = pending == cid
-    if h.token_text is not None and authorised:
-        h.token_text.visible = False
-        if h.token_button is not None:
-            h.token_button.visible = False
     h.estop.disabled = not authorised
     for w in h.action_widgets():
         w.disabled = not mine

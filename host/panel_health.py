@@ -76,6 +76,7 @@ def health_text(
             f"**Link** `{stats.url}`: telemetry {_fmt_rate(stats.rx_rate_hz, 'Telemetry')} Hz · poses "
             f"{_fmt_rate(stats.rx_rate_hz, 'SimPoses')} Hz · errors {stats.errors} · "
             f"skipped {stats.parser.get('bytes_skipped', 0)} B · reconnects {stats.reconnects} · "
+            f"link process restarts {stats.process_restarts} · "
             f"latency {lat} · RC late {stats.rc_late} · tx dropped {stats.tx_dropped}"
         )
     if t is None:

@@ -110,3 +110,60 @@ def test_replay_streams_the_recording_once(rc_loss_recording: Path, monkeypatch:
     assert records_read == sum(1 for r in read_records(rc_loss_recording) if r.topic in wanted)
     assert ticks_run == marks_read == result.ticks == 4000
     assert behind_max <= 2  # reading mark k, tick k - 2 has run: one segment held, never the file
+
+
+def test_a_killed_recording_is_recovered_and_replayed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """kill -9 of a real `spirob-hil run --record` mid-run: recover, the standard reader, replay."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from mcap.reader import make_reader
+
+    from hil.cli import main
+
+    path = tmp_path / "killed.mcap"
+    repo = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hil.cli", "run", "rc-loss", "--seed", "5", "--record", str(path)],
+        cwd=repo,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        # Killed once several chunks are on disk, long before the run (and its summary) ends.
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and (not path.exists() or path.stat().st_size < 200_000):
+            assert proc.poll() is None, "the run ended before it could be killed"
+            time.sleep(0.01)
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+    assert recording.is_truncated(path)
+    assert read_metadata(path).get("scenario") == "rc-loss"  # the metadata is on disk at once
+
+    # Replay accepts the truncated tail, says so in one line, and every compared output matches.
+    result = replay(path)
+    assert result.truncated and result.matched and result.ticks > 1000, result
+    assert main(["replay", str(path)]) == 0
+    note, verdict = capsys.readouterr().out.splitlines()
+    assert "truncated" in note and "every output byte matched" in verdict
+
+    # recover writes a file the mcap library's normal (seeking) reader opens, with every message.
+    out = tmp_path / "recovered.mcap"
+    assert main(["recover", str(path), "-o", str(out)]) == 0
+    assert recording.is_truncated(out)  # complete, but it says its run was cut short
+    with open(out, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics is not None
+        n = summary.statistics.message_count
+        assert n == sum(1 for _ in reader.iter_messages())
+    assert n == sum(1 for _ in read_records(path)) > 0
+    assert read_metadata(out) == {**read_metadata(path), "truncated": "true"}
+    again = replay(out)
+    assert again.truncated and again.matched and again.ticks == result.ticks

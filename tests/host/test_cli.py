@@ -7,6 +7,7 @@ real virtual board (``hil.board``).
 from __future__ import annotations
 
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -61,16 +62,35 @@ def test_parser_defaults() -> None:
     assert ns.port is None and ns.ui_host == "127.0.0.1" and ns.ui_port == 8080
     assert not ns.headless and ns.duration is None and ns.mav_sysid == 1 and ns.mav_compid == 25
     opts = HostOptions.from_args(ns)
-    assert opts.token is None and opts.ui
+    assert opts.token is not None and len(opts.token) >= 16 and opts.ui
 
 
-def test_non_loopback_ui_requires_a_token() -> None:
-    opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "192.0.2.7"]))
-    assert opts.token is not None and len(opts.token) >= 16
+def test_every_bind_requires_a_token_unless_no_token_on_loopback() -> None:
+    for host in ("192.0.2.7", "127.0.0.1", "::1"):
+        opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", host]))
+        assert opts.token is not None and len(opts.token) >= 16
     opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "192.0.2.7", "--token", "abc"]))
     assert opts.token == "abc"
-    opts = HostOptions.from_args(build_parser().parse_args(["--ui-host", "::1"]))
-    assert opts.token is None
+    assert HostOptions.from_args(build_parser().parse_args(["--no-token"])).token is None
+    assert HostOptions.from_args(build_parser().parse_args(["--headless"])).token is None
+
+
+@pytest.mark.parametrize(
+    ("argv", "reason"),
+    [
+        (["--ui-host", "0.0.0.0", "--no-token"], "--no-token is for a loopback --ui-host only"),
+        (["--no-token", "--token", "abc"], "--no-token and --token cannot be combined"),
+    ],
+)
+def test_no_token_refusals(argv: list[str], reason: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([*argv, "--duration", "1"]) == 2
+    assert reason in one_error_line(capsys.readouterr().err)
+
+
+def test_no_token_says_what_it_opens(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--port", peer.url, "--ui-port", "0", "--no-token", "--duration", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "?token=" not in out and "any program or user on this machine can drive the arm" in out
 
 
 def test_virtual_rc_choices() -> None:
@@ -103,6 +123,12 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--record", "/nonexistent/dir/x.mcap", "--port", "loop://"], "does not exist"),
         (["--mav-signing-key", "k.bin"], "needs --mavlink"),
         (["--mavlink", "udpout:127.0.0.1:9", "--mav-signing-timestamp", "t"], "needs --mav-signing-key"),
+        # Checked before anything starts (no virtual board is started for these).
+        (["--port", "socket://nonsense", "--headless"], "expected socket://HOST:PORT"),
+        (["--port", "socket://127.0.0.1:99999", "--headless"], "port 99999 is out of range 1..65535"),
+        (["--mavlink", "udpout:127.0.0.1:99999", "--headless"], "port 99999 is out of range 1..65535"),
+        (["--mavlink", "udpout:127.0.0.1", "--headless"], "expected udpout:HOST:PORT"),
+        (["--mavlink", "bogus:://x", "--headless"], "unknown connection type 'bogus'"),
     ],
 )
 def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -166,7 +192,8 @@ def test_headless_run_for_a_duration(peer: LinkPeer, capsys: pytest.CaptureFixtu
 
 def test_panel_run_prints_the_url(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--port", peer.url, "--ui-port", "0", "--duration", "0.5"]) == 0
-    assert "panel at http://127.0.0.1:" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "panel at http://127.0.0.1:" in out and "/?token=" in out
 
 
 def test_virtual_rc_drives_the_gate_then_manual(peer: LinkPeer) -> None:
@@ -301,6 +328,49 @@ def test_virtual_board_over_a_pty_with_manual_rc() -> None:
                 lambda: app.model.telemetry is not None and app.model.telemetry.mode == Mode.MANUAL, 20.0
             )
             assert app.model.poses is not None
+
+
+def test_a_killed_link_process_is_restarted_and_the_board_held_zero_current() -> None:
+    import os
+    import signal
+
+    from host.board_client import LinkState
+    from host.model import CLI_CLIENT
+    from protocol.messages import Message, Telemetry
+
+    after_restart: list[Telemetry] = []
+    with HostApp(HostOptions(ui=False, virtual_rc=Lever.MIDDLE)) as app:
+        app.start()
+        client, m = app.client, app.model
+        assert client is not None
+        assert wait_for(lambda: m.telemetry is not None and m.telemetry.mode == Mode.MANUAL, 30.0)
+        assert m.set_stick(CLI_CLIENT, 3, 500.0)  # curl: current on every cable
+        assert wait_for(lambda: m.telemetry is not None and min(m.telemetry.commanded_current) > 0, 10.0)
+        old_pid = client._proc.pid
+        restarted = threading.Event()
+
+        def collect(msg: Message) -> None:
+            if restarted.is_set() and isinstance(msg, Telemetry):
+                after_restart.append(msg)
+
+        def on_state(state: LinkState) -> None:
+            if state is LinkState.DISCONNECTED:
+                restarted.set()
+
+        client.add_listener(collect)
+        client.add_state_listener(on_state)
+        os.kill(old_pid, signal.SIGKILL)
+        assert wait_for(lambda: client.stats().process_restarts == 1, 10.0)
+        assert wait_for(lambda: client.state is LinkState.CONNECTED and len(after_restart) >= 20, 30.0)
+        assert client._proc.pid != old_pid and client._proc.is_alive()
+        # No RC reached the board while no link process ran (a spawn takes far longer than its 30 ms RC
+        # timeout); the new process sent SAFE frames first: from its first frame on, the board is in
+        # SAFE with the right lever DOWN and sends zero current, and stays there.
+        first = after_restart[0]
+        assert first.mode == Mode.SAFE and first.right_lever == Lever.DOWN, first
+        assert all(t.commanded_current == (0, 0, 0) for t in after_restart), after_restart[-1]
+        assert all(t.mode == Mode.SAFE for t in after_restart)
+        assert any("disconnected" in n.title.lower() for n in m.notices_after(0))
 
 
 def test_scene_objects_from_the_plant_objects() -> None:

@@ -2,8 +2,10 @@
 
 Against a real `spirob-host` (``HostApp``, in-process) connected to the real virtual board
 (``hil.board``, its own process) on loopback: the page loads, the canvas renders the arm, a stick moved
-in the page changes the commanded tensions the board reports, a tab without the access token can
-only watch, a second tab cannot take control silently, and E-stop (Space) zeroes the currents.
+in the page changes the commanded tensions the board reports, a second tab cannot take control
+silently, and E-stop (Space) zeroes the currents. Against a host on ``loop://``: a page from another
+origin cannot open the panel's websocket (even with the token, even with the panel's cookie), the
+panel refuses a browser without the token, and the printed URL opens it.
 
 ``SPIROB_BROWSER_FAKE_BOARD=1`` runs it against the scripted fake board of tests/link_peer.py instead
 (for developing the panel without the plant). Without Chromium the module fails, it does not skip: CI
@@ -13,15 +15,19 @@ installs it, and a silent skip would hide the panel's only end-to-end test.
 from __future__ import annotations
 
 import contextlib
+import http.server
 import io
 import os
 import shutil
+import threading
 import time
+import urllib.parse
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+import viser
 from chromium import CHROMIUM, CHROMIUM_ARGS
 from playwright import sync_api
 
@@ -117,7 +123,7 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
 
     m = app.model
     assert f"token={TOKEN}" in app.url
-    page_a = open_panel(browser, app)  # the printed URL: the token travels in the websocket URL
+    page_a = open_panel(browser, app)  # the printed URL: the page sets the cookie the websocket carries
     a = client_of(app, set())
     assert m.is_authorised(a)
 
@@ -177,16 +183,6 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     hold_box.click()
     assert wait_for(held), f"cable 1 not held: {m.telemetry}"
 
-    # A tab without the token can only watch: no control, no E-stop.
-    plain = browser.new_page()
-    plain.goto(app.url.split("?")[0] + "?fixedDpr=1")
-    plain.get_by_text("Access token", exact=True).first.wait_for(timeout=30_000)
-    c = client_of(app, {a})
-    assert not m.is_authorised(c)
-    assert not m.estop(c) and m.request_control(c).value == "denied"
-    plain.close()
-    assert wait_for(lambda: c not in app.panel.controls())  # type: ignore[union-attr]
-
     # A second (authorised) tab watches; asking for control does not take it.
     page_b = open_panel(browser, app)
     b = client_of(app, {a})
@@ -216,3 +212,75 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     page_a.close()
     page_b.close()
     assert wait_for(lambda: m.holder is None)
+
+
+OPEN_WS_JS = """([url, protocol]) => new Promise(done => {
+    const ws = new WebSocket(url, [protocol]);
+    ws.onopen = () => { ws.close(); done("open"); };
+    ws.onerror = () => done("refused");
+    setTimeout(() => done("timeout"), 15000);
+})"""
+"""Opens a websocket the way viser's client does (its subprotocol) and says whether it opened."""
+
+
+def try_websocket(page: Any, url: str) -> str:
+    """The outcome ("open", "refused", "timeout") of a websocket to ``url`` opened by ``page``."""
+    return str(page.evaluate(OPEN_WS_JS, [url, f"viser-v{viser.__version__}"]))
+
+
+class _AttackerPage(http.server.BaseHTTPRequestHandler):
+    def do_GET(self) -> None:
+        body = b"<!doctype html><title>elsewhere</title><p>another origin"
+        self.send_response(200)
+        self.send_header("Content-Type", "text/html")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *_args: Any) -> None:
+        return
+
+
+def test_panel_refuses_other_origins_and_missing_tokens() -> None:
+    other = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _AttackerPage)
+    threading.Thread(target=other.serve_forever, daemon=True).start()
+    opts = HostOptions(port="loop://", ui_port=0, token=TOKEN)
+    with HostApp(opts, panel_config=PANEL) as app, sync_api.sync_playwright() as p:
+        app.start()
+        assert app.url.endswith(f"/?token={TOKEN}")
+        parts = urllib.parse.urlsplit(app.url)
+        ws = f"ws://{parts.netloc}/"
+        guard = app.guard
+        assert guard is not None and app.panel is not None
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        try:
+            # The operator's browser: the printed URL opens a working panel (and leaves the cookie).
+            operator = browser.new_context(viewport={"width": 960, "height": 680})
+            panel = operator.new_page()
+            panel.goto(app.url)
+            panel.get_by_role("button", exact=True, name="E-STOP [Space]").wait_for(timeout=30_000)
+            (cid,) = app.panel.controls()
+            assert app.model.is_authorised(cid)
+
+            # A page from another port on 127.0.0.1 in that same browser: refused, with the token in
+            # the URL and with the panel's cookie (cookies ignore ports; the Origin does not).
+            evil = operator.new_page()
+            evil.goto(f"http://127.0.0.1:{other.server_address[1]}/")
+            assert try_websocket(evil, f"{ws}?token={TOKEN}") == "refused"
+            assert try_websocket(evil, ws) == "refused"
+            assert guard.stats.origin_refused_n >= 2
+            assert len(app.panel.controls()) == 1
+
+            # A browser without the token: the page is refused, and so is its own-origin websocket;
+            # the same page's websocket with the token opens.
+            stranger = browser.new_context().new_page()
+            response = stranger.goto(f"http://{parts.netloc}/")
+            assert response is not None and response.status == 403
+            assert "URL printed at start" in stranger.content()
+            assert try_websocket(stranger, ws) == "refused"
+            assert guard.stats.token_refused_n >= 2
+            assert try_websocket(stranger, f"{ws}?token={TOKEN}") == "open"
+        finally:
+            browser.close()
+            other.shutdown()
+            other.server_close()
