@@ -1,11 +1,12 @@
 """Benchmark of the MuJoCo plant (hil.plant) at a 1 ms control period; prints its figures.
 
-For the default 3-cable prototype and the authors' 24-unit design, with the stiff contacts and stretching
-cable of issue 13 (capsule and wedge units) and with the old parameters (``OLD_MODEL``): control periods
-per second and the real-time factor free-swinging, fully packed (every joint limit active) and wrapping
-a cylinder; then a stability run of random cable currents up to the current limit (no divergence allowed).
+For the default 3-cable prototype and the authors' 24-unit design, with the stiff contacts and
+stretching cable of issue 13 (wedge units, the default, and capsules) and with the old parameters
+(``OLD_MODEL``): control periods per second and the real-time factor free-swinging, fully packed (every
+joint limit active) and wrapping a cylinder; then a stability run of random cable currents up to the current limit (no divergence allowed).
 
-Targets on a 2-core machine (issue 3): free-swinging >= 10x real time, packed >= 3x. Wall-clock figures
+Targets on a 2-core machine: free-swinging >= 10x real time, packed >= 3x (issue 3); with the stiff
+contacts of issue 13, free-swinging >= 5x. Wall-clock figures
 depend on what else the machine runs, so the CPU-time factor (this process only) is printed beside them.
 
 Usage: ``.venv/bin/python bench/plant.py [--seconds 5] [--stability-seconds 60] [--seed 0]``
@@ -34,13 +35,14 @@ from hil.plant import Plant, PlantConfig  # noqa: E402
 from hil.spiral import SpiralDesign  # noqa: E402
 
 OLD_MODEL = ModelConfig(
-    arm=ArmConfig(cable_timeconst_s=0.002),
+    arm=ArmConfig(cable_timeconst_s=0.002, unit_shape="capsule"),
     contact=ContactConfig(timeconst_s=0.02, damping_ratio=1.0, solimp=(0.9, 0.95, 0.001, 0.5, 2.0)),
 )
-"""The plant before issue 13: MuJoCo's default contact (20 ms, solimp 0.9-0.95) and a time-constant cable."""
-WEDGE_MODEL = ModelConfig(arm=ArmConfig(unit_shape="wedge"))
-"""The stiff model with wedge-shaped units (convex meshes, colliding with each other) for capsules."""
-MODELS = (("stiff", ModelConfig()), ("stiff wedge", WEDGE_MODEL), ("old", OLD_MODEL))
+"""The plant before issue 13: capsule units, MuJoCo's default contact (20 ms, solimp 0.9-0.95) and a
+time-constant cable."""
+CAPSULE_MODEL = ModelConfig(arm=ArmConfig(unit_shape="capsule"))
+"""The stiff contacts and stretching cable with capsule units (the default has wedge-shaped units)."""
+MODELS = (("stiff, wedge (default)", ModelConfig()), ("stiff, capsule", CAPSULE_MODEL), ("old", OLD_MODEL))
 
 
 @dataclass(frozen=True)
