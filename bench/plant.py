@@ -3,11 +3,12 @@
 For the default 3-cable prototype and the authors' 24-unit design, with the stiff contacts and
 stretching cable of issue 13 (wedge units, the default, and capsules) and with the old parameters
 (``OLD_MODEL``): control periods per second and the real-time factor free-swinging, fully packed (every
-joint limit active) and wrapping a cylinder; then a stability run of random cable currents up to the current limit (no divergence allowed).
+joint limit active) and wrapping a cylinder; then a stability run of random cable currents up to the
+current limit (no divergence allowed).
 
 Targets on a 2-core machine: free-swinging >= 10x real time, packed >= 3x (issue 3); with the stiff
-contacts of issue 13, free-swinging >= 5x. Wall-clock figures
-depend on what else the machine runs, so the CPU-time factor (this process only) is printed beside them.
+contacts of issue 13, free-swinging >= 5x. Wall-clock figures depend on what else the machine runs, so the
+CPU-time factor (this process only) is printed beside them.
 
 Usage: ``.venv/bin/python bench/plant.py [--seconds 5] [--stability-seconds 60] [--seed 0]``
 """
