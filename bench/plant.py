@@ -182,7 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(f"  default model: {m.nbody} bodies, nq={m.nq}, nv={m.nv}, {m.ntendon} cables, {m.nu} motors")
     print()
-    print(f"  {'scenario':<52} {'periods/s':>10} {'RTF wall':>9} {'RTF cpu':>8} {'rows':>6}")
+    print(f"  {'scenario':<70} {'periods/s':>10} {'RTF wall':>9} {'RTF cpu':>8} {'rows':>6}")
     for name, design in (
         ("prototype", SpiralDesign.paper_prototype()),
         ("authors", SpiralDesign.authors_default()),
@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
         for label, model in MODELS:
             for fig in scenarios(f"{name} {label}", design, args.seconds, model):
                 print(
-                    f"  {fig.label:<52} {fig.periods / fig.wall_s:>10.0f} {fig.rtf_wall:>8.1f}x "
+                    f"  {fig.label:<70} {fig.periods / fig.wall_s:>10.0f} {fig.rtf_wall:>8.1f}x "
                     f"{fig.rtf_cpu:>7.1f}x {fig.mean_constraints:>6.0f}"
                 )
     print()
