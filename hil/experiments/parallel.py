@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import multiprocessing
 import signal
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from typing import TypeVar
 
 from .common import Progress
@@ -30,16 +30,21 @@ def parallel_map(
             if progress is not None:
                 progress(done0 + i + 1, total)
         return out
-    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_ignore_ctrl_c)
+    # multiprocessing's pool, not concurrent.futures': on Ctrl-C or a failed item it can *terminate* the
+    # workers, where an executor's shutdown leaves running items to finish (minutes for a long drive)
+    # before the interpreter may exit.
+    pool = multiprocessing.Pool(processes=jobs, initializer=_ignore_ctrl_c)
     try:
-        for i, r in enumerate(pool.map(fn, items)):
+        for i, r in enumerate(pool.imap(fn, items)):
             out.append(r)
             if progress is not None:
                 progress(done0 + i + 1, total)
-    except BaseException:  # Ctrl-C or a failed item: drop what has not started, do not wait for it
-        pool.shutdown(wait=False, cancel_futures=True)
+    except BaseException:
+        pool.terminate()
+        pool.join()
         raise
-    pool.shutdown()
+    pool.close()
+    pool.join()
     return out
 
 
