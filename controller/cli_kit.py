@@ -20,9 +20,11 @@ import argparse
 import math
 import signal
 import sys
+import tempfile
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 from typing import NoReturn, TextIO
 
 __all__ = [
@@ -30,15 +32,19 @@ __all__ = [
     "EXIT_INTERRUPTED",
     "EXIT_OK",
     "EXIT_USAGE",
+    "MAX_DURATION_S",
     "Parser",
     "UsageError",
     "error_line",
+    "finite_float",
     "parse_or_exit",
     "port_number",
     "positive_duration",
     "run_command",
     "seed",
     "stop_on_signals",
+    "writable_dir",
+    "writable_file",
 ]
 
 EXIT_OK = 0
@@ -107,8 +113,10 @@ def run_command(prog: str, body: Callable[[], int]) -> int:
     """Run a batch command's ``body`` and map what escapes it to one line and an exit status.
 
     :class:`UsageError` and ``ValueError`` (an impossible value found while running) give
-    :data:`EXIT_USAGE`; Ctrl-C gives ``PROG: error: interrupted`` and :data:`EXIT_INTERRUPTED` (the
-    ``with`` blocks on the way out have closed recordings and pools).
+    :data:`EXIT_USAGE`, and so does an ``OSError`` (a path the user gave that cannot be written, a full
+    disk: the commands check their paths first, this is the backstop); Ctrl-C gives
+    ``PROG: error: interrupted`` and :data:`EXIT_INTERRUPTED` (the ``with`` blocks on the way out have
+    closed recordings and pools).
     """
     try:
         return body()
@@ -116,6 +124,9 @@ def run_command(prog: str, body: Callable[[], int]) -> int:
         error_line(exc.prog or prog, str(exc))
     except ValueError as exc:
         error_line(prog, str(exc))
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        error_line(prog, f"{where}{exc.strerror or exc}")
     except KeyboardInterrupt:
         error_line(prog, "interrupted")
         return EXIT_INTERRUPTED
@@ -146,14 +157,32 @@ def stop_on_signals(stop: threading.Event | None = None) -> Iterator[threading.E
 # ---------------------------------------------------------------------- argument types
 
 
+def finite_float(text: str) -> float:
+    """A finite number (``nan`` and ``inf`` are refused here, once, rather than deep inside a run)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
+
+
+MAX_DURATION_S = 1e9
+"""The largest :func:`positive_duration` (about 31 years): its microseconds still fit the clocks' int64."""
+
+
 def positive_duration(text: str) -> float:
-    """A duration in seconds: a finite number > 0 (``--duration``, ``--replay-speed``)."""
+    """A duration in seconds: a finite number > 0, at most :data:`MAX_DURATION_S` (``--duration``,
+    ``--replay-speed``)."""
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
     if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0: {text!r}")
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    if value > MAX_DURATION_S:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_DURATION_S:g}, got {text!r}")
     return value
 
 
@@ -177,3 +206,51 @@ def port_number(text: str) -> int:
     if not 0 <= value <= 65535:
         raise argparse.ArgumentTypeError(f"port must be 0..65535: {text!r}")
     return value
+
+
+# ---------------------------------------------------------------------- paths
+
+
+def _probe_writable(directory: Path) -> None:
+    """Create and delete a file in ``directory``: permission bits say nothing when running as root, and
+    pseudo file systems (``/proc``, ``/sys``) refuse new files whatever the bits say."""
+    with tempfile.TemporaryFile(dir=directory):
+        pass
+
+
+def writable_dir(path: Path, purpose: str, prog: str | None = None) -> Path:
+    """Create the directory ``path`` (with its parents) for output and check a file can be written there.
+
+    Called before a run starts, so a bad ``--report DIR`` costs no simulation. The error reads
+    ``cannot PURPOSE PATH: REASON`` (``purpose`` e.g. ``"write plots into"``).
+
+    Raises:
+        UsageError: ``path`` is a file, cannot be created or takes no new files.
+    """
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"cannot {purpose} {path}: not a directory", prog)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        _probe_writable(path)
+    except OSError as exc:
+        raise UsageError(f"cannot {purpose} {path}: {exc.strerror or exc}", prog) from exc
+    return path
+
+
+def writable_file(path: Path, purpose: str, prog: str | None = None) -> Path:
+    """Check the file ``path`` can be created (its directory exists and takes new files); nothing is written.
+
+    The error reads ``cannot PURPOSE PATH: REASON`` (``purpose`` e.g. ``"record to"``).
+
+    Raises:
+        UsageError: ``path`` is a directory, its directory is missing or takes no new files.
+    """
+    if path.is_dir():
+        raise UsageError(f"cannot {purpose} {path}: it is a directory", prog)
+    if not path.parent.is_dir():
+        raise UsageError(f"cannot {purpose} {path}: no such directory", prog)
+    try:
+        _probe_writable(path.parent)
+    except OSError as exc:
+        raise UsageError(f"cannot {purpose} {path}: {exc.strerror or exc}", prog) from exc
+    return path

@@ -26,10 +26,13 @@ from controller.cli_kit import (
     EXIT_OK,
     Parser,
     UsageError,
+    finite_float,
     positive_duration,
     run_command,
     seed,
     stop_on_signals,
+    writable_dir,
+    writable_file,
 )
 from hil.cli_design import add_design_arguments, design_from_args, model_from_args
 from hil.cli_experiments import EXPERIMENT_HELP, configure_experiment, run_experiment_command
@@ -100,7 +103,7 @@ def _configure_design(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print JSON (SI units) instead of a table")
     p.add_argument(
         "--load-force",
-        type=float,
+        type=finite_float,
         metavar="N",
         default=54.0,
         help="cable force for the load bound M(phi, d, F) of eq. (16) [N] (default 54 = 3 A)",
@@ -110,7 +113,7 @@ def _configure_design(p: argparse.ArgumentParser) -> None:
 def _run_design(args: argparse.Namespace) -> int:
     design = design_from_args(args)
     summary = design.summary()
-    if not (math.isfinite(args.load_force) and args.load_force > 0):
+    if not args.load_force > 0:
         raise ValueError(f"--load-force must be > 0, got {args.load_force}")
     summary["load_force_n"] = args.load_force
     summary["max_load_d_min_kg"] = design.max_load_kg(design.d_min_m, args.load_force)
@@ -169,10 +172,12 @@ def _configure_model(p: argparse.ArgumentParser) -> None:
     add_design_arguments(e)
     e.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="MJCF file to write")
     m = e.add_argument_group("model (defaults: the --preset's, docs/plant.md; prototype's shown)")
-    m.add_argument("--total-mass", type=float, metavar="KG", help="mass of the arm [kg] (default 0.0384)")
+    m.add_argument(
+        "--total-mass", type=finite_float, metavar="KG", help="mass of the arm [kg] (default 0.0384)"
+    )
     m.add_argument(
         "--base-stiffness",
-        type=float,
+        type=finite_float,
         metavar="NM_PER_RAD",
         help="stiffness of the base joint [N m/rad] (default 0.5)",
     )
@@ -182,19 +187,24 @@ def _configure_model(p: argparse.ArgumentParser) -> None:
         choices=(2, 3),
         help="joint stiffness profile: proportional to unit size^2 or size^3 (default 3)",
     )
-    m.add_argument("--damping-ratio", type=float, metavar="ZETA", help="joint damping ratio (default 0.13)")
     m.add_argument(
-        "--mu", type=float, metavar="MU", help="capstan friction coefficient of the cables (default 0.3)"
+        "--damping-ratio", type=finite_float, metavar="ZETA", help="joint damping ratio (default 0.13)"
+    )
+    m.add_argument(
+        "--mu",
+        type=finite_float,
+        metavar="MU",
+        help="capstan friction coefficient of the cables (default 0.3)",
     )
     m.add_argument(
         "--torque-constant",
-        type=float,
+        type=finite_float,
         metavar="NM_PER_A",
         help="output-shaft torque constant [N m/A] (default 0.18)",
     )
-    m.add_argument("--spool-radius", type=float, metavar="M", help="spool radius [m] (default 0.010)")
-    m.add_argument("--current-limit", type=float, metavar="A", help="current limit [A] (default 10)")
-    m.add_argument("--timestep-ms", type=float, metavar="MS", help="physics step [ms] (default 1)")
+    m.add_argument("--spool-radius", type=finite_float, metavar="M", help="spool radius [m] (default 0.010)")
+    m.add_argument("--current-limit", type=finite_float, metavar="A", help="current limit [A] (default 10)")
+    m.add_argument("--timestep-ms", type=finite_float, metavar="MS", help="physics step [ms] (default 1)")
     m.add_argument("--floor", action="store_true", help="add a ground plane at z = 0")
     m.add_argument(
         "--object",
@@ -387,6 +397,8 @@ def _run_run(args: argparse.Namespace) -> int:
         raise UsageError(f"unknown scenario {unknown[0]!r} (known: {', '.join(SCENARIOS)})", f"{PROG} run")
     faults = [Fault.parse(spec) for spec in args.fault]
     design = design_from_args(args)
+    if args.report and not args.port:  # checked before the first run, not after it
+        writable_dir(Path(args.report), "write plots into", f"{PROG} run")
     record_paths = _record_paths(args.record, names)
     console = _progress_console()
     results: list[ScenarioResult] = []
@@ -460,14 +472,9 @@ def _record_paths(record: str | None, names: list[str]) -> dict[str, Path]:
         return {}
     path = Path(record)
     if len(names) == 1 and not path.is_dir():
-        targets = {names[0]: path}
-    else:
-        path.mkdir(parents=True, exist_ok=True)
-        targets = {n: path / f"{n}.mcap" for n in names}
-    for target in targets.values():
-        if not target.parent.is_dir():
-            raise UsageError(f"cannot record to {target}: no such directory", f"{PROG} run")
-    return targets
+        return {names[0]: writable_file(path, "record to", f"{PROG} run")}
+    writable_dir(path, "record into", f"{PROG} run")
+    return {n: path / f"{n}.mcap" for n in names}
 
 
 def _configure_replay(p: argparse.ArgumentParser) -> None:

@@ -6,13 +6,17 @@ from __future__ import annotations
 import argparse
 import math
 
-from controller.cli_kit import UsageError
+from controller.cli_kit import UsageError, finite_float
 
 from .model_config import ModelConfig
 from .model_presets import PRESETS, preset
 from .spiral import SpiralDesign
 
-__all__ = ["add_design_arguments", "design_from_args", "model_from_args"]
+__all__ = ["MAX_UNITS_N", "add_design_arguments", "design_from_args", "model_from_args"]
+
+MAX_UNITS_N = 1000
+"""The most units a command line accepts: every unit is a MuJoCo body and a joint of the 1 kHz plant, and
+the printed arms have tens (the authors' 24); a thousand is already far past anything buildable."""
 
 
 def add_design_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,20 +35,22 @@ def add_design_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help=f"a named design and plant model ({listing})",
     )
-    g.add_argument("--length", type=float, metavar="M", help="length of the straightened arm [m]")
-    g.add_argument("--tip-width", type=float, metavar="M", help="width of the tip [m]")
+    g.add_argument("--length", type=finite_float, metavar="M", help="length of the straightened arm [m]")
+    g.add_argument("--tip-width", type=finite_float, metavar="M", help="width of the tip [m]")
     g.add_argument(
-        "--taper-deg", type=float, metavar="DEG", help="taper angle of the straightened arm [degrees]"
+        "--taper-deg", type=finite_float, metavar="DEG", help="taper angle of the straightened arm [degrees]"
     )
     g.add_argument(
-        "--base-width", type=float, metavar="M", help="width at the base [m] (instead of the taper)"
+        "--base-width", type=finite_float, metavar="M", help="width at the base [m] (instead of the taper)"
     )
-    g.add_argument("--a", type=float, metavar="M", help="spiral scaling factor a [m]")
-    g.add_argument("--b", type=float, metavar="B", help="spiral growth rate b [1/rad]")
-    g.add_argument("--theta0-deg", type=float, metavar="DEG", help="spiral angle of the base [degrees]")
+    g.add_argument("--a", type=finite_float, metavar="M", help="spiral scaling factor a [m]")
+    g.add_argument("--b", type=finite_float, metavar="B", help="spiral growth rate b [1/rad]")
+    g.add_argument(
+        "--theta0-deg", type=finite_float, metavar="DEG", help="spiral angle of the base [degrees]"
+    )
     g.add_argument("--units", type=int, metavar="N", help="number of units (instead of --theta0-deg)")
     g.add_argument(
-        "--dtheta-deg", type=float, metavar="DEG", help="discretisation step [degrees] (default 30)"
+        "--dtheta-deg", type=finite_float, metavar="DEG", help="discretisation step [degrees] (default 30)"
     )
     g.add_argument("--cables", type=int, choices=(1, 2, 3), help="number of cables (default 3)")
 
@@ -54,8 +60,23 @@ def design_from_args(args: argparse.Namespace) -> SpiralDesign:
 
     Raises:
         UsageError: options from different forms mixed, or a form incomplete.
-        ValueError: the values do not make a design (negative length, taper of 0 or >= 90°, ...).
+        ValueError: the values do not make a design (negative length, taper of 0 or >= 90°, more than
+            :data:`MAX_UNITS_N` units, sizes past a float's range, ...).
     """
+    try:
+        design = _design_from_args(args)
+        if design.units > MAX_UNITS_N:
+            raise ValueError(f"the design has {design.units} units; at most {MAX_UNITS_N} are modelled")
+        design.summary()
+    except OverflowError:
+        # the spiral grows as exp(b * theta): a large b and many units leave the float range
+        raise ValueError(
+            "these design inputs give sizes past the range of a float (exp(b * theta0))"
+        ) from None
+    return design
+
+
+def _design_from_args(args: argparse.Namespace) -> SpiralDesign:
     physical = [args.length, args.tip_width, args.taper_deg, args.base_width]
     params = [args.a, args.b, args.theta0_deg, args.units]
     forms = sum(
@@ -85,8 +106,8 @@ def design_from_args(args: argparse.Namespace) -> SpiralDesign:
         if (args.theta0_deg is None) == (args.units is None):
             raise UsageError("give exactly one of --theta0-deg and --units")
         if args.units is not None:
-            if args.units < 1:
-                raise ValueError(f"--units must be >= 1, got {args.units}")
+            if not 1 <= args.units <= MAX_UNITS_N:
+                raise ValueError(f"--units must be 1..{MAX_UNITS_N}, got {args.units}")
             theta0 = args.units * dtheta
         else:
             theta0 = math.radians(args.theta0_deg)

@@ -16,13 +16,16 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from controller.cli_kit import EXIT_OK, seed
+from controller.cli_kit import EXIT_OK, finite_float, seed, writable_dir
 from controller.config import CONTROL_PERIOD_US
 
 from .cli_design import add_design_arguments, design_from_args, model_from_args
 from .experiments import EXPERIMENTS, SIZES, run_experiment
 
-__all__ = ["EXPERIMENT_HELP", "configure_experiment", "run_experiment_command"]
+__all__ = ["EXPERIMENT_HELP", "MAX_JOBS_N", "configure_experiment", "run_experiment_command"]
+
+MAX_JOBS_N = 64
+"""The most worker processes ``--jobs`` starts: each holds a MuJoCo plant; more than this is a typo."""
 
 EXPERIMENT_HELP = "reproduce a result of the paper: " + ", ".join(EXPERIMENTS)
 """The one-line help of ``spirob-hil experiment``: every experiment of the catalogue, by name."""
@@ -45,7 +48,7 @@ def configure_experiment(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--timestep-ms",
-        type=float,
+        type=finite_float,
         metavar="MS",
         help="physics step [ms] (default: the preset's, 1); the 1 ms control period must be a whole number "
         "of steps: 1, 0.5, 0.25 ... (to show a result converges)",
@@ -56,8 +59,10 @@ def configure_experiment(p: argparse.ArgumentParser) -> None:
 def run_experiment_command(args: argparse.Namespace) -> int:
     """Run ``spirob-hil experiment``: progress on stderr, the table (or JSON) on stdout, a PNG with
     ``--report``."""
-    if args.jobs < 1:
-        raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
+    if not 1 <= args.jobs <= MAX_JOBS_N:
+        raise ValueError(f"--jobs must be 1..{MAX_JOBS_N}, got {args.jobs}")
+    if args.report is not None:  # checked before the experiment runs, not after
+        writable_dir(args.report, "write the figure into", "spirob-hil experiment")
     model = model_from_args(args)
     if args.timestep_ms is not None:
         step_s = args.timestep_ms / 1000.0

@@ -94,7 +94,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--replay", type=Path, metavar="FILE", help="replay a recording (no board) through the same listeners"
     )
-    run.add_argument("--replay-speed", type=positive_duration, default=1.0, help="replay speed factor")
+    run.add_argument(
+        "--replay-speed", type=positive_duration, metavar="X", help="with --replay: speed factor (default 1)"
+    )
     mav = p.add_argument_group("drone link (MAVLink)")
     mav.add_argument(
         "--mavlink", metavar="URL", help="pymavlink connection string, e.g. udpout:127.0.0.1:14550"
@@ -165,6 +167,8 @@ class HostOptions:
         Raises:
             HostError: flags that cannot go together, or a missing file.
         """
+        if ns.replay_speed is not None and ns.replay is None:
+            raise HostError("--replay-speed needs --replay")
         if ns.replay is not None:
             if ns.port is not None:
                 raise HostError("--replay and --port cannot be combined (a replay has no board)")
@@ -210,7 +214,7 @@ class HostOptions:
             duration_s=ns.duration,
             record=ns.record,
             replay=ns.replay,
-            replay_speed=ns.replay_speed,
+            replay_speed=1.0 if ns.replay_speed is None else ns.replay_speed,
             virtual_rc=VIRTUAL_RC_LEVERS[ns.virtual_rc] if ns.virtual_rc else None,
             mavlink=ns.mavlink,
             mav_sysid=ns.mav_sysid,

@@ -2,15 +2,24 @@
 
 - A run in which no test passed fails (pytest itself only fails on "nothing collected").
 - A test that leaves a thread or a child process running fails.
+- Real-time tests (``@pytest.mark.realtime``) the machine starved are skipped as ``starved:``
+  (``tests/realtime_guard.py``); the end of the run counts them, warns about a file whose every real-time
+  test was skipped, and with ``CI`` set fails the run for it: CI never passes on an all-skipped file.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import threading
+from collections import defaultdict
 from collections.abc import Iterator
 
 import pytest
+from realtime_guard import STARVED_PREFIX
+
+_REALTIME: defaultdict[str, dict[str, int]] = defaultdict(lambda: {"passed": 0, "failed": 0, "starved": 0})
+"""Per test file of this run: how many real-time tests passed, failed and were skipped as starved."""
 
 
 @pytest.fixture(autouse=True)
@@ -35,6 +44,43 @@ def _no_leaked_threads_or_processes() -> Iterator[None]:
     assert not alive, f"test left child processes running: {[p.name for p in alive]}"
 
 
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if "realtime" not in report.keywords:
+        return
+    outcome: str | None = None
+    if report.when == "call" and report.passed:
+        outcome = "passed"
+    elif report.failed:
+        outcome = "failed"
+    elif report.skipped and isinstance(report.longrepr, tuple) and STARVED_PREFIX in report.longrepr[2]:
+        outcome = "starved"
+    if outcome is not None:
+        _REALTIME[report.nodeid.split("::")[0]][outcome] += 1
+
+
+def _all_starved() -> list[str]:
+    """The files whose every real-time test of this run was skipped as starved."""
+    return sorted(f for f, n in _REALTIME.items() if n["starved"] and not n["passed"] and not n["failed"])
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    files = _REALTIME
+    starved = sum(n["starved"] for n in files.values())
+    if not starved:
+        return
+    ran = sum(sum(n.values()) for n in files.values())
+    terminalreporter.write_line(
+        f"real-time tests: {starved} of {ran} skipped as starved by the machine (void runs, not results)",
+        yellow=True,
+    )
+    for path in _all_starved():
+        terminalreporter.write_line(
+            f"warning: every real-time test of {path} was skipped as starved: it tested nothing"
+            + ("; CI fails this run" if os.environ.get("CI") else ""),
+            red=True,
+        )
+
+
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     reporter = session.config.pluginmanager.get_plugin("terminalreporter")
     if reporter is None or exitstatus != 0:
@@ -42,3 +88,5 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     if not reporter.stats.get("passed"):
         session.exitstatus = 1
         reporter.write_line("error: no test passed; refusing an empty run", red=True)
+    elif os.environ.get("CI") and _all_starved():
+        session.exitstatus = 1  # CI runs alone: a file whose real-time tests all starved tested nothing

@@ -61,6 +61,35 @@ def test_bad_config_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert "current_limit_a" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (
+            ["--can", "fake", "--link", "loop://", "--duration", "nan"],
+            "--duration: must be a finite number > 0",
+        ),
+        (
+            ["--can", "fake", "--link", "loop://", "--duration", "inf"],
+            "--duration: must be a finite number > 0",
+        ),
+        (["--can", "fake", "--link", "loop://", "--duration", "1e303"], "--duration: must be at most"),
+        (["--can", "fake", "--link", "loop://", "--duration", "x"], "--duration: not a number"),
+        (["--can", "fake"], "give --rc (DBUS UART) or --link"),
+        ([], "required: --can"),
+        (["--can"], "--can: expected one argument"),
+        (["--can", "fake", "--link", "loop://", "--bogus"], "unrecognized arguments: --bogus"),
+    ],
+)
+def test_usage_errors_are_one_line_and_exit_2(
+    argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("python -m controller: error: ") and needle in err, err
+
+
 def test_short_run_with_the_fake_bus(pty_path: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--can", "fake", "--link", pty_path, "--duration", "0.2", "--no-fifo"]) == 0
     assert "stopped: phase GATE" in capsys.readouterr().err

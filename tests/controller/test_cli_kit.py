@@ -6,6 +6,7 @@ import argparse
 import os
 import signal
 import threading
+from pathlib import Path
 
 import pytest
 
@@ -16,12 +17,15 @@ from controller.cli_kit import (
     Parser,
     UsageError,
     error_line,
+    finite_float,
     parse_or_exit,
     port_number,
     positive_duration,
     run_command,
     seed,
     stop_on_signals,
+    writable_dir,
+    writable_file,
 )
 
 
@@ -59,16 +63,24 @@ def test_run_command_maps_what_escapes_to_a_status(capsys: pytest.CaptureFixture
     assert run_command("tool", lambda: raises(UsageError("bad", "tool sub"))) == EXIT_USAGE
     assert run_command("tool", lambda: raises(ValueError("worse"))) == EXIT_USAGE
     assert run_command("tool", lambda: raises(KeyboardInterrupt())) == EXIT_INTERRUPTED
+    assert run_command("tool", lambda: raises(PermissionError(13, "Permission denied", "/x"))) == EXIT_USAGE
     assert capsys.readouterr().err.splitlines() == [
         "tool sub: error: bad",
         "tool: error: worse",
         "tool: error: interrupted",
+        "tool: error: /x: Permission denied",
     ]
 
 
 @pytest.mark.parametrize(
     ("kind", "text", "value"),
-    [(positive_duration, "0.5", 0.5), (seed, "0", 0), (port_number, "65535", 65535)],
+    [
+        (positive_duration, "0.5", 0.5),
+        (positive_duration, "1e9", 1e9),
+        (finite_float, "-2.5", -2.5),
+        (seed, "0", 0),
+        (port_number, "65535", 65535),
+    ],
 )
 def test_argument_types_accept(kind: object, text: str, value: float) -> None:
     assert callable(kind) and kind(text) == value
@@ -82,6 +94,10 @@ def test_argument_types_accept(kind: object, text: str, value: float) -> None:
         (positive_duration, "nan"),
         (positive_duration, "inf"),
         (positive_duration, "x"),
+        (positive_duration, "1e300"),
+        (finite_float, "nan"),
+        (finite_float, "-inf"),
+        (finite_float, "x"),
         (seed, "-1"),
         (seed, "1.5"),
         (port_number, "-1"),
@@ -92,6 +108,28 @@ def test_argument_types_refuse(kind: object, text: str) -> None:
     assert callable(kind)
     with pytest.raises(argparse.ArgumentTypeError):
         kind(text)
+
+
+def test_writable_dir_creates_it_and_refuses_files_and_pseudo_file_systems(tmp_path: Path) -> None:
+    assert writable_dir(tmp_path / "a" / "b", "write plots into").is_dir()
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    with pytest.raises(UsageError, match=r"cannot write plots into .*afile: not a directory"):
+        writable_dir(afile, "write plots into")
+    with pytest.raises(UsageError, match="cannot write plots into /proc/spirob"):
+        writable_dir(Path("/proc/spirob"), "write plots into")  # refused even to root
+
+
+def test_writable_file_checks_without_writing(tmp_path: Path) -> None:
+    target = tmp_path / "x.mcap"
+    assert writable_file(target, "record to") == target and not target.exists()
+    assert list(tmp_path.iterdir()) == []  # the probe leaves nothing behind
+    with pytest.raises(UsageError, match="it is a directory"):
+        writable_file(tmp_path, "record to")
+    with pytest.raises(UsageError, match="no such directory"):
+        writable_file(tmp_path / "missing" / "x.mcap", "record to")
+    with pytest.raises(UsageError, match=r"cannot record to /proc/x\.mcap"):
+        writable_file(Path("/proc/x.mcap"), "record to")
 
 
 def test_stop_on_signals_sets_the_event_and_restores_the_handlers() -> None:

@@ -3,17 +3,31 @@
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import pytest
 import serial
+from realtime_guard import largest_gap_s, retry_void
 
+from controller.config import FirmwareConfig
 from hil.board import BoardConfig, LinkWire, VirtualBoard, VirtualBoardProcess, parse_listen
 from hil.errors import HilError
 from hil.harness import ScriptedHost
 from hil.radio import RadioScript
 from protocol.dbus import Lever, RcFrame
 from protocol.link import LinkParser
-from protocol.messages import Heartbeat, Phase, SimPoses, Telemetry, VirtualRc, decode, encode
+from protocol.messages import (
+    Event,
+    EventKind,
+    Heartbeat,
+    Phase,
+    RawRc,
+    SimPoses,
+    Telemetry,
+    VirtualRc,
+    decode,
+    encode,
+)
 
 
 def test_lockstep_tick_order_and_time() -> None:
@@ -55,12 +69,21 @@ def test_parse_listen() -> None:
             parse_listen(bad)
 
 
-def _talk(url: str) -> tuple[list[Telemetry], int]:
-    """Act as a host for a moment: heartbeats and virtual RC (lever DOWN, then MIDDLE + curl)."""
+RC_TIMEOUT_S = FirmwareConfig().failsafe.rc_timeout_us / 1e6
+"""A host loop that sent nothing for longer than this starved the board of RC: the run is void."""
+
+
+def _talk(url: str) -> tuple[list[Telemetry], int, float]:
+    """Act as a host for a moment: heartbeats and virtual RC (lever DOWN, then MIDDLE + curl).
+
+    Returns:
+        The telemetry, the number of pose messages and the largest gap between two sends [s].
+    """
     port = serial.serial_for_url(url, timeout=0)
     parser = LinkParser()
     telemetry: list[Telemetry] = []
     poses = 0
+    sent_s: list[float] = []
     try:
         deadline = time.monotonic() + 4.0
         seq = 0
@@ -69,6 +92,7 @@ def _talk(url: str) -> tuple[list[Telemetry], int]:
             elapsed = time.monotonic() - t_start
             frame = RcFrame.neutral() if elapsed < 0.3 else RcFrame((0, 0, 0, 500), Lever.MIDDLE, Lever.DOWN)
             port.write(encode(VirtualRc(frame.pack()), seq) + encode(Heartbeat(seq, seq), seq + 1))
+            sent_s.append(time.monotonic())
             seq = (seq + 2) & 0xFF
             for f in parser.feed(port.read(4096)):
                 msg = decode(f)
@@ -79,20 +103,33 @@ def _talk(url: str) -> tuple[list[Telemetry], int]:
             time.sleep(0.01)
     finally:
         port.close()
-    return telemetry, poses
+    return telemetry, poses, largest_gap_s(sent_s)
 
 
+def _reached_manual(telemetry: list[Telemetry]) -> bool:
+    return any(m.phase == Phase.OK and max(m.commanded_current) > 0 for m in telemetry)
+
+
+def _talk_void(got: tuple[list[Telemetry], int, float]) -> str | None:
+    """The run is void if it missed MANUAL while the host loop itself stalled past the RC timeout."""
+    telemetry, _, gap_s = got
+    if _reached_manual(telemetry) or gap_s <= RC_TIMEOUT_S:
+        return None
+    return f"the host loop sent nothing for {gap_s * 1e3:.0f} ms > {RC_TIMEOUT_S * 1e3:.0f} ms (void)"
+
+
+@pytest.mark.realtime
 @pytest.mark.parametrize("pty", [False, True], ids=["tcp", "pty"])
 def test_realtime_board_process_serves_the_link(pty: bool) -> None:
     with VirtualBoardProcess(listen="socket://127.0.0.1:0", pty=pty, fifo=False) as board:
         url = board.start(timeout_s=60)
         assert url.startswith("/dev/") if pty else url.startswith("socket://127.0.0.1:")
-        telemetry, poses = _talk(url)
+        telemetry, poses, _ = retry_void(lambda: _talk(url), _talk_void)
         assert board.alive
     assert not board.alive
     assert len(telemetry) >= 100 and poses > 10
     # The virtual RC drove the real-time firmware through the gate into MANUAL with current flowing.
-    assert any(m.phase == Phase.OK and max(m.commanded_current) > 0 for m in telemetry)
+    assert _reached_manual(telemetry)
     assert telemetry[-1].time_us > telemetry[0].time_us
 
 
@@ -110,53 +147,76 @@ def test_board_process_reports_a_busy_port() -> None:
             board.start(timeout_s=60)
 
 
+@dataclass
+class _HeaderRun:
+    """What the host saw around the long header (see the test below)."""
+
+    telemetry: list[Telemetry] = field(default_factory=list)
+    phases: list[int] = field(default_factory=list)
+    raw: list[bytes] = field(default_factory=list)
+    injected_at: int = -1
+    sent_s: list[float] = field(default_factory=list)
+
+
+def _send_long_header(url: str, header: bytes, marked: bytes) -> _HeaderRun:
+    """Drive the board past the gate, send ``header`` then ``marked`` as the next RC frame; about 1 s."""
+    port = serial.serial_for_url(url, timeout=0)
+    parser = LinkParser()
+    got = _HeaderRun()
+    try:
+        seq = 0
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            ok_since = next((i for i, m in enumerate(got.telemetry) if m.phase == Phase.OK), None)
+            if got.injected_at < 0 and ok_since is not None and len(got.telemetry) - ok_since > 30:
+                got.injected_at = len(got.telemetry)
+                port.write(header)
+                data = marked
+            else:
+                data = RcFrame.neutral().pack()
+            port.write(encode(VirtualRc(data), seq) + encode(Heartbeat(seq, seq), seq + 1))
+            got.sent_s.append(time.monotonic())
+            seq = (seq + 2) & 0xFF
+            for f in parser.feed(port.read(65536)):
+                msg = decode(f)
+                if isinstance(msg, Telemetry):
+                    got.telemetry.append(msg)
+                elif isinstance(msg, Event) and msg.kind == EventKind.PHASE:
+                    got.phases.append(msg.code)
+                elif isinstance(msg, RawRc):
+                    got.raw.append(msg.data)
+            if got.injected_at >= 0 and len(got.telemetry) > got.injected_at + 100:  # about 1 s after it
+                break
+            time.sleep(0.01)
+    finally:
+        port.close()
+    return got
+
+
+def _header_run_void(got: _HeaderRun) -> str | None:
+    """RC_LOST is the product's failure only if the host kept sending; a stalled host loop voids the run."""
+    gap_s = largest_gap_s(got.sent_s)
+    if Phase.RC_LOST not in got.phases or gap_s <= RC_TIMEOUT_S:
+        return None
+    return f"the host loop sent nothing for {gap_s * 1e3:.0f} ms > {RC_TIMEOUT_S * 1e3:.0f} ms (void)"
+
+
+@pytest.mark.realtime
 def test_long_header_does_not_stall_a_realtime_board() -> None:
     """Issue 18: ``A5 F4 01 <seq> <crc8>`` (a valid header announcing 500 bytes) once froze link input for
     238 ms and latched RC_LOST. The board now refuses it as soon as it reads the id that follows."""
     from protocol.link import SOF, crc8
-    from protocol.messages import Event, EventKind, RawRc
 
     head = bytes([SOF, 0xF4, 0x01, 0x33])
     header = head + bytes([crc8(head)])
     marked = RcFrame((7, 0, 0, 0), Lever.DOWN, Lever.DOWN).pack()  # the first RC frame after the header
     with VirtualBoardProcess(listen="socket://127.0.0.1:0", fifo=False) as board:
         url = board.start(timeout_s=60)
-        port = serial.serial_for_url(url, timeout=0)
-        parser = LinkParser()
-        telemetry: list[Telemetry] = []
-        phases: list[int] = []
-        raw: list[bytes] = []
-        injected_at = -1
-        try:
-            seq = 0
-            deadline = time.monotonic() + 20.0
-            while time.monotonic() < deadline:
-                ok_since = next((i for i, m in enumerate(telemetry) if m.phase == Phase.OK), None)
-                if injected_at < 0 and ok_since is not None and len(telemetry) - ok_since > 30:
-                    injected_at = len(telemetry)
-                    port.write(header)
-                    data = marked
-                else:
-                    data = RcFrame.neutral().pack()
-                port.write(encode(VirtualRc(data), seq) + encode(Heartbeat(seq, seq), seq + 1))
-                seq = (seq + 2) & 0xFF
-                for f in parser.feed(port.read(65536)):
-                    msg = decode(f)
-                    if isinstance(msg, Telemetry):
-                        telemetry.append(msg)
-                    elif isinstance(msg, Event) and msg.kind == EventKind.PHASE:
-                        phases.append(msg.code)
-                    elif isinstance(msg, RawRc):
-                        raw.append(msg.data)
-                if injected_at >= 0 and len(telemetry) > injected_at + 100:  # about 1 s after it
-                    break
-                time.sleep(0.01)
-        finally:
-            port.close()
-    assert injected_at >= 0, "the board never passed the gate"
-    assert marked in raw  # the frame right after the header was taken
-    assert Phase.RC_LOST not in phases
-    assert all(m.phase == Phase.OK for m in telemetry[injected_at:])
+        got = retry_void(lambda: _send_long_header(url, header, marked), _header_run_void)
+    assert got.injected_at >= 0, "the board never passed the gate"
+    assert marked in got.raw  # the frame right after the header was taken
+    assert Phase.RC_LOST not in got.phases
+    assert all(m.phase == Phase.OK for m in got.telemetry[got.injected_at :])
 
 
 def test_link_loss_resets_direct_on_a_tcp_board() -> None:

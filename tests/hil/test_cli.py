@@ -126,6 +126,16 @@ def test_an_experiment_runs_on_the_preset_it_is_given(capsys: pytest.CaptureFixt
         ["design", "--cables", "4"],
         ["design", "--length", "abc"],
         ["design", "--json", "--load-force", "-1"],
+        ["design", "--json", "--load-force", "inf"],
+        # issue 18: absurd sizes and non-finite numbers are one line, never an OverflowError
+        ["design", "--a", "0.01", "--b", "0.2", "--units", "100000"],
+        ["design", "--a", "0.01", "--b", "3", "--units", "900"],
+        ["design", "--a", "0.001", "--b", "0.001", "--theta0-deg", "360000", "--dtheta-deg", "30"],
+        ["design", "--length", "nan", "--tip-width", "0.007", "--taper-deg", "6"],
+        ["design", "--a", "inf", "--b", "0.2", "--units", "10"],
+        ["model", "export", "-o", "x.xml", "--total-mass", "nan"],
+        ["experiment", "packing", "--jobs", "100000"],
+        ["experiment", "packing", "--timestep-ms", "nan"],
         ["model", "export"],
         ["model"],
         ["frobnicate"],
@@ -250,6 +260,16 @@ def test_unwritable_output_is_a_user_error(tmp_path: Path, capsys: pytest.Captur
     status, _, err = run(["model", "export", "-o", str(tmp_path / "missing" / "arm.xml")], capsys)
     assert_one_line_error(status, err)
     assert "cannot write" in err
+
+
+def test_experiment_report_into_a_file_fails_before_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    status, out, err = run(["experiment", "packing", "--size", "tiny", "--report", str(afile)], capsys)
+    assert_one_line_error(status, err)
+    assert "not a directory" in err and out == ""
 
 
 def test_parser_is_separate_and_lists_every_command(capsys: pytest.CaptureFixture[str]) -> None:

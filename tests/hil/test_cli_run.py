@@ -71,6 +71,16 @@ def test_run_fails_with_nonzero_status_when_a_check_fails(capsys: pytest.Capture
         (["board", "--listen", "socket://example.org:5760"], "add --listen-any"),
         (["run", "rc-loss", "--record", "/no/such/dir/x.mcap"], "cannot record"),
         (["run", "rc-loss", "--seed", "-1"], "--seed: must be a whole number >= 0"),
+        # issue 18: every path the user gives is checked before the first run, one line
+        (
+            ["run", "rc-loss", "--report", "/etc/passwd"],
+            "cannot write plots into /etc/passwd: not a directory",
+        ),
+        (["run", "rc-loss", "--report", "/proc/spirob"], "cannot write plots into /proc/spirob"),
+        (["run", "rc-loss", "--record", "/proc/x.mcap"], "cannot record to /proc/x.mcap"),
+        (["run", "rc-loss", "host-loss", "--record", "/etc/passwd"], "cannot record into /etc/passwd"),
+        (["board", "--duration", "nan"], "--duration: must be a finite number > 0"),
+        (["board", "--duration", "1e300"], "--duration: must be at most"),
         (["experiment", "packing", "--seed", "x"], "--seed: must be a whole number >= 0"),
     ],
 )

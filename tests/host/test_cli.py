@@ -122,6 +122,7 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--replay", "/nonexistent/x.mcap", "--headless"], "no such recording"),
         (["--record", "/nonexistent/dir/x.mcap", "--port", "loop://"], "does not exist"),
         (["--mav-signing-key", "k.bin"], "needs --mavlink"),
+        (["--replay-speed", "4", "--headless"], "--replay-speed needs --replay"),
         (["--mavlink", "udpout:127.0.0.1:9", "--mav-signing-timestamp", "t"], "needs --mav-signing-key"),
         # Checked before anything starts (no virtual board is started for these).
         (["--port", "socket://nonsense", "--headless"], "expected socket://HOST:PORT"),
