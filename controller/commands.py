@@ -80,6 +80,8 @@ class Params:
         self._events = events
         self._apply = apply
         self._safe = safe
+        self.refused: str | None = None
+        """Why the last :meth:`set` was refused, or None if it was taken (a command acks with it)."""
 
     def set(self, now_us: int, name: str, value: float) -> float:
         """Set a runtime parameter (wire name) if valid and allowed now; return the value in force afterwards.
@@ -95,6 +97,7 @@ class Params:
                 new = self.config.with_param(name, value)
             except ConfigError as exc:
                 why = str(exc)
+        self.refused = why
         if why is not None:
             self._events.push(now_us, EventKind.PARAM, PARAMS.index(name), value, f"rejected: {why}")
             return self.config.get_param(name)
@@ -290,6 +293,8 @@ class CommandServer:
             if a0 not in (0.0, 1.0):
                 return AckResult.DENIED, "args[0] must be 0 or 1"
             self._params.set(now_us, "HOST_REQUIRED", a0)
+            if self._params.refused is not None:  # a failsafe setting: only in SAFE, like the parameter
+                return AckResult.REJECTED, self._params.refused
             return AckResult.ACCEPTED, "host required" if a0 else "host not required"
         if code == CommandCode.SET_TENSIONS:
             values = (a0, a1, a2)

@@ -550,11 +550,13 @@ SAFETY_PARAMS: frozenset[str] = frozenset(
         "SPOOL_RADIUS_M",
         "TORQUE_K_NM_A",
         "HOST_TIMEOUT_US",
+        "HOST_REQUIRED",
         "PAYIN_MAX_M_S",
     }
 )
 """Parameters that decide how much current flows for a tension, how fast a cable may reel in, or when
-the failsafe acts: a ``ParamSet`` changes them only in SAFE (zero current), never while the arm moves."""
+the failsafe acts (the host timeout and whether a host is required at all): a ``ParamSet`` or a
+``REQUIRE_HOST`` command changes them only in SAFE (zero current), never while the arm moves."""
 
 
 def runtime_refusal(config: FirmwareConfig, name: str, value: float, safe: bool) -> str | None:

@@ -258,3 +258,31 @@ def test_direct_tensions_do_not_survive_a_disarm_or_a_loss(loss: str) -> None:
     pre = rig.config.mapping.pretension_n
     raw = round(pre * rig.config.motor.spool_radius_m / rig.config.motor.torque_constant_nm_per_a * 1000)
     assert max(rig.currents) <= raw < driven
+
+
+def test_the_host_requirement_changes_only_in_safe() -> None:
+    """Dropping the host requirement while the arm moves would silence the host-loss failsafe."""
+    rig = Rig(link=True)
+    rig.send(Heartbeat(rig.now_us, 0))
+    rig.send(Command(CommandCode.REQUIRE_HOST, (1.0, 0.0, 0.0)))  # SAFE: taken
+    _direct(rig)
+    assert rig.fw.config.failsafe.host_required
+    rig.drain()
+    rig.send(Command(CommandCode.REQUIRE_HOST, (0.0, 0.0, 0.0)))
+    rig.send(ParamSet("HOST_REQUIRED", 0.0))
+    _live(rig, 200)  # the events go out at their own rate
+    msgs = rig.drain()
+    acks = [m for m in msgs if isinstance(m, CommandAck) and m.command == CommandCode.REQUIRE_HOST]
+    assert [(a.result, a.text) for a in acks] == [(AckResult.REJECTED, "safety parameter: only in SAFE")]
+    assert [(v.name, v.value) for v in msgs if isinstance(v, ParamValue)] == [("HOST_REQUIRED", 1.0)]
+    reasons = [e.text for e in msgs if isinstance(e, Event) and e.kind == EventKind.PARAM]
+    assert reasons == ["rejected: safety parameter: only in SAFE"] * 2
+    assert rig.fw.mode == Mode.DIRECT and rig.fw.config.failsafe.host_required
+    rig.set_rc(frame(right=Lever.DOWN))
+    _live(rig, 20)
+    assert rig.fw.mode == Mode.SAFE
+    rig.send(Command(CommandCode.REQUIRE_HOST, (0.0, 0.0, 0.0)))
+    _live(rig, 5)
+    acks = [m for m in rig.drain() if isinstance(m, CommandAck) and m.command == CommandCode.REQUIRE_HOST]
+    assert [a.result for a in acks] == [AckResult.ACCEPTED]
+    assert not rig.fw.config.failsafe.host_required
