@@ -359,15 +359,18 @@ def run_realtime(
 # --- a board in its own process -------------------------------------------------------------------
 
 
-def realtime_board(config: BoardConfig, listen: str | None = None) -> tuple[VirtualBoard, str]:
+def realtime_board(
+    config: BoardConfig, listen: str | None = None, *, listen_any: bool = False
+) -> tuple[VirtualBoard, str]:
     """A board for real time with its link endpoint open; returns it and the URL a host connects to.
 
     Args:
         config: the board; with ``rc="radio"`` the virtual radio holds both levers DOWN (SAFE).
         listen: ``socket://HOST:PORT`` for TCP, or None for a pty.
+        listen_any: allow a ``listen`` address other than loopback (whoever reaches it can drive the arm).
 
     Raises:
-        ValueError: ``listen`` is not ``socket://HOST:PORT``.
+        ValueError: ``listen`` is not ``socket://HOST:PORT``, or not loopback without ``listen_any``.
         OSError: the endpoint cannot be opened (port in use, ...).
     """
     from .transports import PtyTransport, TcpServerTransport
@@ -376,7 +379,7 @@ def realtime_board(config: BoardConfig, listen: str | None = None) -> tuple[Virt
     if listen is None:
         transport = PtyTransport()
     else:
-        host, port = parse_listen(listen)
+        host, port = parse_listen(listen, listen_any=listen_any)
         transport = TcpServerTransport(host, port)
     script = RadioScript([(0, RcFrame.neutral())]) if config.rc == "radio" else None
     board = VirtualBoard(config, link=transport, radio_script=script, exec_timer_ns=monotonic_ns)
@@ -387,6 +390,7 @@ def _child_main(
     conn: multiprocessing.connection.Connection,
     config: BoardConfig,
     listen: str | None,
+    listen_any: bool,
     fifo: bool,
 ) -> None:
     """Entry of the board process: open the endpoint, report its URL, run until told to stop."""
@@ -394,7 +398,7 @@ def _child_main(
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        board, url = realtime_board(config, listen)
+        board, url = realtime_board(config, listen, listen_any=listen_any)
     except Exception as exc:  # reported to the parent as one line
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
         conn.close()
@@ -413,18 +417,39 @@ def _child_main(
         board.close()
 
 
-def parse_listen(listen: str) -> tuple[str, int]:
-    """``socket://HOST:PORT`` -> (host, port).
+def parse_listen(listen: str, *, listen_any: bool = False) -> tuple[str, int]:
+    """``socket://HOST:PORT`` -> (host, port), a loopback HOST unless ``listen_any``.
 
     Raises:
-        ValueError: not that form.
+        ValueError: not that form, or reachable from other machines without ``listen_any``.
     """
     if not listen.startswith("socket://"):
         raise ValueError(f"--listen takes socket://HOST:PORT, got {listen!r}")
     host, sep, port = listen[len("socket://") :].rpartition(":")
     if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
         raise ValueError(f"--listen takes socket://HOST:PORT, got {listen!r}")
+    if not listen_any and not is_loopback_host(host):
+        raise ValueError(
+            f"--listen {listen} is reachable from other machines (anyone there can drive the arm): "
+            "use a loopback address, or add --listen-any"
+        )
     return host, int(port)
+
+
+def is_loopback_host(host: str) -> bool:
+    """``host`` (a name or an address, IPv6 in brackets or not) binds only this machine's loopback.
+
+    Only ``localhost`` among names: any other name may resolve to an address other machines reach.
+    """
+    import ipaddress
+
+    host = host.strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 class VirtualBoardProcess:
@@ -433,8 +458,12 @@ class VirtualBoardProcess:
     Args:
         config: the board to build (default: the prototype arm, RC from the host link).
         listen: ``socket://127.0.0.1:PORT`` (port 0 picks a free one), or None for a pty.
+        listen_any: allow a ``listen`` address other than loopback, as the CLI's ``--listen-any``.
         pty: serve on a pty (the default when ``listen`` is None).
         fifo: ask for SCHED_FIFO in the child (it says so in its log when refused).
+
+    Raises:
+        ValueError: ``listen`` is malformed, or not loopback without ``listen_any``.
     """
 
     def __init__(
@@ -442,13 +471,15 @@ class VirtualBoardProcess:
         config: BoardConfig | None = None,
         *,
         listen: str | None = "socket://127.0.0.1:0",
+        listen_any: bool = False,
         pty: bool = False,
         fifo: bool = True,
     ) -> None:
         self.config = config if config is not None else BoardConfig(rc="link")
         self.listen = None if pty else listen
+        self.listen_any = listen_any
         if self.listen is not None:
-            parse_listen(self.listen)
+            parse_listen(self.listen, listen_any=listen_any)
         self.fifo = fifo
         self.url: str | None = None
         self._proc: mp.process.BaseProcess | None = None
@@ -465,7 +496,9 @@ class VirtualBoardProcess:
         ctx = mp.get_context("spawn")
         parent, child = ctx.Pipe()
         proc = ctx.Process(
-            target=_child_main, args=(child, self.config, self.listen, self.fifo), name="virtual-board"
+            target=_child_main,
+            args=(child, self.config, self.listen, self.listen_any, self.fifo),
+            name="virtual-board",
         )
         proc.start()
         child.close()

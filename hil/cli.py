@@ -282,35 +282,21 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed, default=0, help="seed of the plant's random choices (default 0)")
 
 
-def _is_loopback_listen(listen: str) -> bool:
-    """``socket://HOST:PORT`` binds a loopback address (a malformed URL is left to ``parse_listen``)."""
-    import ipaddress
-
-    host = listen.removeprefix("socket://").rpartition(":")[0].strip("[]")
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return not listen.startswith("socket://")  # not a socket URL: parse_listen says what is wrong
-
-
 def _run_board(args: argparse.Namespace) -> int:
     from controller.clock import RealTimeClock
-    from hil.board import BoardConfig, realtime_board, run_realtime
+    from hil.board import BoardConfig, parse_listen, realtime_board, run_realtime
     from hil.plant import PlantConfig
 
-    if args.listen is not None and not args.listen_any and not _is_loopback_listen(args.listen):
-        raise UsageError(
-            f"--listen {args.listen} is reachable from other machines (anyone there can drive the arm): "
-            "use a loopback address, or add --listen-any",
-            f"{PROG} board",
-        )
+    if args.listen is not None:
+        try:  # the board's own rule (a loopback address unless --listen-any), before the plant is built
+            parse_listen(args.listen, listen_any=args.listen_any)
+        except ValueError as exc:
+            raise UsageError(str(exc), f"{PROG} board") from None
     design = design_from_args(args)
     plant = PlantConfig(model=model_from_args(args))
     try:
         config = BoardConfig(design=design, plant=plant, rc=args.rc, seed=args.seed)
-        board, url = realtime_board(config, args.listen)
+        board, url = realtime_board(config, args.listen, listen_any=args.listen_any)
     except OSError as exc:
         raise UsageError(f"cannot listen on {args.listen}: {exc.strerror or exc}", f"{PROG} board") from exc
     print(

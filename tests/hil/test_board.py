@@ -10,7 +10,14 @@ import serial
 from realtime_guard import largest_gap_s, retry_void
 
 from controller.config import FirmwareConfig
-from hil.board import BoardConfig, LinkWire, VirtualBoard, VirtualBoardProcess, parse_listen
+from hil.board import (
+    BoardConfig,
+    LinkWire,
+    VirtualBoard,
+    VirtualBoardProcess,
+    parse_listen,
+    realtime_board,
+)
 from hil.errors import HilError
 from hil.harness import ScriptedHost
 from hil.radio import RadioScript
@@ -67,6 +74,29 @@ def test_parse_listen() -> None:
     for bad in ("tcp://127.0.0.1:1", "socket://127.0.0.1", "socket://:80", "socket://h:99999"):
         with pytest.raises(ValueError):
             parse_listen(bad)
+
+
+@pytest.mark.parametrize("address", ["0.0.0.0", "192.168.1.5", "example.org", "[::]"])
+def test_a_board_listens_beyond_loopback_only_when_allowed(address: str) -> None:
+    """The CLI's rule (``--listen-any``) holds for every way to start a board, not just the command."""
+    listen = f"socket://{address}:0"
+    with pytest.raises(ValueError, match="add --listen-any"):
+        parse_listen(listen)
+    with pytest.raises(ValueError, match="add --listen-any"):
+        VirtualBoardProcess(listen=listen)
+    with pytest.raises(ValueError, match="add --listen-any"):
+        realtime_board(BoardConfig(rc="link"), listen)  # refused before the plant is built
+    assert parse_listen(listen, listen_any=True) == (address, 0)
+    for loopback in ("127.0.0.1", "127.0.0.2", "localhost", "[::1]"):
+        assert parse_listen(f"socket://{loopback}:0") == (loopback, 0)
+
+
+def test_realtime_board_listens_on_any_address_when_allowed() -> None:
+    board, url = realtime_board(BoardConfig(rc="link"), "socket://0.0.0.0:0", listen_any=True)
+    try:
+        assert url.startswith("socket://")
+    finally:
+        board.close()
 
 
 RC_TIMEOUT_S = FirmwareConfig().failsafe.rc_timeout_us / 1e6
