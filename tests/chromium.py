@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
+from realtime_guard import scaled_s, starved_timeouts
+
 CHROMIUM = "/usr/bin/chromium"
 """Installed by ``scripts/setup.sh --system`` with apt-get."""
 
@@ -15,3 +20,24 @@ CHROMIUM_ARGS = [
     "--disable-sync",
 ]
 """Headless in a container: no sandbox, no GPU, nothing fetched from the network."""
+
+PAGE_LOAD_S = 30.0
+"""A page load's wait on a quiet machine (the panel renders its 3D scene in software on 2 cores)."""
+
+
+def page_load_ms() -> float:
+    """The page-load wait for Playwright's ``timeout=`` [ms]: :data:`PAGE_LOAD_S` scaled with the load."""
+    return scaled_s(PAGE_LOAD_S) * 1000.0
+
+
+@contextlib.contextmanager
+def page_load(what: str) -> Iterator[None]:
+    """Inside: a Playwright time-out on a starved machine skips the test as ``starved:`` (it fails otherwise).
+
+    Args:
+        what: the page being loaded, for the skip reason.
+    """
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout  # only the browser tests need it
+
+    with starved_timeouts(PlaywrightTimeout, what=what):
+        yield

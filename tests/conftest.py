@@ -3,8 +3,9 @@
 - A run in which no test passed fails (pytest itself only fails on "nothing collected").
 - A test that leaves a thread or a child process running fails.
 - Real-time tests (``@pytest.mark.realtime``) the machine starved are skipped as ``starved:``
-  (``tests/realtime_guard.py``); the end of the run counts them, warns about a file whose every real-time
-  test was skipped, and with ``CI`` set fails the run for it: CI never passes on an all-skipped file.
+  (``tests/realtime_guard.py``), and so are MAVProxy and browser tests (``mavproxy``, ``browser``) whose
+  waits timed out on a starved machine; the end of the run counts them, warns about a file whose every
+  such test was skipped, and with ``CI`` set fails the run for it: CI never passes on an all-skipped file.
 """
 
 from __future__ import annotations
@@ -20,6 +21,9 @@ from realtime_guard import STARVED_PREFIX
 
 _REALTIME: defaultdict[str, dict[str, int]] = defaultdict(lambda: {"passed": 0, "failed": 0, "starved": 0})
 """Per test file of this run: how many real-time tests passed, failed and were skipped as starved."""
+
+_WALL_CLOCK_MARKS = frozenset({"realtime", "mavproxy", "browser"})
+"""The tests that can be starved: they wait on wall-clock time, another process or a browser."""
 
 
 @pytest.fixture(autouse=True)
@@ -45,7 +49,7 @@ def _no_leaked_threads_or_processes() -> Iterator[None]:
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
-    if "realtime" not in report.keywords:
+    if _WALL_CLOCK_MARKS.isdisjoint(report.keywords):
         return
     outcome: str | None = None
     if report.when == "call" and report.passed:
@@ -70,12 +74,13 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
         return
     ran = sum(sum(n.values()) for n in files.values())
     terminalreporter.write_line(
-        f"real-time tests: {starved} of {ran} skipped as starved by the machine (void runs, not results)",
+        f"real-time, MAVProxy and browser tests: {starved} of {ran} skipped as starved by the machine "
+        "(void runs, not results)",
         yellow=True,
     )
     for path in _all_starved():
         terminalreporter.write_line(
-            f"warning: every real-time test of {path} was skipped as starved: it tested nothing"
+            f"warning: every wall-clock test of {path} was skipped as starved: it tested nothing"
             + ("; CI fails this run" if os.environ.get("CI") else ""),
             red=True,
         )

@@ -13,8 +13,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from realtime_guard import scaled_s, timed_out
+
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
 WAIT_S = 15.0
+"""A wait on a quiet machine; every wait here grows with the load (``realtime_guard.scaled_s``) and, if it
+still times out on a starved machine, skips the test as ``starved:`` instead of failing it."""
+RUN_LIMIT_S = 120.0
+"""MAVProxy's own lifetime on a quiet machine (``timeout`` kills a process the test lost), also scaled."""
 # MAVProxy is a test dependency (the "test" extra): a missing one fails the tests that need it, loudly.
 
 
@@ -25,12 +31,13 @@ def free_udp_port() -> int:
 
 
 def wait_for(cond: Callable[[], bool], what: str, timeout: float = WAIT_S) -> None:
-    deadline = time.monotonic() + timeout
+    """Poll ``cond`` for ``timeout`` s scaled with the load; on time-out fail, or skip as starved."""
+    deadline = time.monotonic() + scaled_s(timeout)
     while time.monotonic() < deadline:
         if cond():
             return
         time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what}")
+    timed_out(what)
 
 
 class MavProxy:
@@ -41,7 +48,7 @@ class MavProxy:
             "timeout",
             "-k",
             "5",
-            "120",
+            f"{scaled_s(RUN_LIMIT_S):.0f}",
             sys.executable,
             str(MAVPROXY),
             f"--master=udpin:127.0.0.1:{port}",
@@ -82,9 +89,13 @@ class MavProxy:
         self.proc.stdin.flush()
 
     def expect(self, pattern: str, start: int = 0, timeout: float = WAIT_S) -> int:
-        """Index of the first console line at or after ``start`` matching ``pattern``."""
+        """Index of the first console line at or after ``start`` matching ``pattern``.
+
+        Waits ``timeout`` s scaled with the load. A MAVProxy that exited fails the test; one that only
+        ran out of time skips it as starved on a starved machine (``realtime_guard.timed_out``).
+        """
         rx = re.compile(pattern)
-        deadline = time.monotonic() + timeout
+        deadline = time.monotonic() + scaled_s(timeout)
         while time.monotonic() < deadline:
             for i, line in enumerate(self.lines()[start:], start):
                 if rx.search(line):
@@ -93,7 +104,9 @@ class MavProxy:
                 break
             time.sleep(0.02)
         tail = "\n".join(self.lines()[-30:])
-        raise AssertionError(f"MAVProxy never printed /{pattern}/; last lines:\n{tail}")
+        if self.proc.poll() is not None:
+            raise AssertionError(f"MAVProxy exited without printing /{pattern}/; last lines:\n{tail}")
+        timed_out(f"MAVProxy to print /{pattern}/", f"; last lines:\n{tail}")
 
     def close(self) -> None:
         if self.proc.poll() is None and self.proc.stdin is not None:

@@ -9,13 +9,19 @@ skip reason starts with :data:`STARVED_PREFIX`; ``tests/conftest.py`` counts tho
 them at the end and fails a CI run (``CI`` set) in which every real-time test of a file was skipped.
 
 Tests that use this mark themselves ``@pytest.mark.realtime``.
+
+The MAVProxy and Chromium tests (``mavproxy``, ``browser``) wait on another program instead: their waits
+grow with the load per core (:func:`scaled_s`, at most :data:`LOAD_SCALE_MAX` times), and a wait that
+still times out while the machine is starved (load per core above :data:`STARVED_LOAD_PER_CORE`) skips
+the test as ``starved:`` (:func:`timed_out`, :func:`starved_timeouts`); on a quieter machine it fails.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, NoReturn, TypeVar
 
 import pytest
@@ -25,11 +31,17 @@ if TYPE_CHECKING:  # tests/conftest.py imports this module: hil (and MuJoCo) onl
 
 __all__ = [
     "ATTEMPTS_N",
+    "LOAD_SCALE_MAX",
+    "STARVED_LOAD_PER_CORE",
     "STARVED_PREFIX",
     "largest_gap_s",
+    "load_per_core",
     "load_text",
     "retry_void",
+    "scaled_s",
     "skip_starved",
+    "starved_timeouts",
+    "timed_out",
     "void_reason",
 ]
 
@@ -38,6 +50,13 @@ ATTEMPTS_N = 3
 
 STARVED_PREFIX = "starved:"
 """How every skip for a machine-starved run begins (``tests/conftest.py`` counts them by it)."""
+
+LOAD_SCALE_MAX = 3.0
+"""The most a wait grows with the load (a hung program must still end within the suite's 300 s)."""
+
+STARVED_LOAD_PER_CORE = 2.0
+"""A wait that times out with more than this many runnable tasks per core (the 1-minute load average)
+is the machine's fault: each task got at most half a core, on top of the already scaled wait."""
 
 T = TypeVar("T")
 
@@ -51,6 +70,47 @@ def load_text() -> str:
 def skip_starved(reason: str) -> NoReturn:
     """Skip the running test as starved by the machine: ``starved: REASON; load average ...``."""
     pytest.skip(f"{STARVED_PREFIX} {reason}; {load_text()}")
+
+
+def load_per_core() -> float:
+    """The 1-minute load average per CPU core (1.0: every core busy, nobody waiting)."""
+    return os.getloadavg()[0] / (os.cpu_count() or 1)
+
+
+def scaled_s(timeout_s: float) -> float:
+    """``timeout_s`` (a quiet machine's wait) times the load per core, within 1..:data:`LOAD_SCALE_MAX`."""
+    return timeout_s * min(LOAD_SCALE_MAX, max(1.0, load_per_core()))
+
+
+def timed_out(what: str, detail: str = "") -> NoReturn:
+    """A wait for ``what`` timed out: skipped as starved on a starved machine, a failure otherwise.
+
+    Args:
+        what: what the test waited for (one line: it ends up in the skip reason).
+        detail: appended to the failure only (e.g. the program's last output lines).
+
+    Raises:
+        pytest.skip.Exception: the load per core is above :data:`STARVED_LOAD_PER_CORE`.
+        AssertionError: it is not (the program under test did not answer).
+    """
+    if load_per_core() > STARVED_LOAD_PER_CORE:
+        skip_starved(f"timed out waiting for {what}")
+    raise AssertionError(f"timed out waiting for {what}{detail}")
+
+
+@contextlib.contextmanager
+def starved_timeouts(*timeouts: type[Exception], what: str) -> Iterator[None]:
+    """Inside: a ``timeouts`` exception (e.g. Playwright's) skips the test as starved on a starved machine.
+
+    On a quieter machine the exception propagates: the test fails as it would without this.
+    """
+    try:
+        yield
+    except timeouts as exc:
+        if load_per_core() > STARVED_LOAD_PER_CORE:
+            first = str(exc).strip().splitlines()[:1]
+            skip_starved(f"timed out waiting for {what} ({first[0] if first else type(exc).__name__})")
+        raise
 
 
 def void_reason(result: ScenarioResult) -> str | None:
