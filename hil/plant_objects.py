@@ -6,15 +6,20 @@ whenever it rebuilds its model and exposes its methods under the same names (``p
 
 from __future__ import annotations
 
+import itertools
+import math
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 
 from hil.model_config import ObjectConfig
 from hil.plant_types import Pose, finite_vector, unit_quat
 
-__all__ = ["SceneObjects"]
+if TYPE_CHECKING:
+    from hil.plant import Plant
+
+__all__ = ["SceneObjects", "contact_units", "contact_wrap_deg"]
 
 
 class SceneObjects:
@@ -179,3 +184,25 @@ class SceneObjects:
             )
         force = finite_vector("force_n", force_n, 3)
         self._d.xfrc_applied[self.bodies[name], :3] = force
+
+
+def contact_units(plant: Plant, name: str) -> set[str]:
+    """The arm units touching the object ``name``."""
+    return {c.unit for c in plant.contacts() if c.other == name}
+
+
+def contact_wrap_deg(plant: Plant, name: str) -> float:
+    """Angular extent of the arm's contacts around an object's axis (y), in degrees (0..360).
+
+    The largest gap between contact directions is the part not wrapped; 360° minus it is the wrap.
+    """
+    centre = plant.object_pose(name).pos_m
+    angles = sorted(
+        math.atan2(c.pos_m[2] - centre[2], c.pos_m[0] - centre[0])
+        for c in plant.contacts()
+        if c.other == name
+    )
+    if len(angles) < 2:
+        return 0.0
+    gaps = [b - a for a, b in itertools.pairwise(angles)] + [angles[0] + 2 * math.pi - angles[-1]]
+    return math.degrees(2 * math.pi - max(gaps))

@@ -27,6 +27,7 @@ import numpy as np
 from protocol.messages import GraspState
 
 from ..model_config import ModelConfig
+from ..plant_objects import contact_units
 from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
 from .common import (
@@ -43,7 +44,7 @@ from .common import (
 )
 from .grasp import GraspSetup, grasp_firmware, grasp_rig
 from .parallel import parallel_map
-from .rig import contact_units, world_m
+from .rig import world_m
 from .stats import bootstrap_interval, wilson_interval
 from .strategy import TINY, StrategyParams, placements
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..model_config import ModelConfig, ObjectConfig
 from ..plant import Plant, PlantConfig
+from ..plant_objects import contact_units, contact_wrap_deg
 from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
 from .common import (
@@ -40,7 +41,7 @@ from .common import (
     worst_extremes,
 )
 from .parallel import parallel_map
-from .rig import contact_units, contact_wrap_deg, world_m
+from .rig import world_m
 
 
 @dataclass(frozen=True)

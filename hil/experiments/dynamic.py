@@ -34,6 +34,7 @@ from protocol.messages import CommandCode
 
 from ..model_config import ModelConfig, ObjectConfig
 from ..plant import Plant
+from ..plant_objects import contact_units, contact_wrap_deg
 from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
 from .common import (
@@ -51,7 +52,7 @@ from .common import (
 )
 from .dynamic_rig import paper_arm_45cm, scaled_model, with_contact_timeconst, with_timestep
 from .parallel import parallel_map
-from .rig import contact_units, contact_wrap_deg, direct_rig, world_m
+from .rig import direct_rig, world_m
 from .stats import wilson_interval
 
 CAPTURE_MS = 120.0

@@ -4,8 +4,6 @@ experiments measure on its plant (contacts, wrap angle)."""
 from __future__ import annotations
 
 import dataclasses
-import itertools
-import math
 from collections.abc import Sequence
 
 from controller.config import FirmwareConfig
@@ -128,25 +126,3 @@ def direct_rig(
 def world_m(x_m: float, z_m: float) -> tuple[float, float, float]:
     """World position of a point given relative to the arm's base in the x-z plane."""
     return (x_m, 0.0, BASE_Z_M + z_m)
-
-
-def contact_units(plant: Plant, name: str) -> set[str]:
-    """The arm units touching the object ``name``."""
-    return {c.unit for c in plant.contacts() if c.other == name}
-
-
-def contact_wrap_deg(plant: Plant, name: str) -> float:
-    """Angular extent of the arm's contacts around an object's axis (y), in degrees (0..360).
-
-    The largest gap between contact directions is the part not wrapped; 360° minus it is the wrap.
-    """
-    centre = plant.object_pose(name).pos_m
-    angles = sorted(
-        math.atan2(c.pos_m[2] - centre[2], c.pos_m[0] - centre[0])
-        for c in plant.contacts()
-        if c.other == name
-    )
-    if len(angles) < 2:
-        return 0.0
-    gaps = [b - a for a, b in itertools.pairwise(angles)] + [angles[0] + 2 * math.pi - angles[-1]]
-    return math.degrees(2 * math.pi - max(gaps))

@@ -9,8 +9,8 @@ from protocol.dbus import Lever
 from protocol.messages import GraspState
 
 from ..environment import Environment
-from ..experiments.rig import contact_wrap_deg
 from ..model_config import ObjectConfig
+from ..plant_objects import contact_wrap_deg
 from ..record import Check, RunRecord
 from .base import MS, SAFE, Plan, Scenario, rc
 
