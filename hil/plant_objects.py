@@ -9,15 +9,12 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import mujoco
 
 from hil.model_config import ObjectConfig
-from hil.plant_types import Pose, finite_vector, unit_quat
-
-if TYPE_CHECKING:
-    from hil.plant import Plant
+from hil.plant_types import Contact, Pose, finite_vector, unit_quat
 
 __all__ = ["SceneObjects", "contact_units", "contact_wrap_deg"]
 
@@ -186,12 +183,20 @@ class SceneObjects:
         self._d.xfrc_applied[self.bodies[name], :3] = force
 
 
-def contact_units(plant: Plant, name: str) -> set[str]:
+class ContactView(Protocol):
+    """What the wrap measures need of a plant (:class:`hil.plant.Plant` has it)."""
+
+    def contacts(self) -> list[Contact]: ...
+
+    def object_pose(self, name: str) -> Pose: ...
+
+
+def contact_units(plant: ContactView, name: str) -> set[str]:
     """The arm units touching the object ``name``."""
     return {c.unit for c in plant.contacts() if c.other == name}
 
 
-def contact_wrap_deg(plant: Plant, name: str) -> float:
+def contact_wrap_deg(plant: ContactView, name: str) -> float:
     """Angular extent of the arm's contacts around an object's axis (y), in degrees (0..360).
 
     The largest gap between contact directions is the part not wrapped; 360° minus it is the wrap.
