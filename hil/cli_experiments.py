@@ -21,6 +21,7 @@ from controller.config import CONTROL_PERIOD_US
 
 from .cli_design import add_design_arguments, design_from_args, model_from_args
 from .experiments import EXPERIMENTS, SIZES, run_experiment
+from .experiments.common import PHYSICS
 
 __all__ = ["EXPERIMENT_HELP", "MAX_JOBS_N", "configure_experiment", "run_experiment_command"]
 
@@ -47,10 +48,17 @@ def configure_experiment(p: argparse.ArgumentParser) -> None:
         "--jobs", type=int, default=2, metavar="N", help="worker processes for independent runs (default 2)"
     )
     p.add_argument(
+        "--physics",
+        choices=list(PHYSICS),
+        help="fine: a 0.25 ms step with 0.5 ms contacts and joint limits (every experiment's default but "
+        "convergence's); board: the real-time board's 1 ms step with 2 ms constraints",
+    )
+    p.add_argument(
         "--timestep-ms",
         type=finite_float,
         metavar="MS",
-        help="physics step [ms] (default: the preset's, 1); the 1 ms control period must be a whole number "
+        help="physics step [ms] (default: --physics's); the constraints keep --physics's time constants; "
+        "the 1 ms control period must be a whole number "
         "of steps: 1, 0.5, 0.25 ... (to show a result converges)",
     )
     add_design_arguments(p)
@@ -63,7 +71,9 @@ def run_experiment_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--jobs must be 1..{MAX_JOBS_N}, got {args.jobs}")
     if args.report is not None:  # checked before the experiment runs, not after
         writable_dir(args.report, "write the figure into", "spirob-hil experiment")
-    model = model_from_args(args)
+    exp = EXPERIMENTS[args.name]
+    step_s = PHYSICS[args.physics] if args.physics else exp.model.solver.timestep_s
+    model = model_from_args(args).with_physics(step_s)
     if args.timestep_ms is not None:
         step_s = args.timestep_ms / 1000.0
         ratio = CONTROL_PERIOD_US * 1e-6 / step_s if step_s > 0 else 0.0
@@ -72,9 +82,11 @@ def run_experiment_command(args: argparse.Namespace) -> int:
                 f"--timestep-ms must divide the 1 ms control period (1, 0.5, 0.25 ...): {args.timestep_ms:g}"
             )
         model = dataclasses.replace(model, solver=dataclasses.replace(model.solver, timestep_s=step_s))
-        model.validate()
+        try:
+            model.validate()
+        except ValueError as exc:
+            raise ValueError(f"--timestep-ms {args.timestep_ms:g}: {exc} (--physics board has 2 ms)") from exc
     design = design_from_args(args)
-    exp = EXPERIMENTS[args.name]
     err = Console(stderr=True)
     t0 = time.perf_counter()
     with Progress(
@@ -113,6 +125,8 @@ def run_experiment_command(args: argparse.Namespace) -> int:
         out["size"] = args.size
         out["preset"] = args.preset
         out["timestep_s"] = model.solver.timestep_s
+        out["contact_timeconst_s"] = model.contact.timeconst_s
+        out["limit_timeconst_s"] = model.arm.limit_timeconst_s
         out["elapsed_s"] = round(elapsed, 1)
         if figure is not None:
             out["figure"] = str(figure)
@@ -128,7 +142,8 @@ def run_experiment_command(args: argparse.Namespace) -> int:
     console.print(table)
     console.print(
         f"samples: {exp.samples(result)}; preset {args.preset or 'prototype'}; "
-        f"step {model.solver.timestep_s * 1000:g} ms; seed {args.seed}; "
+        f"step {model.solver.timestep_s * 1000:g} ms (contacts {model.contact.timeconst_s * 1000:g} ms, "
+        f"limits {model.arm.limit_timeconst_s * 1000:g} ms); seed {args.seed}; "
         f"size {args.size}; {elapsed:.0f} s"
     )
     if figure is not None:

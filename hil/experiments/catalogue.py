@@ -10,7 +10,7 @@ from typing import Any
 from ..model_config import ModelConfig
 from ..spiral import SpiralDesign
 from . import contact, convergence, dynamic, grasp_range, load, packing, sensitivity, strategy, workspace
-from .common import DEFAULT_MODEL, Progress, Row, sized
+from .common import BOARD_MODEL, DEFAULT_MODEL, Progress, Row, sized
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,9 @@ class Experiment:
         rows: the result's numbers next to the paper's.
         samples: the result's sample counts, in words.
         plot: writes the figure, returns its path.
+        model: the plant model it runs on unless given one: the experiments' fine physics
+            (:data:`~hil.experiments.common.DEFAULT_MODEL`), or the board's for ``convergence``, which
+            varies the step under the board's constraint time constants.
     """
 
     name: str
@@ -33,6 +36,7 @@ class Experiment:
     rows: Callable[[Any], list[Row]]
     samples: Callable[[Any], str]
     plot: Callable[[Any, Path], Path]
+    model: ModelConfig = DEFAULT_MODEL
 
 
 EXPERIMENTS: dict[str, Experiment] = {
@@ -109,6 +113,7 @@ EXPERIMENTS: dict[str, Experiment] = {
             convergence.table_rows,
             convergence.describe_samples,
             convergence.plot_figure,
+            BOARD_MODEL,
         ),
     )
 }
@@ -123,10 +128,10 @@ def run_experiment(
     seed: int = 0,
     progress: Progress | None = None,
     jobs: int = 1,
-    model: ModelConfig = DEFAULT_MODEL,
+    model: ModelConfig | None = None,
 ) -> Any:
-    """Run the experiment ``name`` at ``size`` on the plant ``model`` (pure; the result is frozen and
-    picklable).
+    """Run the experiment ``name`` at ``size`` on the plant ``model`` (default: the experiment's own,
+    :attr:`Experiment.model`; pure; the result is frozen and picklable).
 
     Raises:
         KeyError: unknown experiment.
@@ -134,4 +139,6 @@ def run_experiment(
     """
     exp = EXPERIMENTS[name]
     sized(size, 0, 0, 0)
-    return exp.run(design or SpiralDesign.paper_prototype(), size, seed, progress, max(1, jobs), model)
+    return exp.run(
+        design or SpiralDesign.paper_prototype(), size, seed, progress, max(1, jobs), model or exp.model
+    )

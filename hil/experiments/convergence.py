@@ -28,7 +28,7 @@ from ..plant_objects import contact_units, contact_wrap_deg
 from ..plant_types import PhysicsExtremes
 from ..spiral import SpiralDesign
 from .common import (
-    DEFAULT_MODEL,
+    BOARD_MODEL,
     FAR_M,
     MS,
     OBJ,
@@ -226,10 +226,11 @@ def run_at_size(
     seed: int,
     progress: Progress | None,
     jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
+    model: ModelConfig = BOARD_MODEL,
 ) -> Any:
     """Run the experiment at ``size`` on ``model`` (the prototype's design always: the numbers are the
-    plant's, not a design's; only the physics step changes between columns)."""
+    plant's, not a design's; only the physics step changes between columns, the constraints' time
+    constants stay the model's, so the board's model by default: its 2 ms allow the 1 ms column)."""
     p = sized(
         size,
         ConvergenceParams(
