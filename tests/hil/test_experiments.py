@@ -204,3 +204,21 @@ def test_contact_reaches_at_the_strategys_placements() -> None:
     jobs = contact_jobs(design, ContactParams(), seed=0)
     assert [(s.x_m, s.z_m, s.diameter_m) for s, det, _ in jobs[::2]] == spots
     assert {det for _, det, _ in jobs} == {"old", "new"}
+
+
+def test_physics_flag_and_a_step_too_coarse_for_fine_constraints(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["experiment", "packing", "--size", "tiny", "--jobs", "1", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["timestep_s"], out["contact_timeconst_s"], out["limit_timeconst_s"]) == (
+        0.25e-3,
+        0.5e-3,
+        0.5e-3,
+    )
+    assert (
+        main(["experiment", "packing", "--size", "tiny", "--jobs", "1", "--json", "--physics", "board"]) == 0
+    )
+    out = json.loads(capsys.readouterr().out)
+    assert (out["timestep_s"], out["contact_timeconst_s"], out["limit_timeconst_s"]) == (1e-3, 2e-3, 2e-3)
+    assert main(["experiment", "packing", "--size", "tiny", "--timestep-ms", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--physics board" in err[0] and "Traceback" not in err[0]

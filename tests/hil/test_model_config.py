@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -97,3 +98,28 @@ def test_the_cable_axial_stiffness_is_e_times_the_fibre_area() -> None:
     assert arm.cable_axial_stiffness_n == pytest.approx(109e9 * 0.5 * math.pi * 0.00025**2)
     with pytest.raises(ValueError, match="cable_fill_factor"):
         ArmConfig(cable_fill_factor=1.5).validate()
+
+
+def test_with_physics_sets_the_step_and_the_stiffest_constraints_it_allows() -> None:
+    fine = ModelConfig().with_physics(0.25e-3)
+    fine.validate()
+    assert fine.solver.timestep_s == 0.25e-3
+    assert fine.contact.timeconst_s == fine.arm.limit_timeconst_s == 0.5e-3
+    # nothing else changes
+    assert (
+        dataclasses.replace(
+            fine, solver=ModelConfig().solver, contact=ModelConfig().contact, arm=ModelConfig().arm
+        )
+        == ModelConfig()
+    )
+    with pytest.raises(ValueError, match="at least twice the physics step"):
+        dataclasses.replace(fine, solver=dataclasses.replace(fine.solver, timestep_s=1e-3)).validate()
+
+
+def test_experiments_run_fine_physics_but_convergence_the_boards() -> None:
+    from hil.experiments import EXPERIMENTS
+    from hil.experiments.common import BOARD_MODEL
+
+    for name, exp in EXPERIMENTS.items():
+        expected = BOARD_MODEL if name == "convergence" else BOARD_MODEL.with_physics(0.25e-3)
+        assert exp.model == expected, name
