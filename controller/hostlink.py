@@ -5,7 +5,9 @@ and every length above that id's own, is refused as soon as the id is read, so n
 input longer than one real frame (29 bytes at most). Link work per ``link_rx`` tick has a budget: at
 most :data:`RX_BYTES_PER_TICK` bytes are parsed and :data:`RX_FRAMES_PER_TICK` frames handled; the
 excess is dropped and counted (``rx_bytes_dropped``, ``rx_frames_dropped``), never carried over, so a
-flood costs the control task one bounded slice of every tick and never delays it.
+flood costs the control task one bounded slice of every tick and never delays it. The radio and the host's
+liveness are not queued behind a flood of other frames: a ``VirtualRc`` or ``Heartbeat`` parsed within the
+byte budget is kept even past the frame budget (at most :data:`RX_PRIORITY_PER_TICK` of them, each cheap).
 """
 
 from __future__ import annotations
@@ -14,10 +16,10 @@ from collections.abc import Sequence
 
 from controller.transport import Transport
 from protocol.link import LinkFrame, LinkParser
-from protocol.messages import HOST_TO_BOARD_LENGTHS, Message, encode
+from protocol.messages import HOST_TO_BOARD_LENGTHS, Heartbeat, Message, VirtualRc, encode
 from protocol.stream import MessageStream, Received, UndecodableHook
 
-__all__ = ["RX_BYTES_PER_TICK", "RX_FRAMES_PER_TICK", "BoardLink"]
+__all__ = ["RX_BYTES_PER_TICK", "RX_FRAMES_PER_TICK", "RX_PRIORITY_PER_TICK", "BoardLink"]
 
 RX_BYTES_PER_TICK = 512
 """Link bytes parsed per ``link_rx`` tick (512 kB/s at 1 kHz). A host sends about 3 kB/s (a 27-byte
@@ -25,6 +27,11 @@ RX_BYTES_PER_TICK = 512
 carries about 1 MB/s, so only a flood reaches the budget."""
 RX_FRAMES_PER_TICK = 8
 """Frames handled per ``link_rx`` tick, decoded or not (8000 frames/s; a host sends about 80)."""
+
+RX_PRIORITY_PER_TICK = 2
+"""``VirtualRc`` and ``Heartbeat`` frames kept past the frame budget per tick. A host sends one of each per
+14 ms and 100 ms, so two per 1 ms tick is already a flood of them; more are dropped like any other frame."""
+_PRIORITY = (VirtualRc, Heartbeat)
 
 _NOTHING: tuple[Received, ...] = ()
 
@@ -116,8 +123,12 @@ class BoardLink:
         out = self.stream.feed(data)  # undecodable frames spend the same budget (_undecodable)
         left = self._frames_left
         if len(out) > left:
-            self.rx_frames_dropped += len(out) - left
+            late = out[left:]
             del out[left:]
+            # Radio and liveness first: a flood of other frames must not latch RC or host loss.
+            kept = [r for r in late if isinstance(r.msg, _PRIORITY)][:RX_PRIORITY_PER_TICK]
+            out.extend(kept)
+            self.rx_frames_dropped += len(late) - len(kept)
         if over or self.rx_frames_dropped != dropped:
             self.rx_over_budget += 1
         return out

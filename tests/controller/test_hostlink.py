@@ -8,7 +8,7 @@ import pytest
 from controller_harness import Rig, frame, link_rc_rig
 
 from controller.commands import PARAM_VALUES_PER_TICK
-from controller.hostlink import RX_BYTES_PER_TICK, RX_FRAMES_PER_TICK, BoardLink
+from controller.hostlink import RX_BYTES_PER_TICK, RX_FRAMES_PER_TICK, RX_PRIORITY_PER_TICK, BoardLink
 from controller.transport import MemoryTransport
 from protocol.link import SOF, crc8
 from protocol.messages import (
@@ -137,3 +137,38 @@ def test_param_request_flood_spends_only_the_budget() -> None:
     assert 0 < len(values) <= ticks * PARAM_VALUES_PER_TICK
     assert rig.fw.link is not None
     assert rig.fw.link.frames_sent - sent_before <= ticks * PARAM_VALUES_PER_TICK + ticks // 10 * 8
+
+
+def test_radio_and_heartbeat_pass_the_frame_budget_but_only_two_per_tick() -> None:
+    host, board = MemoryTransport.pair()
+    link = BoardLink(board)
+    rc = encode(VirtualRc.from_frame(frame()), 0)
+    # ten ParamRequests (over the 8-frame budget), then the radio, a heartbeat and two more radio frames
+    burst = encode(ParamRequest(), 0) * 10 + rc + encode(Heartbeat(0, 0), 0) + rc * 2
+    assert len(burst) <= RX_BYTES_PER_TICK
+    host.write(burst)
+    got = [r.msg for r in link.receive()]
+    assert sum(isinstance(m, ParamRequest) for m in got) == RX_FRAMES_PER_TICK
+    assert [type(m) for m in got[RX_FRAMES_PER_TICK:]] == [VirtualRc, Heartbeat][:RX_PRIORITY_PER_TICK]
+    assert link.rx_frames_dropped == 2 + (4 - RX_PRIORITY_PER_TICK)
+
+
+def test_a_flood_of_other_frames_does_not_latch_rc_loss() -> None:
+    """Safety: a host flooding ParamRequests (within the byte budget) keeps its radio: no RC_LOST."""
+    rig = link_rc_rig()
+    assert rig.host is not None
+    ms = 0
+    while rig.fw.phase != Phase.OK:
+        _host_tick(rig, ms)
+        ms += 1
+        assert ms < 200
+    rig.drain()
+    flood = encode(ParamRequest(), 0) * 12  # 12 frames before every tick's own: over the frame budget
+    for _ in range(1000):
+        rig.host.write(flood)
+        _host_tick(rig, ms)
+        ms += 1
+    rig.drain()
+    assert rig.fw.counters["link_rx_frames_dropped"] > 0  # the budget did act
+    assert Phase.RC_LOST not in _phases(rig) and Phase.HOST_LOST not in _phases(rig)
+    assert rig.fw.phase == Phase.OK
