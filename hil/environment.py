@@ -5,6 +5,7 @@ plant, radio, wire) and the scripted host on the board link, and advances them o
 :meth:`Environment.step`, in this order::
 
     task.before_tick   the task acts on the world (moves an object, sends a command)
+    drone              a scripted drone motion sets the acceleration due (:mod:`hil.drone_motion`)
     host.before_tick   the host writes what is due (heartbeat, scripted messages)
     board.tick         physics, delivery, the firmware's due tasks, the command to the ESCs
     host.after_tick    the host takes what the board sent
@@ -26,6 +27,7 @@ from protocol.stream import MessageStream
 
 from . import recording
 from .board import BoardConfig, VirtualBoard
+from .drone_motion import NEVER_US, DroneMotion, DroneMotionPlayer
 from .faults import Fault
 from .harness import ScriptedHost
 from .radio import RadioScript
@@ -61,6 +63,7 @@ class Environment:
         recorder: record every byte in and out of the board (and the decoded telemetry) to MCAP.
         record_ticks: keep a :class:`~hil.record.RunRecord` with room for this many ticks (0: none, the
             cheapest loop, for experiments and benchmarks that measure the plant themselves).
+        drone: the drone's scripted motion (its acceleration, in the plant's time; the pose is held).
     """
 
     def __init__(
@@ -74,6 +77,7 @@ class Environment:
         heartbeats: bool = True,
         recorder: Recorder | None = None,
         record_ticks: int = 0,
+        drone: DroneMotion | None = None,
     ) -> None:
         self.task = task if task is not None else Task()
         self.recorder = recorder
@@ -93,6 +97,8 @@ class Environment:
             self._board_tx = wire.tx_tap = bytearray()
         self._telemetry_written = 0
         self.ticks = 0
+        self._drone = DroneMotionPlayer(drone) if drone is not None else None
+        self._drone_next_us = self._drone.next_us if self._drone is not None else NEVER_US
         # Hooks the task does not override are not called: the loop stays as lean as the board's tick.
         kind = type(self.task)
         self._before_tick = self.task.before_tick if kind.before_tick is not Task.before_tick else None
@@ -118,6 +124,8 @@ class Environment:
         board, host = self.board, self.host
         if self._before_tick is not None:
             self._before_tick(self)
+        if board.plant.time_us >= self._drone_next_us:  # one comparison a tick; work only at a change
+            self._apply_drone()
         host.before_tick(board.now_us)
         board.tick()
         host.after_tick(board.now_us)
@@ -154,6 +162,12 @@ class Environment:
             if until is not None and until():
                 return i + 1
         return total
+
+    def _apply_drone(self) -> None:
+        player = self._drone
+        assert player is not None  # a change is only ever due with a motion to play
+        player.apply(self.board.plant)
+        self._drone_next_us = player.next_us
 
     def _sample(self) -> None:
         s, p = self.samples, self.plant_samples
