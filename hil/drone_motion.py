@@ -142,12 +142,25 @@ class DroneMotion:
 class DroneMotionPlayer:
     """Applies a :class:`DroneMotion` to a plant, in the plant's (physics) time.
 
-    Call :meth:`apply` before each physics step once the plant's time has reached :attr:`next_us`; the
-    acceleration set then holds for the steps until the next change. The drone's pose is kept as it is.
+    Call :meth:`apply` before each control period once the plant's time has reached :attr:`next_us`; the
+    acceleration set then holds for the periods until the next change. The drone's pose is kept as it is.
+
+    Args:
+        motion: the motion to play.
+        period_us: the plant's control period: every change must fall on it, so that no segment is
+            shortened or skipped between two periods.
+
+    Raises:
+        ValueError: a change that does not fall on the control period.
     """
 
-    def __init__(self, motion: DroneMotion) -> None:
+    def __init__(self, motion: DroneMotion, period_us: int) -> None:
         self._changes = motion.changes()
+        for t_us, _ in self._changes:
+            if t_us % period_us:
+                raise ValueError(
+                    f"the drone motion changes at {t_us} us, not on the {period_us} us control period"
+                )
         self._i = 0
         self.next_us = self._changes[0][0]
         """Plant time of the next change (:data:`NEVER_US` once the motion is over)."""

@@ -27,7 +27,7 @@ from protocol.stream import MessageStream
 
 from . import recording
 from .board import BoardConfig, VirtualBoard
-from .drone_motion import NEVER_US, DroneMotion, DroneMotionPlayer
+from .drone_motion import DroneMotion, DroneMotionPlayer
 from .faults import Fault
 from .harness import ScriptedHost
 from .radio import RadioScript
@@ -64,6 +64,9 @@ class Environment:
         record_ticks: keep a :class:`~hil.record.RunRecord` with room for this many ticks (0: none, the
             cheapest loop, for experiments and benchmarks that measure the plant themselves).
         drone: the drone's scripted motion (its acceleration, in the plant's time; the pose is held).
+
+    Raises:
+        ValueError: the drone's motion changes between two control periods.
     """
 
     def __init__(
@@ -81,6 +84,10 @@ class Environment:
     ) -> None:
         self.task = task if task is not None else Task()
         self.recorder = recorder
+        config = config if config is not None else BoardConfig()
+        # Refused before the board exists, so a bad motion leaves nothing open.
+        period_us = config.plant.control_period_us
+        self._drone = DroneMotionPlayer(drone, period_us) if drone is not None else None
         self.board = VirtualBoard(config, faults=tuple(faults), radio_script=radio, recorder=recorder)
         wire = self.board.wire
         if wire is None:  # a board built without a link end of its own always has a wire
@@ -97,8 +104,6 @@ class Environment:
             self._board_tx = wire.tx_tap = bytearray()
         self._telemetry_written = 0
         self.ticks = 0
-        self._drone = DroneMotionPlayer(drone) if drone is not None else None
-        self._drone_next_us = self._drone.next_us if self._drone is not None else NEVER_US
         # Hooks the task does not override are not called: the loop stays as lean as the board's tick.
         kind = type(self.task)
         self._before_tick = self.task.before_tick if kind.before_tick is not Task.before_tick else None
@@ -124,8 +129,9 @@ class Environment:
         board, host = self.board, self.host
         if self._before_tick is not None:
             self._before_tick(self)
-        if board.plant.time_us >= self._drone_next_us:  # one comparison a tick; work only at a change
-            self._apply_drone()
+        drone = self._drone
+        if drone is not None and board.plant.time_us >= drone.next_us:  # work only at a change
+            drone.apply(board.plant)
         host.before_tick(board.now_us)
         board.tick()
         host.after_tick(board.now_us)
@@ -162,12 +168,6 @@ class Environment:
             if until is not None and until():
                 return i + 1
         return total
-
-    def _apply_drone(self) -> None:
-        player = self._drone
-        assert player is not None  # a change is only ever due with a motion to play
-        player.apply(self.board.plant)
-        self._drone_next_us = player.next_us
 
     def _sample(self) -> None:
         s, p = self.samples, self.plant_samples

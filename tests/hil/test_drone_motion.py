@@ -119,3 +119,11 @@ def test_a_push_swings_the_hanging_arm_backwards() -> None:
         x_pushed = float(pushed.board.plant.tip_pose().pos_m[0])
     assert abs(x_still - x0) < 1e-3
     assert x_pushed < x0 - 0.01
+
+
+def test_a_change_between_two_control_periods_is_refused() -> None:
+    # A 0.5 ms blip would fall between two 1 ms periods and never be applied: refused, in one line.
+    motion = DroneMotion((AccelSegment(2 * MS, 500, (8.0, 0.0, 0.0)),))
+    with pytest.raises(ValueError) as info:
+        Environment(BoardConfig(), drone=motion)
+    assert str(info.value) == "the drone motion changes at 2500 us, not on the 1000 us control period"
