@@ -84,13 +84,16 @@ class DroneManoeuvre(Grasp):
     def after_tick(self, env: Environment) -> None:
         super().after_tick(env)
         hold_us = self.hold_us
+        plant = env.board.plant
+        # The levels are in the plant's time (the drone's motion is; a loop-delay fault shifts only the
+        # firmware's). The state after the tick that ends at a level's start is the one before its push.
+        now_us = plant.time_us
         # Only a grasp whose own judgement ended before the manoeuvres is measured (else NaN: fails).
-        if hold_us is None or hold_us + HELD_US > FIRST_US or env.now_us < FIRST_US:
+        if hold_us is None or hold_us + HELD_US > FIRST_US or now_us < FIRST_US:
             return
-        i = (env.now_us - FIRST_US) // LEVEL_US
+        i = (now_us - FIRST_US) // LEVEL_US
         if i >= len(LEVELS_M_S2):
             return
-        plant = env.board.plant
         pos = plant.object_pose(CAN.name).pos_m
         if math.isnan(self.min_wrap_deg[i]):  # the level's first tick: where the can was when it began
             self._level_pos_m[:] = pos
