@@ -5,6 +5,7 @@ plant, radio, wire) and the scripted host on the board link, and advances them o
 :meth:`Environment.step`, in this order::
 
     task.before_tick   the task acts on the world (moves an object, sends a command)
+    drone              a scripted drone motion sets the acceleration due (:mod:`hil.drone_motion`)
     host.before_tick   the host writes what is due (heartbeat, scripted messages)
     board.tick         physics, delivery, the firmware's due tasks, the command to the ESCs
     host.after_tick    the host takes what the board sent
@@ -26,6 +27,7 @@ from protocol.stream import MessageStream
 
 from . import recording
 from .board import BoardConfig, VirtualBoard
+from .drone_motion import DroneMotion, DroneMotionPlayer
 from .faults import Fault
 from .harness import ScriptedHost
 from .radio import RadioScript
@@ -61,6 +63,10 @@ class Environment:
         recorder: record every byte in and out of the board (and the decoded telemetry) to MCAP.
         record_ticks: keep a :class:`~hil.record.RunRecord` with room for this many ticks (0: none, the
             cheapest loop, for experiments and benchmarks that measure the plant themselves).
+        drone: the drone's scripted motion (its acceleration, in the plant's time; the pose is held).
+
+    Raises:
+        ValueError: the drone's motion changes between two control periods.
     """
 
     def __init__(
@@ -74,9 +80,14 @@ class Environment:
         heartbeats: bool = True,
         recorder: Recorder | None = None,
         record_ticks: int = 0,
+        drone: DroneMotion | None = None,
     ) -> None:
         self.task = task if task is not None else Task()
         self.recorder = recorder
+        config = config if config is not None else BoardConfig()
+        # Refused before the board exists, so a bad motion leaves nothing open.
+        period_us = config.plant.control_period_us
+        self._drone = DroneMotionPlayer(drone, period_us) if drone is not None else None
         self.board = VirtualBoard(config, faults=tuple(faults), radio_script=radio, recorder=recorder)
         wire = self.board.wire
         if wire is None:  # a board built without a link end of its own always has a wire
@@ -118,6 +129,9 @@ class Environment:
         board, host = self.board, self.host
         if self._before_tick is not None:
             self._before_tick(self)
+        drone = self._drone
+        if drone is not None and board.plant.time_us >= drone.next_us:  # work only at a change
+            drone.apply(board.plant)
         host.before_tick(board.now_us)
         board.tick()
         host.after_tick(board.now_us)

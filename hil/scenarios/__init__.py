@@ -24,6 +24,7 @@ from ..record import Check, RunRecord, ScenarioResult
 from ..recording import Recorder
 from ..spiral import SpiralDesign
 from .base import MANUAL, MS, RC_GAP_CHECK, SAFE, TICK_US, Plan, Scenario, rc, rc_gap_check
+from .drone_manoeuvre import DroneManoeuvre
 from .grasp import Grasp
 from .host_loss import HostLoss
 from .link_disconnect import LinkDisconnect
@@ -68,6 +69,7 @@ SCENARIOS: dict[str, type[Scenario]] = {
         HostLoss,
         Overcurrent,
         Grasp,
+        DroneManoeuvre,
     )
 }
 """The catalogue, in the order ``spirob-hil list`` shows it."""
@@ -135,6 +137,8 @@ def run_scenario(
     if record is not None:
         meta = {"scenario": name, **config.describe()}
         meta["faults"] = ";".join(repr(f) for f in plan.faults)
+        if plan.drone is not None:  # only then: every other recording stays byte-identical
+            meta["drone"] = repr(plan.drone)
         recorder = Recorder(record, metadata=meta)
     try:
         env = Environment(
@@ -146,6 +150,7 @@ def run_scenario(
             heartbeats=plan.heartbeats,
             recorder=recorder,
             record_ticks=scenario.duration_us // config.plant.control_period_us,
+            drone=plan.drone,
         )
         with env:
             env.run(scenario.duration_us, progress=progress)

@@ -28,6 +28,7 @@ from controller.config import FailsafeConfig, FirmwareConfig
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, EventKind, Phase
 
+from ..drone_motion import DroneMotion
 from ..environment import Task
 from ..faults import Fault, FaultKind
 from ..model_config import ObjectConfig
@@ -80,7 +81,8 @@ def arm_then(t_manual_us: int = 200 * MS, **sticks: int) -> list[tuple[int, RcFr
 
 @dataclass(frozen=True)
 class Plan:
-    """How a scenario runs: the radio, the host, the faults, the board's configuration, the scene."""
+    """How a scenario runs: the radio, the host, the faults, the board's configuration, the scene, and the
+    drone's scripted motion (lockstep only: the plant's acceleration)."""
 
     radio: Sequence[tuple[int, RcFrame]]
     faults: Sequence[Fault] = ()
@@ -89,6 +91,7 @@ class Plan:
     firmware: FirmwareConfig = field(default_factory=FirmwareConfig)
     objects: tuple[ObjectConfig, ...] = ()
     start_packed: bool = False
+    drone: DroneMotion | None = None
 
 
 class Scenario(Task, ABC):

@@ -10,7 +10,10 @@ import pytest
 from controller.config import FirmwareConfig
 from hil import scenarios
 from hil.faults import Fault, FaultKind
-from hil.scenarios import SCENARIOS, Check, run_scenario
+from hil.recording import read_metadata
+from hil.scenarios import SCENARIOS, Check, drone_manoeuvre, run_scenario
+from hil.scenarios.drone_manoeuvre import DroneManoeuvre
+from hil.scenarios.grasp import Grasp
 from hil.scenarios.rc_loss import RcLoss
 
 
@@ -66,3 +69,44 @@ def test_same_seed_gives_byte_identical_recordings(tmp_path: Path) -> None:
     c = tmp_path / "c.mcap"
     run_scenario("link-noise", seed=8, record=c)
     assert c.read_bytes() != a.read_bytes()
+
+
+def test_drone_manoeuvre_is_byte_identical_for_a_seed(tmp_path: Path) -> None:
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    first = run_scenario("drone-manoeuvre", seed=3, record=a)
+    second = run_scenario("drone-manoeuvre", seed=3, record=b)
+    assert a.read_bytes() == b.read_bytes()
+    assert first.checks == second.checks and first.extremes == second.extremes
+    assert read_metadata(a)["drone"] == repr(DroneManoeuvre().plan().drone)
+
+
+def test_drone_manoeuvre_pushes_2_m_s2_for_1_s_after_the_grasp_is_judged() -> None:
+    motion = DroneManoeuvre().plan().drone
+    assert motion is not None
+    start = drone_manoeuvre.FIRST_US
+    assert start >= Grasp.duration_us
+    assert motion.accel_at(start - 1) == (0.0, 0.0, 0.0)
+    assert motion.accel_at(start) == (2.0, 0.0, 0.0)
+    assert motion.accel_at(start + 999_999) == (2.0, 0.0, 0.0)
+    assert motion.accel_at(start + 1_000_000)[0] == -2.0  # braking, back to rest
+    assert motion.accel_at(start + 2_000_000) == (0.0, 0.0, 0.0)
+    assert DroneManoeuvre.duration_us >= motion.end_us
+
+
+def test_drone_manoeuvre_judgement_can_fail() -> None:
+    s = DroneManoeuvre()
+    assert s.survived_m_s2() == 0.0  # nothing measured: nothing survived
+    s.min_wrap_deg[:] = (190.0, 185.0, 170.0)
+    s.min_units[:] = 4
+    s.max_shift_mm[:] = 1.0
+    assert [s.held(i) for i in range(3)] == [True, True, False]
+    assert s.survived_m_s2() == 4.0  # the wrap fell below half the circumference at 8 m/s²
+    s.max_shift_mm[0] = 41.0  # the can moved further than a held can swings at the first level
+    assert s.survived_m_s2() == 0.0
+    s.max_shift_mm[0] = 1.0
+    s.min_units[1] = 3
+    assert s.survived_m_s2() == 2.0
+    s.min_units[1] = 4
+    s.min_wrap_deg[1] = float("nan")  # a level never measured is never held, nor any after it
+    s.min_wrap_deg[2] = 190.0
+    assert s.survived_m_s2() == 2.0
