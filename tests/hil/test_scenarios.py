@@ -10,6 +10,7 @@ import pytest
 from controller.config import FirmwareConfig
 from hil import scenarios
 from hil.faults import Fault, FaultKind
+from hil.record import ScenarioResult
 from hil.recording import read_metadata
 from hil.scenarios import SCENARIOS, Check, drone_manoeuvre, run_scenario
 from hil.scenarios.drone_manoeuvre import DroneManoeuvre
@@ -17,7 +18,13 @@ from hil.scenarios.grasp import Grasp
 from hil.scenarios.rc_loss import RcLoss
 
 
-@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def _assert_passed(result: ScenarioResult) -> None:
+    failed = [c for c in result.checks if not c.passed]
+    assert result.checks and not failed, failed
+
+
+# drone-manoeuvre (19 s of wall time a run) passes in its byte-identity test below, not here again.
+@pytest.mark.parametrize("name", sorted(set(SCENARIOS) - {"drone-manoeuvre"}))
 def test_scenario_passes(name: str) -> None:
     result = run_scenario(name, seed=1)
     failed = [c for c in result.checks if not c.passed]
@@ -75,6 +82,8 @@ def test_drone_manoeuvre_is_byte_identical_for_a_seed(tmp_path: Path) -> None:
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
     first = run_scenario("drone-manoeuvre", seed=3, record=a)
     second = run_scenario("drone-manoeuvre", seed=3, record=b)
+    _assert_passed(first)
+    assert first.extremes is not None
     assert a.read_bytes() == b.read_bytes()
     assert first.checks == second.checks and first.extremes == second.extremes
     assert read_metadata(a)["drone"] == repr(DroneManoeuvre().plan().drone)
