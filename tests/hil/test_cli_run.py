@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
+from realtime_guard import scaled_s
 from terminal import ctrl_c, start_in_own_group
 
 from hil.cli import main
@@ -123,7 +124,9 @@ def test_board_command_serves_and_stops(tmp_path: Path) -> None:
 def test_ctrl_c_stops_with_one_line_and_no_traceback(argv: list[str]) -> None:
     """A terminal's Ctrl-C reaches the whole process group (the CLI and any pool workers)."""
     proc = start_in_own_group("hil.cli", *argv)
-    time.sleep(4.0)  # well into the work: the scenario suite and the experiment both take longer
+    # Well into the work (the scenario suite and the experiment both take far longer), past the imports
+    # even on a loaded machine, where starting the interpreter and MuJoCo takes longer too.
+    time.sleep(scaled_s(4.0))
     assert proc.poll() is None
     _, err = ctrl_c(proc)
     assert proc.returncode == 130
