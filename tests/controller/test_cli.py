@@ -5,17 +5,21 @@ from __future__ import annotations
 
 import importlib.metadata
 import os
+import select
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import can
 import pytest
 from c610_rigs import C610TrioServer
+from terminal import ctrl_c, start_in_own_group
 
 from controller.cli import can_bus_config, main, parse_args
 from controller.transport import SerialTransport
+from protocol.messages import Heartbeat, encode
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -268,3 +272,37 @@ def test_can_log_of_a_firmware_run_on_python_cans_virtual_bus(
     commands = [m for m in frames if m.arbitration_id == 0x200]
     assert len(commands) > 50 and all(not m.is_rx for m in commands)
     assert all(m.is_rx and m.channel == channel for m in frames if m.arbitration_id != 0x200)
+
+
+def test_spy_url_logs_the_firmwares_board_link(tmp_path: Path) -> None:
+    """``--link spy://PTY?file=LOG``: pyserial's spy handler logs what the firmware sends and receives."""
+    log = tmp_path / "link.txt"
+    master, slave = os.openpty()
+    proc = start_in_own_group(
+        "controller",
+        *("--can-interface", "fake", "--no-fifo", "--duration", "1.5"),
+        *("--link", f"spy://{os.ttyname(slave)}?file={log}"),
+    )
+    heartbeat = encode(Heartbeat(host_time_us=1, counter=1), seq=0)
+    received = b""
+    try:
+        deadline = time.monotonic() + 60.0
+        sent = False
+        while proc.poll() is None and time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 0.05)
+            if ready:
+                received += os.read(master, 65536)
+            if received and not sent:  # the port is open and raw: the host speaks
+                os.write(master, heartbeat)
+                sent = True
+        _, err = ctrl_c(proc) if proc.poll() is None else proc.communicate(timeout=60)
+    finally:
+        os.close(slave)
+        os.close(master)
+    assert proc.returncode == 0, err
+    assert sent and received.startswith(b"\xa5")
+    # pyserial's hex dump: "000001.234 TX   0010  A5 0C ... (16 bytes in two groups)  ASCII"
+    lines = log.read_text().splitlines()
+    tx = b"".join(bytes.fromhex(line[22:71]) for line in lines if line[11:13] == "TX")
+    rx = b"".join(bytes.fromhex(line[22:71]) for line in lines if line[11:13] == "RX")
+    assert tx.startswith(received[:64]) and rx == heartbeat
