@@ -2,27 +2,36 @@
 
 Examples::
 
-    python -m controller --can slcan:///dev/ttyACM0 --rc /dev/ttyUSB0 --link /dev/ttyGS0
-    python -m controller --can fake --link socket://127.0.0.1:5760 --duration 10
+    python -m controller --can-interface socketcan --can-channel can0 --rc /dev/ttyUSB0 --link /dev/ttyGS0
+    python -m controller --can-interface gs_usb --can-channel 0 --can-log run.blf --link /dev/ttyGS0
+    python -m controller --can-interface fake --link socket://127.0.0.1:5760 --duration 10
 
-``--can`` takes any python-can ``interface:channel`` (``slcan:///dev/ttyACM0``, ``socketcan:can0``,
-``virtual:bus0``) or ``fake`` (the in-process C610 trio). Without ``--rc`` the sticks come from the host's
-virtual RC frames over ``--link``. A missing or busy port is a one-line error and exit status 2.
+The CAN options are python-can's: ``--can-interface`` and ``--can-channel`` name the bus, ``--can-bitrate``
+(1 Mbit/s unless told otherwise) is passed to every interface, and what the flags leave open comes from
+python-can's configuration (``--can-config FILE``, else ``CAN_INTERFACE``/``CAN_CHANNEL``/``CAN_BITRATE``
+and ``~/.canrc``), as ``can.util.load_config`` reads it. ``--can-interface fake`` is the in-process C610
+trio. ``--can-log`` writes every frame through python-can's ``can.Logger`` (``.log`` candump, ``.blf``).
+Without ``--rc`` the sticks come from the host's virtual RC frames over ``--link``. A missing or busy port
+is a one-line error and exit status 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import configparser
 import json
 import logging
 import sys
 from collections.abc import Sequence
 from contextlib import ExitStack
+from pathlib import Path
+from typing import Any
 
 from controller.cli_kit import (
     EXIT_OK,
     EXIT_USAGE,
     Parser,
+    add_version,
     error_line,
     parse_or_exit,
     positive_duration,
@@ -32,26 +41,51 @@ from controller.clock import RealTimeClock
 from controller.config import FirmwareConfig
 from controller.errors import ConfigError, PortError
 from controller.firmware import Firmware
-from controller.motorbus import CanMotorBus, FakeMotorBus, MotorBus, parse_can_spec
+from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import SerialTransport, Transport
 
-__all__ = ["build_parser", "main", "parse_args"]
+__all__ = ["PROG", "SCRIPT_PROG", "build_parser", "can_bus_config", "main", "parse_args", "script_main"]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``python -m controller``."""
+PROG = "python -m controller"
+"""The program name in messages; the ``spirob-firmware`` console script runs the same parser as itself."""
+SCRIPT_PROG = "spirob-firmware"
+
+
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
+    """The argument parser of ``python -m controller`` (``prog``: the name it reports itself by)."""
     p = Parser(
-        prog="python -m controller",
+        prog=prog,
         description="SpiRob C-board firmware emulator: 1 kHz control of three C610/M2006 motors.",
     )
-    p.add_argument(
-        "--can",
-        required=True,
-        metavar="SPEC",
-        help="motor CAN bus: python-can interface:channel (slcan:///dev/ttyACM0, socketcan:can0, "
-        "virtual:bus0) or 'fake' (in-process C610 trio)",
+    add_version(p)
+    can = p.add_argument_group("motor CAN bus (python-can's options)")
+    can.add_argument(
+        "--can-interface",
+        metavar="NAME",
+        help="python-can interface (socketcan, gs_usb, slcan, pcan, virtual, ...) or 'fake' (the "
+        "in-process C610 trio); default: python-can's configuration",
     )
+    can.add_argument("--can-channel", metavar="CH", help="python-can channel (can0, 0, /dev/ttyACM0, ...)")
+    can.add_argument(
+        "--can-bitrate",
+        type=_bitrate,
+        metavar="BPS",
+        help=f"bit rate passed to every interface (default: the configuration's, else {CAN_BITRATE})",
+    )
+    can.add_argument(
+        "--can-config",
+        metavar="FILE",
+        help="python-can configuration file ([default] section; default: ~/.canrc and friends)",
+    )
+    can.add_argument(
+        "--can-log",
+        metavar="FILE",
+        help="log every CAN frame through python-can's logger: FILE.log (candump) or FILE.blf",
+    )
+    # The private ``--can interface:channel`` of earlier versions: refused with the flags that replace it.
+    p.add_argument("--can", help=argparse.SUPPRESS)
     p.add_argument("--rc", metavar="PORT", help="DR16 DBUS UART (100000 8E1), e.g. /dev/ttyUSB0")
     p.add_argument("--link", metavar="PORT", help="host link: device path or pyserial URL (socket://...)")
     p.add_argument("--require-host", action="store_true", help="zero current when the host heartbeat stops")
@@ -64,10 +98,17 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+def parse_args(argv: Sequence[str] | None = None, prog: str = PROG) -> argparse.Namespace:
     """Parse ``argv`` (default ``sys.argv[1:]``); a usage error is one line on stderr and exit status 2."""
-    parser = build_parser()
+    parser = build_parser(prog)
     args = parse_or_exit(parser, argv)
+    if args.can is not None:
+        error_line(
+            parser.prog,
+            "--can is gone: use --can-interface and --can-channel (python-can's names, e.g. "
+            "--can-interface slcan --can-channel /dev/ttyACM0), or --can-interface fake",
+        )
+        raise SystemExit(EXIT_USAGE)
     if args.rc is None and args.link is None:
         error_line(parser.prog, "give --rc (DBUS UART) or --link (virtual RC from the host), or both")
         raise SystemExit(EXIT_USAGE)
@@ -90,26 +131,88 @@ def _load_config(args: argparse.Namespace) -> FirmwareConfig:
     return FirmwareConfig.from_dict(values)
 
 
-def _open_bus(spec: str) -> MotorBus:
-    if spec == "fake":
-        return FakeMotorBus()
+def _bitrate(text: str) -> int:
+    """A ``--can-bitrate``: a whole number of bit/s > 0."""
     try:
-        interface, channel = parse_can_spec(spec)
-    except ValueError as exc:
-        raise PortError(str(exc)) from exc
-    return CanMotorBus(channel, interface)
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number of bit/s, got {text!r}") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def can_bus_config(args: argparse.Namespace) -> dict[str, Any]:
+    """The python-can bus configuration of a command line, as ``can.Bus`` would resolve it.
+
+    The flags win; what they leave open comes from ``--can-config`` (or, without it, python-can's own
+    sources: ``CAN_INTERFACE``/``CAN_CHANNEL``/``CAN_BITRATE``/``CAN_CONFIG`` and ``~/.canrc``); the bit
+    rate falls back to the C610's 1 Mbit/s, never to python-can's 500 kbit/s.
+
+    Raises:
+        PortError: no interface or channel anywhere, an unknown interface, a config file that cannot
+            be read or holds a bad value.
+    """
+    import can
+
+    given: dict[str, Any] = {}
+    if args.can_interface is not None:
+        given["interface"] = args.can_interface
+    if args.can_channel is not None:
+        given["channel"] = args.can_channel
+    if args.can_bitrate is not None:
+        given["bitrate"] = args.can_bitrate
+    if args.can_config is not None and not Path(args.can_config).is_file():
+        raise PortError(f"cannot read CAN config {args.can_config}: no such file")
+    try:
+        config = dict(can.util.load_config(path=args.can_config, config=given))
+    except can.CanInterfaceNotImplementedError as exc:
+        # python-can reports a missing interface as the unknown interface "None": say what is missing.
+        sources = (
+            given,
+            can.rc,
+            can.util.load_environment_config(),
+            can.util.load_file_config(args.can_config),
+        )
+        if not any(src.get("interface") or src.get("bustype") for src in sources):
+            raise PortError(
+                "no CAN interface: give --can-interface (or set it in python-can's config)"
+            ) from exc
+        raise PortError(f"CAN configuration: {exc}") from exc
+    except (ValueError, TypeError, configparser.Error) as exc:
+        raise PortError(f"CAN configuration: {exc}") from exc
+    if config.get("channel") is None:
+        raise PortError(f"no CAN channel for {config['interface']}: give --can-channel")
+    if config.get("bitrate") is None:
+        config["bitrate"] = CAN_BITRATE
+    return config
+
+
+def _open_bus(args: argparse.Namespace) -> MotorBus:
+    if args.can_interface == "fake":
+        if args.can_log is not None:
+            raise PortError("--can-log needs a python-can interface: the fake trio has no CAN frames")
+        return FakeMotorBus()
+    config = can_bus_config(args)
+    if config["bitrate"] != CAN_BITRATE:
+        logging.getLogger(__name__).warning(
+            "CAN bit rate %s: C610s talk at %s only", config["bitrate"], CAN_BITRATE
+        )
+    interface, channel = config.pop("interface"), config.pop("channel")
+    # Resolved above already: python-can must not merge its config files in a second time.
+    return CanMotorBus(str(channel), str(interface), log_file=args.can_log, ignore_config=True, **config)
+
+
+def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     """Run the firmware until ``--duration`` elapses or SIGINT/SIGTERM; return the exit status."""
-    args = parse_args(argv)
+    args = parse_args(argv, prog)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
     try:
         config = _load_config(args)
         with ExitStack() as stack:
-            bus = _open_bus(args.can)
+            bus = _open_bus(args)
             stack.callback(bus.shutdown)
             link: Transport | None = None
             if args.link:
@@ -132,3 +235,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         error_line(None, str(exc))
         return EXIT_USAGE
     return EXIT_OK
+
+
+def script_main() -> int:
+    """Entry point of the ``spirob-firmware`` console script: :func:`main` under that name."""
+    return main(prog=SCRIPT_PROG)

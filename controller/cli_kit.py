@@ -7,6 +7,8 @@
   :data:`EXIT_INTERRUPTED` (Ctrl-C during a batch job, as a shell reports SIGINT: 128 + 2).
 - Long-running servers stop cleanly on Ctrl-C and SIGTERM (:func:`stop_on_signals`); batch commands turn
   Ctrl-C into one ``interrupted`` line and status 130 (:func:`run_command`).
+- Every command line answers ``--version`` with ``PROG VERSION``, the installed package's version
+  (:func:`add_version`).
 - The argument types check their value once, with the same wording everywhere (:func:`positive_duration`,
   :func:`seed`, :func:`port_number`).
 
@@ -17,6 +19,7 @@ This module sits in ``controller`` (the lowest package with a command line), so 
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import math
 import signal
 import sys
@@ -35,8 +38,10 @@ __all__ = [
     "MAX_DURATION_S",
     "Parser",
     "UsageError",
+    "add_version",
     "error_line",
     "finite_float",
+    "package_version",
     "parse_or_exit",
     "port_number",
     "positive_duration",
@@ -46,6 +51,9 @@ __all__ = [
     "writable_dir",
     "writable_file",
 ]
+
+DISTRIBUTION = "spirob-teleop"
+"""The installed distribution whose version ``--version`` prints."""
 
 EXIT_OK = 0
 EXIT_FAILURE = 1
@@ -78,6 +86,20 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         """Raise :class:`UsageError` instead of printing the usage and exiting."""
         raise UsageError(message, self.prog)
+
+
+def package_version() -> str:
+    """The installed ``spirob-teleop`` version (``importlib.metadata``); ``unknown`` in a bare checkout."""
+    try:
+        return importlib.metadata.version(DISTRIBUTION)
+    except importlib.metadata.PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown"
+
+
+def add_version(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Give ``parser`` a ``--version`` flag that prints ``PROG VERSION`` and exits 0; returns ``parser``."""
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
+    return parser
 
 
 def error_line(prog: str | None, message: str, file: TextIO | None = None) -> None:

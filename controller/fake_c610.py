@@ -6,8 +6,8 @@ is taken as ideal (measured current = command), the output shaft integrates
 carry the wrapped rotor angle (8192 counts per rotor turn, 36 rotor turns per output turn), the rotor
 speed in rpm and the current, byte for byte as ``protocol.c610`` defines them.
 
-It is stepped synchronously by :class:`~controller.motorbus.FakeMotorBus` (``python -m controller --can
-fake``) or directly with :meth:`FakeC610Trio.step`.
+It is stepped synchronously by :class:`~controller.motorbus.FakeMotorBus` (``python -m controller
+--can-interface fake``) or directly with :meth:`FakeC610Trio.step`.
 """
 
 from __future__ import annotations

@@ -7,8 +7,9 @@ errors — over two tiny private hooks that a back end implements:
   ``OSError`` on failure; the caller counts it).
 - ``_recv_frames() -> list[(can_id, data)]``: every frame received since the last call, never blocking.
 
-Back ends: :class:`CanMotorBus` (any python-can bus: ``slcan`` over a serial port such as /dev/ttyACM0
-for USB-CAN adapters, ``socketcan``, ``virtual``; python-can's ``interface`` name picks the driver) and
+Back ends: :class:`CanMotorBus` (any python-can bus: ``socketcan`` (``can0``), ``gs_usb`` (candleLight),
+``slcan`` over a serial port such as /dev/ttyACM0, ``virtual``; python-can's ``interface`` name picks the
+driver; 1 Mbit/s, receive filters for the feedback ids, an optional ``can.Logger`` of every frame) and
 :class:`FakeMotorBus` (an in-process C610 trio, no threads). The simulated back end lives in ``hil``
 (``hil.drives.SimMotorBus``), which builds it around its plant.
 
@@ -18,6 +19,8 @@ answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``). CAN bus at 1 Mbit/s
 
 from __future__ import annotations
 
+import os
+import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from types import TracebackType
@@ -42,7 +45,7 @@ __all__ = [
     "CanMotorBus",
     "FakeMotorBus",
     "MotorBus",
-    "parse_can_spec",
+    "feedback_filters",
 ]
 
 CAN_BITRATE = 1_000_000
@@ -203,28 +206,29 @@ class MotorBus(ABC):
         """Back end: release resources (called once)."""
 
 
-def parse_can_spec(spec: str) -> tuple[str, str]:
-    """Split ``interface:channel`` (``slcan:///dev/ttyACM0``, ``virtual:bus0``, ``socketcan:can0``).
+def feedback_filters(motor_count: int = 3) -> list[dict[str, int | bool]]:
+    """python-can ``can_filters`` that pass only the feedback of motors 1..``motor_count`` (0x201-0x203).
 
-    A leading ``//`` after the colon is dropped, so URL-style specs work. Without a colon the spec is a
-    serial device for ``slcan``.
-
-    Raises:
-        ValueError: empty interface or channel.
+    Interfaces that filter in the kernel or the adapter (SocketCAN, PCAN, Kvaser, ...) then never wake
+    the control loop for other traffic; the others (slcan, gs_usb, virtual) filter inside python-can,
+    before :meth:`MotorBus.read_feedback` sees a frame.
     """
-    if ":" not in spec:
-        interface, channel = "slcan", spec
-    else:
-        interface, channel = spec.split(":", 1)
-        if channel.startswith("//"):
-            channel = channel[2:]
-    if not interface or not channel:
-        raise ValueError(f"CAN spec must be interface:channel, got {spec!r}")
-    return interface, channel
+    return [
+        {"can_id": FEEDBACK_ID_BASE + motor, "can_mask": 0x7FF, "extended": False}
+        for motor in range(1, motor_count + 1)
+    ]
 
 
 class CanMotorBus(MotorBus):
-    """The motors on any python-can bus (``slcan`` USB-CAN adapter, ``socketcan``, ``virtual``)."""
+    """The motors on any python-can bus (``socketcan``, ``gs_usb``, ``slcan``, ``pcan``, ``virtual``, ...).
+
+    Attributes:
+        bus: the python-can bus.
+        feedback_timestamps_s: python-can's receive timestamp (the driver's or the adapter's, in
+            seconds) of the latest feedback frame of each motor, 0.0 before the first.
+        log_file: where every frame sent and received is logged (None: not logged).
+        log_errors: frames the log file failed to take (a full disk); the bus keeps going.
+    """
 
     def __init__(
         self,
@@ -233,23 +237,29 @@ class CanMotorBus(MotorBus):
         *,
         bus: Any = None,
         bitrate: int = CAN_BITRATE,
+        log_file: str | os.PathLike[str] | None = None,
         send_timeout_s: float = 0.001,
         current_limit_raw: int = CURRENT_RAW_MAX,
         **kwargs: Any,
     ) -> None:
         """Open a python-can bus, or wrap one (``bus=``, then owned: shut down with this object).
 
+        An opened bus gets ``bitrate`` (whatever the interface: python-can's own default is 500 kbit/s,
+        at which a C610 is never heard) and the :func:`feedback_filters` as its ``can_filters``.
+
         Args:
-            channel: python-can channel (``/dev/ttyACM0`` for slcan, ``can0``, any name for virtual).
-            interface: python-can interface name (``slcan``, ``socketcan``, ``virtual``, ...).
-            bus: an open ``can.BusABC`` to use instead of opening one.
-            bitrate: CAN bitrate (slcan sets it on the adapter; virtual ignores it).
+            channel: python-can channel (``can0``, ``/dev/ttyACM0`` for slcan, any name for virtual).
+            interface: python-can interface name (``socketcan``, ``gs_usb``, ``slcan``, ``virtual``, ...).
+            bus: an open ``can.BusABC`` to use instead of opening one (its filters are left as they are).
+            bitrate: CAN bitrate in bit/s (SocketCAN ignores it: the kernel's ``ip link`` sets it).
+            log_file: log every frame, with its timestamp, through python-can's ``can.Logger``: the
+                suffix picks the format (``.log`` candump, ``.blf`` Vector BLF, ``.asc``, ``.csv``).
             send_timeout_s: longest a send may wait for room in the adapter's queue.
             current_limit_raw: see :class:`MotorBus`.
             **kwargs: passed to ``can.Bus`` (e.g. ``sleep_after_open=0`` for slcan on a pty).
 
         Raises:
-            PortError: the channel cannot be opened.
+            PortError: the channel cannot be opened, or the log file cannot be written.
         """
         super().__init__(current_limit_raw=current_limit_raw)
         import can
@@ -258,28 +268,61 @@ class CanMotorBus(MotorBus):
         if bus is None:
             if channel is None or interface is None:
                 raise ValueError("give channel and interface, or bus")
-            if interface == "slcan":
-                kwargs.setdefault("bitrate", bitrate)
+            kwargs.setdefault("bitrate", bitrate)
+            kwargs.setdefault("can_filters", feedback_filters(self.motor_count))
             try:
                 bus = can.Bus(channel=channel, interface=interface, **kwargs)
             except (can.CanError, OSError, ValueError, ImportError) as exc:
-                raise PortError(f"cannot open CAN {interface}:{channel}: {exc}") from exc
+                raise PortError(f"cannot open CAN {interface} channel {channel}: {exc}") from exc
         self.bus = bus
         self.send_timeout_s = send_timeout_s
-        self._rx: list[tuple[int, bytes]] = []
+        self.feedback_timestamps_s = [0.0] * self.motor_count
+        self.log_file = log_file
+        self.log_errors = 0
+        self._logger: Any = None
+        if log_file is not None:
+            try:
+                self._logger = can.Logger(log_file)
+            except (OSError, ValueError, ImportError) as exc:
+                bus.shutdown()
+                raise PortError(f"cannot log CAN frames to {log_file}: {exc}") from exc
+        # One command message, refilled every tick (the drivers copy or serialize it in send()).
+        self._command = can.Message(
+            arbitration_id=COMMAND_ID_LOW,
+            data=bytes(8),
+            is_extended_id=False,
+            is_rx=False,
+            channel=channel,
+        )
 
     def _send_frame(self, can_id: int, data: bytes) -> None:
         can = self._can
-        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
+        msg = self._command
+        msg.arbitration_id = can_id
+        msg.data[:] = data
+        msg.dlc = len(data)
+        msg.timestamp = time.time()
         try:
             self.bus.send(msg, timeout=self.send_timeout_s)
         except can.CanError as exc:
             raise BusError(str(exc)) from exc
+        if self._logger is not None:
+            self._log(msg)
+
+    def _log(self, msg: Any) -> None:
+        """Hand ``msg`` to the logger; a failing log file is counted, never taken for a bus failure."""
+        try:
+            self._logger.on_message_received(msg)
+        except (OSError, ValueError):
+            self.log_errors += 1
 
     def _recv_frames(self) -> list[tuple[int, bytes]]:
         can = self._can
         out: list[tuple[int, bytes]] = []
         recv = self.bus.recv
+        logger = self._logger is not None
+        stamps = self.feedback_timestamps_s
+        n = self.motor_count
         for _ in range(_RECV_BURST_MAX):
             try:
                 msg = recv(timeout=0)
@@ -287,12 +330,18 @@ class CanMotorBus(MotorBus):
                 raise BusError(str(exc)) from exc
             if msg is None:
                 break
+            if logger:
+                self._log(msg)
             if msg.is_error_frame:
                 self.can_errors += 1
             elif msg.is_extended_id or msg.is_remote_frame:
                 self.frames_ignored += 1
             else:
-                out.append((msg.arbitration_id, bytes(msg.data)))
+                can_id = msg.arbitration_id
+                motor = can_id - FEEDBACK_ID_BASE
+                if 1 <= motor <= n:
+                    stamps[motor - 1] = msg.timestamp
+                out.append((can_id, bytes(msg.data)))
         return out
 
     def _shutdown_backend(self) -> None:
@@ -300,6 +349,11 @@ class CanMotorBus(MotorBus):
             self.bus.shutdown()
         except (self._can.CanError, OSError):
             self.can_errors += 1
+        if self._logger is not None:
+            try:
+                self._logger.stop()
+            except OSError:
+                self.can_errors += 1
 
 
 class FakeMotorBus(MotorBus):

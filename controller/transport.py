@@ -5,16 +5,20 @@ and sends as much as the peer accepts now; the rest goes out on later calls. Whe
 would exceed its capacity the *new* frame is dropped whole and counted (a stalled host loses telemetry,
 never stalls the loop, and the byte stream never carries half a frame).
 
-Why the serial transport writes with ``os.write`` on the port's file descriptor: pyserial's
-``write()`` with ``write_timeout=0`` spins forever on EAGAIN when the peer stops reading (its retry
-loop only gives up on a timeout, which a zero timeout never reaches), and with a positive timeout it
-raises without saying how many bytes went out. The descriptors pyserial opens (tty, pty, socket://)
-are already non-blocking, so ``os.write`` returns a partial count or raises ``BlockingIOError``.
+The serial transport goes through pyserial's own API (``in_waiting``, ``read``, ``write``), so every
+URL handler pyserial knows works on the board link: ``spy://`` logs the traffic, ``socket://`` and
+``hwgrep://`` open what they name. The port is opened with ``timeout=0`` and ``write_timeout=0``:
+``read`` returns what one non-blocking read got, ``write`` returns how many bytes the descriptor took.
+One trap remains: pyserial's zero-timeout ``write`` retries for ever on ``EAGAIN`` (its loop only gives
+up on a timeout, which a zero timeout never reaches). So a port with a descriptor is first asked, with a
+zero-timeout ``select``, whether it takes bytes now; a pty or socket that says so accepts at least one
+byte, and a stalled peer costs one ``select`` per flush, never a spin.
 """
 
 from __future__ import annotations
 
 import os
+import select
 import threading
 from abc import ABC, abstractmethod
 from types import TracebackType
@@ -26,6 +30,8 @@ __all__ = ["MemoryTransport", "SerialTransport", "Transport", "set_tcp_nodelay"]
 
 DEFAULT_TX_CAPACITY = 64 * 1024
 """Bytes queued for a slow peer before new frames are dropped (about 0.4 s of 100 Hz telemetry)."""
+_READ_CHUNK_N = 65536
+"""Most bytes one ``read`` takes from a serial port (one non-blocking read of the descriptor)."""
 
 
 class Transport(ABC):
@@ -192,6 +198,7 @@ class SerialTransport(Transport):
             self._fd = None
             self._serial.write_timeout = None
         else:
+            self._serial.write_timeout = 0
             set_tcp_nodelay(self._fd)
 
     @property
@@ -200,26 +207,25 @@ class SerialTransport(Transport):
         return self._serial
 
     def _read(self) -> bytes:
-        fd = self._fd
-        if fd is None:
-            n = self._serial.in_waiting
-            return bytes(self._serial.read(n)) if n else b""
-        try:
-            return os.read(fd, 65536)
-        except BlockingIOError:
+        ser = self._serial
+        # in_waiting is an ioctl on a tty (a zero-timeout select on socket://, where it reports 0 or 1):
+        # an idle port costs no read call, and a ready one is read in one go up to _READ_CHUNK_N.
+        n = ser.in_waiting
+        if not n:
             return b""
+        return bytes(ser.read(max(n, _READ_CHUNK_N)))
 
     def _write(self, data: bytearray) -> int:
+        ser = self._serial
         fd = self._fd
         if fd is None:
-            ser = self._serial
             room = getattr(ser, "buffer_size", 4096) - ser.out_waiting  # loop://: never block on a full queue
             n = min(len(data), room)
             return int(ser.write(bytes(data[:n])) or 0) if n > 0 else 0
-        try:
-            return os.write(fd, data)
-        except BlockingIOError:
+        _, ready, _ = select.select((), (fd,), (), 0)
+        if not ready:
             return 0
+        return int(ser.write(data) or 0)
 
     def _close(self) -> None:
         try:

@@ -4,8 +4,8 @@ Shows the start-up gate, MANUAL curl and bend from the sticks, the RC-lost fails
 after the last valid frame), and the telemetry a host receives. Runs in well under a second, no
 hardware: ``python examples/02_firmware_fake_bus.py``.
 
-The same ``Firmware`` runs on hardware with ``python -m controller --can slcan:///dev/ttyACM0 --rc
-/dev/ttyUSB0 --link /dev/ttyGS0``; only the bus, the RC source and the clock change.
+The same ``Firmware`` runs on hardware with ``spirob-firmware --can-interface socketcan --can-channel can0
+--rc /dev/ttyUSB0 --link /dev/ttyGS0``; only the bus, the RC source and the clock change.
 """
 
 from __future__ import annotations

@@ -26,6 +26,7 @@ from controller.cli_kit import (
     EXIT_OK,
     Parser,
     UsageError,
+    add_version,
     finite_float,
     positive_duration,
     run_command,
@@ -557,6 +558,7 @@ COMMANDS: list[Command] = [
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``spirob-hil`` with every subcommand in :data:`COMMANDS`."""
     parser = Parser(prog=PROG, description="SpiRob hardware-in-the-loop: design math, plant model, harness.")
+    add_version(parser)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
     for cmd in COMMANDS:
         p = sub.add_parser(cmd.name, help=cmd.help, description=cmd.help)

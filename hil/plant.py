@@ -583,7 +583,8 @@ class Plant:
         if self._ball:
             # Bending towards the cable at azimuth ψ: rotate about the axis (−sin ψ, cos ψ, 0)·(−1).
             axis = np.array([math.sin(psi), -math.cos(psi), 0.0])
-            quat = np.concatenate([[math.cos(dtheta / 2)], math.sin(dtheta / 2) * axis])
+            quat = np.empty(4)
+            mujoco.mju_axisAngle2Quat(quat, axis, dtheta)
             for adr in self._arm_qadr:
                 d.qpos[adr : adr + 4] = quat
         else:

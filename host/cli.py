@@ -19,6 +19,7 @@ from controller.cli_kit import (
     EXIT_FAILURE,
     EXIT_OK,
     EXIT_USAGE,
+    add_version,
     error_line,
     parse_or_exit,
     stop_on_signals,
@@ -34,7 +35,7 @@ _log = logging.getLogger("spirob-host")
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `spirob-host`; returns the exit status (0 ok, 1 runtime failure, 2 start-up error)."""
-    ns = parse_or_exit(build_parser(), argv, hint=" (see --help)")
+    ns = parse_or_exit(add_version(build_parser()), argv, hint=" (see --help)")
     # Shorter GIL hand-offs keep the panel's push loop and the link dispatcher responsive while the
     # viser server and numpy work run in other threads (default 5 ms).
     sys.setswitchinterval(0.001)

@@ -25,10 +25,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import mujoco
 import numpy as np
 import numpy.typing as npt
 import trimesh
 import viser
+import viser.transforms as vtf
 
 __all__ = [
     "ArmGeometry",
@@ -148,37 +150,18 @@ class ArmGeometry:
         )
 
 
-# ---------------------------------------------------------------------- quaternion helpers (w, x, y, z)
+# ---------------------------------------------------------------------- quaternions (w, x, y, z)
+# viser.transforms does the quaternion algebra on batches; MuJoCo's mju_quatZ2Vec the z-to-axis alignment.
 
 
 def quat_mul(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Hamilton product of (..., 4) quaternion arrays."""
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        (
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ),
-        axis=-1,
-    )
-
-
-def quat_conj(q: FloatArray) -> FloatArray:
-    """Conjugate (inverse of a unit quaternion)."""
-    out: FloatArray = q * np.array([1.0, -1.0, -1.0, -1.0])
-    return out
+    """Hamilton product of (..., 4) quaternion arrays (``viser.transforms.SO3`` composition)."""
+    return np.asarray((vtf.SO3(wxyz=a) @ vtf.SO3(wxyz=b)).wxyz, dtype=np.float64)
 
 
 def quat_rotate(q: FloatArray, v: FloatArray) -> FloatArray:
-    """Rotate (..., 3) vectors by (..., 4) unit quaternions."""
-    w = q[..., :1]
-    u = q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    out: FloatArray = v + w * t + np.cross(u, t)
-    return out
+    """Rotate (..., 3) vectors by (..., 4) unit quaternions (``viser.transforms.SO3.apply``)."""
+    return np.asarray(vtf.SO3(wxyz=q).apply(v), dtype=np.float64)
 
 
 def _normalize(v: FloatArray, fallback: Sequence[float]) -> FloatArray:
@@ -189,15 +172,11 @@ def _normalize(v: FloatArray, fallback: Sequence[float]) -> FloatArray:
 
 
 def _align_z_to(axis: FloatArray) -> FloatArray:
-    """Quaternions rotating +z onto each unit vector of ``axis`` (N, 3)."""
-    z = np.array([0.0, 0.0, 1.0])
-    d = np.clip(axis @ z, -1.0, 1.0)
-    c = np.cross(np.broadcast_to(z, axis.shape), axis)
-    q = np.concatenate((1.0 + d[:, None], c), axis=1)
-    # Antiparallel: 180° about x.
-    anti = d < -1.0 + 1e-9
-    q[anti] = np.array([0.0, 1.0, 0.0, 0.0])
-    out: FloatArray = _normalize(q, (1.0, 0.0, 0.0, 0.0))
+    """Quaternions rotating +z onto each vector of ``axis`` (N, 3): MuJoCo's ``mju_quatZ2Vec`` (identity
+    for a zero vector, 180° about x for -z)."""
+    out = np.empty((len(axis), 4))
+    for i, vec in enumerate(np.ascontiguousarray(axis, dtype=np.float64)):
+        mujoco.mju_quatZ2Vec(out[i], vec)
     return out
 
 
@@ -268,7 +247,7 @@ def arm_drawing(positions: FloatArray, quats: FloatArray, geom: ArmGeometry) -> 
     if n > 1:
         delta = p[1:] - p[:-1]
         dist = np.linalg.norm(delta, axis=1)
-        local = quat_rotate(quat_conj(q[:-1]), delta)
+        local = np.asarray(vtf.SO3(wxyz=q[:-1]).inverse().apply(delta), dtype=np.float64)
         axis_local[:-1] = _normalize(local, (0.0, 0.0, -1.0))
         axis_local[-1] = axis_local[-2]
         good = dist > 1e-6
@@ -459,7 +438,7 @@ def _reroot(positions: FloatArray, quats: FloatArray, drone: DronePose) -> tuple
     """Move all bodies rigidly so body 0 lands on ``drone``."""
     q_new = np.asarray(drone.wxyz, dtype=np.float64)
     q_new = q_new / max(float(np.linalg.norm(q_new)), 1e-12)
-    q_rel = quat_mul(q_new, quat_conj(quats[0]))
+    q_rel = (vtf.SO3(wxyz=q_new) @ vtf.SO3(wxyz=quats[0]).inverse()).wxyz
     rel = positions - positions[0]
     pos = np.asarray(drone.position_m, dtype=np.float64) + quat_rotate(
         np.broadcast_to(q_rel, (len(rel), 4)), rel

@@ -1,38 +1,63 @@
-"""``python -m controller``: argument handling, one-line errors with exit 2, a short real run."""
+"""``python -m controller``: argument handling, python-can's CAN options and configuration, one-line
+errors with exit 2, ``--version``, a short real run."""
 
 from __future__ import annotations
 
+import importlib.metadata
 import os
+import select
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import can
 import pytest
+from c610_rigs import C610TrioServer
+from terminal import ctrl_c, start_in_own_group
 
-from controller.cli import main, parse_args
+from controller.cli import can_bus_config, main, parse_args
 from controller.transport import SerialTransport
+from protocol.messages import Heartbeat, encode
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_parse_args() -> None:
-    args = parse_args(["--can", "slcan:///dev/ttyACM0", "--rc", "/dev/ttyUSB0", "--require-host"])
-    assert (args.can, args.rc, args.link, args.require_host) == (
-        "slcan:///dev/ttyACM0",
+    args = parse_args(
+        [
+            "--can-interface",
+            "slcan",
+            "--can-channel",
+            "/dev/ttyACM0",
+            "--rc",
+            "/dev/ttyUSB0",
+            "--require-host",
+        ]
+    )
+    assert (
+        args.can_interface,
+        args.can_channel,
+        args.can_bitrate,
+        args.rc,
+        args.link,
+        args.require_host,
+    ) == (
+        "slcan",
+        "/dev/ttyACM0",
+        None,
         "/dev/ttyUSB0",
         None,
         True,
     )
     with pytest.raises(SystemExit) as exc:
-        parse_args(["--can", "fake"])  # no RC source at all
+        parse_args(["--can-interface", "fake"])  # no RC source at all
     assert exc.value.code == 2
-    with pytest.raises(SystemExit):
-        parse_args(["--rc", "/dev/ttyUSB0"])  # --can is required
 
 
 def test_missing_port_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["--can", "fake", "--rc", "/dev/ttyDOESNOTEXIST"]) == 2
+    assert main(["--can-interface", "fake", "--rc", "/dev/ttyDOESNOTEXIST"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1 and "ttyDOESNOTEXIST" in err
 
@@ -49,7 +74,7 @@ def pty_path() -> Iterator[str]:
 
 def test_busy_port_is_one_line_and_exit_2(pty_path: str, capsys: pytest.CaptureFixture[str]) -> None:
     with SerialTransport(pty_path):
-        assert main(["--can", "fake", "--link", pty_path]) == 2
+        assert main(["--can-interface", "fake", "--link", pty_path]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1
 
@@ -57,7 +82,7 @@ def test_busy_port_is_one_line_and_exit_2(pty_path: str, capsys: pytest.CaptureF
 def test_bad_config_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cfg = tmp_path / "fw.json"
     cfg.write_text('{"current_limit_a": 42}')
-    assert main(["--can", "fake", "--link", "loop://", "--config", str(cfg)]) == 2
+    assert main(["--can-interface", "fake", "--link", "loop://", "--config", str(cfg)]) == 2
     assert "current_limit_a" in capsys.readouterr().err
 
 
@@ -65,19 +90,32 @@ def test_bad_config_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     ("argv", "needle"),
     [
         (
-            ["--can", "fake", "--link", "loop://", "--duration", "nan"],
+            ["--can-interface", "fake", "--link", "loop://", "--duration", "nan"],
             "--duration: must be a finite number > 0",
         ),
         (
-            ["--can", "fake", "--link", "loop://", "--duration", "inf"],
+            ["--can-interface", "fake", "--link", "loop://", "--duration", "inf"],
             "--duration: must be a finite number > 0",
         ),
-        (["--can", "fake", "--link", "loop://", "--duration", "1e303"], "--duration: must be at most"),
-        (["--can", "fake", "--link", "loop://", "--duration", "x"], "--duration: not a number"),
-        (["--can", "fake"], "give --rc (DBUS UART) or --link"),
-        ([], "required: --can"),
-        (["--can"], "--can: expected one argument"),
-        (["--can", "fake", "--link", "loop://", "--bogus"], "unrecognized arguments: --bogus"),
+        (
+            ["--can-interface", "fake", "--link", "loop://", "--duration", "1e303"],
+            "--duration: must be at most",
+        ),
+        (["--can-interface", "fake", "--link", "loop://", "--duration", "x"], "--duration: not a number"),
+        (["--can-interface", "fake"], "give --rc (DBUS UART) or --link"),
+        (
+            ["--can", "slcan:///dev/ttyACM0", "--link", "loop://"],
+            "--can is gone: use --can-interface and --can-channel",
+        ),
+        (
+            ["--can-interface", "fake", "--link", "loop://", "--can-bitrate", "1M"],
+            "--can-bitrate: must be a whole",
+        ),
+        (
+            ["--can-interface", "fake", "--link", "loop://", "--can-bitrate", "0"],
+            "--can-bitrate: must be > 0",
+        ),
+        (["--can-interface", "fake", "--link", "loop://", "--bogus"], "unrecognized arguments: --bogus"),
     ],
 )
 def test_usage_errors_are_one_line_and_exit_2(
@@ -91,13 +129,23 @@ def test_usage_errors_are_one_line_and_exit_2(
 
 
 def test_short_run_with_the_fake_bus(pty_path: str, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["--can", "fake", "--link", pty_path, "--duration", "0.2", "--no-fifo"]) == 0
+    assert main(["--can-interface", "fake", "--link", pty_path, "--duration", "0.2", "--no-fifo"]) == 0
     assert "stopped: phase GATE" in capsys.readouterr().err
 
 
 def test_module_entry_no_traceback() -> None:
     proc = subprocess.run(
-        [sys.executable, "-m", "controller", "--can", "slcan:///dev/ttyDOESNOTEXIST", "--link", "loop://"],
+        [
+            sys.executable,
+            "-m",
+            "controller",
+            "--can-interface",
+            "slcan",
+            "--can-channel",
+            "/dev/ttyDOESNOTEXIST",
+            "--link",
+            "loop://",
+        ],
         cwd=ROOT,
         capture_output=True,
         text=True,
@@ -107,3 +155,154 @@ def test_module_entry_no_traceback() -> None:
     assert proc.returncode == 2
     assert proc.stderr.startswith("error: cannot open CAN") and "Traceback" not in proc.stderr
     assert proc.stderr.count("\n") == 1
+
+
+def test_version_prints_prog_and_the_installed_version(capsys: pytest.CaptureFixture[str]) -> None:
+    for prog in ("python -m controller", "spirob-firmware"):
+        with pytest.raises(SystemExit) as exc:
+            main(["--version"], prog=prog)
+        assert exc.value.code == 0
+        assert capsys.readouterr().out == f"{prog} {importlib.metadata.version('spirob-teleop')}\n"
+
+
+@pytest.fixture
+def no_can_config(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> Path:
+    """No python-can configuration from this machine: an empty home, no CAN_* variables."""
+    for name in ("CAN_INTERFACE", "CAN_CHANNEL", "CAN_BITRATE", "CAN_CONFIG"):
+        monkeypatch.delenv(name, raising=False)
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    return home
+
+
+def test_can_options_default_to_1_mbit_on_every_interface(no_can_config: Path) -> None:
+    for interface in ("gs_usb", "socketcan", "pcan", "virtual"):
+        args = parse_args(["--can-interface", interface, "--can-channel", "0", "--link", "loop://"])
+        config = can_bus_config(args)
+        assert (config["interface"], config["channel"], config["bitrate"]) == (interface, 0, 1_000_000)
+    args = parse_args(
+        ["--can-interface", "gs_usb", "--can-channel", "0", "--can-bitrate", "500000", "--link", "x"]
+    )
+    assert can_bus_config(args)["bitrate"] == 500_000
+
+
+def test_can_config_file_environment_and_flags(
+    no_can_config: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    conf = tmp_path / "can.ini"
+    conf.write_text("[default]\ninterface = socketcan\nchannel = can1\nreceive_own_messages = False\n")
+    args = parse_args(["--can-config", str(conf), "--link", "loop://"])
+    config = can_bus_config(args)
+    assert config["interface"] == "socketcan" and config["channel"] == "can1"
+    assert config["bitrate"] == 1_000_000 and config["receive_own_messages"] is False
+    # the flags win over the file
+    args = parse_args(["--can-config", str(conf), "--can-channel", "can0", "--link", "loop://"])
+    assert can_bus_config(args)["channel"] == "can0"
+    # python-can's own sources when no file is named: ~/.canrc, then the environment above it
+    (no_can_config / ".canrc").write_text(
+        "[default]\ninterface = slcan\nchannel = /dev/ttyACM0\nbitrate = 250000\n"
+    )
+    config = can_bus_config(parse_args(["--link", "loop://"]))
+    assert (config["interface"], config["channel"], config["bitrate"]) == ("slcan", "/dev/ttyACM0", 250_000)
+    monkeypatch.setenv("CAN_CHANNEL", "/dev/ttyACM1")
+    assert can_bus_config(parse_args(["--link", "loop://"]))["channel"] == "/dev/ttyACM1"
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["--link", "loop://"], "error: no CAN interface: give --can-interface"),
+        (["--can-interface", "socketcan", "--link", "loop://"], "error: no CAN channel for socketcan"),
+        (["--can-interface", "nosuchcan", "--can-channel", "0", "--link", "loop://"], "Unknown interface"),
+        (["--can-config", "/nonexistent/can.ini", "--link", "loop://"], "cannot read CAN config"),
+        (
+            ["--can-interface", "fake", "--can-log", "x.log", "--link", "loop://"],
+            "--can-log needs a python-can",
+        ),
+        (
+            [
+                "--can-interface",
+                "virtual",
+                "--can-channel",
+                "c",
+                "--can-log",
+                "/nonexistent/x.log",
+                "--link",
+                "loop://",
+            ],
+            "cannot log CAN frames to /nonexistent/x.log",
+        ),
+        (
+            [
+                "--can-interface",
+                "virtual",
+                "--can-channel",
+                "c",
+                "--can-log",
+                "frames.nosuch",
+                "--link",
+                "loop://",
+            ],
+            "cannot log CAN frames to frames.nosuch",
+        ),
+    ],
+)
+def test_can_mistakes_are_one_line_and_exit_2(
+    argv: list[str], needle: str, no_can_config: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err, err
+
+
+def test_can_log_of_a_firmware_run_on_python_cans_virtual_bus(
+    tmp_path: Path, no_can_config: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The hardware path end to end: flags -> python-can bus -> a candump log that python-can reads back."""
+    channel = f"test-cli-canlog-{os.getpid()}"
+    log = tmp_path / "run.log"
+    argv = ["--can-interface", "virtual", "--can-channel", channel, "--can-log", str(log)]
+    with C610TrioServer(can.Bus(interface="virtual", channel=channel)) as server:
+        assert main([*argv, "--link", "loop://", "--duration", "0.3", "--no-fifo"]) == 0
+    assert server.error is None and "stopped:" in capsys.readouterr().err
+    frames = list(can.LogReader(log))
+    ids = {m.arbitration_id for m in frames}
+    assert ids == {0x200, 0x201, 0x202, 0x203}
+    commands = [m for m in frames if m.arbitration_id == 0x200]
+    assert len(commands) > 50 and all(not m.is_rx for m in commands)
+    assert all(m.is_rx and m.channel == channel for m in frames if m.arbitration_id != 0x200)
+
+
+def test_spy_url_logs_the_firmwares_board_link(tmp_path: Path) -> None:
+    """``--link spy://PTY?file=LOG``: pyserial's spy handler logs what the firmware sends and receives."""
+    log = tmp_path / "link.txt"
+    master, slave = os.openpty()
+    proc = start_in_own_group(
+        "controller",
+        *("--can-interface", "fake", "--no-fifo", "--duration", "1.5"),
+        *("--link", f"spy://{os.ttyname(slave)}?file={log}"),
+    )
+    heartbeat = encode(Heartbeat(host_time_us=1, counter=1), seq=0)
+    received = b""
+    try:
+        deadline = time.monotonic() + 60.0
+        sent = False
+        while proc.poll() is None and time.monotonic() < deadline:
+            ready, _, _ = select.select([master], [], [], 0.05)
+            if ready:
+                received += os.read(master, 65536)
+            if received and not sent:  # the port is open and raw: the host speaks
+                os.write(master, heartbeat)
+                sent = True
+        _, err = ctrl_c(proc) if proc.poll() is None else proc.communicate(timeout=60)
+    finally:
+        os.close(slave)
+        os.close(master)
+    assert proc.returncode == 0, err
+    assert sent and received.startswith(b"\xa5")
+    # pyserial's hex dump: "000001.234 TX   0010  A5 0C ... (16 bytes in two groups)  ASCII"
+    lines = log.read_text().splitlines()
+    tx = b"".join(bytes.fromhex(line[22:71]) for line in lines if line[11:13] == "TX")
+    rx = b"".join(bytes.fromhex(line[22:71]) for line in lines if line[11:13] == "RX")
+    assert tx.startswith(received[:64]) and rx == heartbeat

@@ -1,19 +1,23 @@
-"""MotorBus: clamping, packing, feedback decoding, shutdown, CAN specs; loopback over python-can's virtual
-bus and over a real pty pair (slcan adapter emulator with a fake C610 trio behind it)."""
+"""MotorBus: clamping, packing, feedback decoding, shutdown; python-can's options (bit rate, receive filters,
+timestamps, ``can.Logger``); loopback over python-can's virtual bus and over a real pty pair (slcan adapter
+emulator with a fake C610 trio behind it)."""
 
 from __future__ import annotations
 
+import importlib.resources
 import os
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import can
+import cantools
 import pytest
 from c610_rigs import C610TrioServer, SlcanAdapterEmulator
 
 from controller.errors import BusError, PortError
 from controller.fake_c610 import FakeC610Trio
-from controller.motorbus import CanMotorBus, FakeMotorBus, MotorBus, parse_can_spec
+from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus, feedback_filters
 from protocol.c610 import MotorFeedback, current_command
 
 
@@ -89,14 +93,6 @@ def test_shutdown_sends_zero_once_and_is_safe_twice() -> None:
     assert bus.read_feedback() == []
 
 
-def test_spec_parsing() -> None:
-    assert parse_can_spec("slcan:///dev/ttyACM0") == ("slcan", "/dev/ttyACM0")
-    assert parse_can_spec("virtual:bus0") == ("virtual", "bus0")
-    assert parse_can_spec("/dev/ttyACM1") == ("slcan", "/dev/ttyACM1")
-    with pytest.raises(ValueError):
-        parse_can_spec("virtual:")
-
-
 def test_fake_bus_feedback_follows_commands() -> None:
     bus = FakeMotorBus()
     bus.trio.silent.add(3)
@@ -170,3 +166,101 @@ def adapter_open(adapter: SlcanAdapterEmulator) -> bool:
 def test_missing_can_port_is_a_port_error() -> None:
     with pytest.raises(PortError, match="ttyDOESNOTEXIST"):
         CanMotorBus("/dev/ttyDOESNOTEXIST", "slcan", sleep_after_open=0)
+
+
+def test_every_interface_gets_1_mbit_and_the_feedback_filters(monkeypatch: pytest.MonkeyPatch) -> None:
+    opened: list[dict[str, object]] = []
+    real_bus = can.Bus
+
+    def fake_bus(**kwargs: object) -> can.BusABC:
+        opened.append(kwargs)
+        return real_bus(interface="virtual", channel=f"test-opened-{os.getpid()}")
+
+    monkeypatch.setattr(can, "Bus", fake_bus)
+    for interface in ("gs_usb", "socketcan", "slcan", "pcan"):
+        CanMotorBus("0", interface).shutdown()
+    assert [k["interface"] for k in opened] == ["gs_usb", "socketcan", "slcan", "pcan"]
+    assert all(k["bitrate"] == CAN_BITRATE == 1_000_000 for k in opened)
+    assert all(k["can_filters"] == feedback_filters(3) for k in opened)
+    assert {f["can_id"] for f in feedback_filters(3)} == {0x201, 0x202, 0x203}
+
+
+def test_receive_filters_keep_other_traffic_away() -> None:
+    channel = f"test-filters-{os.getpid()}"
+    peer = can.Bus(interface="virtual", channel=channel)
+    with CanMotorBus(channel, "virtual") as bus:
+        for can_id in (0x100, 0x1FF, 0x204, 0x205, 0x202):
+            peer.send(
+                can.Message(arbitration_id=can_id, data=MotorFeedback(10, 0, 0).pack(), is_extended_id=False)
+            )
+        got = _drain(bus, 1)
+        assert set(got) == {2}
+        assert bus.read_feedback() == [] and bus.frames_ignored == 0  # the filter dropped them, not we
+    peer.shutdown()
+
+
+def test_feedback_timestamps_are_the_frames_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    channel = f"test-stamps-{os.getpid()}"
+    peer = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
+    with CanMotorBus(channel, "virtual") as bus:
+        assert bus.feedback_timestamps_s == [0.0, 0.0, 0.0]
+        for motor, stamp in ((1, 1000.25), (3, 1000.5)):
+            data = MotorFeedback(motor, 0, 0).pack()
+            peer.send(
+                can.Message(timestamp=stamp, arbitration_id=0x200 + motor, data=data, is_extended_id=False)
+            )
+        assert set(_drain(bus, 2)) == {1, 3}
+        assert bus.feedback_timestamps_s == [1000.25, 0.0, 1000.5]
+    peer.shutdown()
+
+
+def _c610_db() -> cantools.database.can.Database:
+    path = importlib.resources.files("protocol").joinpath("c610.dbc")
+    with importlib.resources.as_file(path) as dbc:
+        db = cantools.database.load_file(str(dbc))
+    assert isinstance(db, cantools.database.can.Database)
+    return db
+
+
+@pytest.mark.parametrize("suffix", [".log", ".blf"])
+def test_hardware_path_logs_every_frame_for_python_can_and_the_dbc(tmp_path: Path, suffix: str) -> None:
+    """CanMotorBus over python-can's virtual interface with a C610 trio: the log reads back with python-can,
+    holds both directions with their timestamps, and the shipped DBC decodes every frame to our values."""
+    channel = f"test-canlog-{os.getpid()}-{suffix[1:]}"
+    log = tmp_path / f"run{suffix}"
+    trio = FakeC610Trio(start_angles_counts=(8000, 100, 4000))
+    feedback: list[tuple[int, MotorFeedback]] = []
+    with C610TrioServer(can.Bus(interface="virtual", channel=channel), trio) as server:
+        with CanMotorBus(channel, "virtual", log_file=log) as bus:
+            for _ in range(5):
+                bus.send_currents([1500, -700, 0])
+                got = _drain(bus, 3)
+                assert set(got) == {1, 2, 3}
+                feedback += sorted(got.items())
+            stamps = list(bus.feedback_timestamps_s)
+        assert server.error is None
+        assert bus.log_errors == 0
+    frames = list(can.LogReader(log))
+    sent = [m for m in frames if m.arbitration_id == 0x200]
+    received = [m for m in frames if m.arbitration_id != 0x200]
+    assert len(sent) == 6  # five commands and shutdown's zero frame
+    assert len(received) == len(feedback) == 15
+    db = _c610_db()
+    for msg in sent[:5]:
+        assert db.decode_message(msg.arbitration_id, bytes(msg.data)) == pytest.approx(
+            {"Motor1_Current": 1.5, "Motor2_Current": -0.7, "Motor3_Current": 0.0, "Motor4_Current": 0.0}
+        )
+    assert all(v == 0 for v in db.decode_message(0x200, bytes(sent[5].data)).values())
+    for msg, (motor, fb) in zip(received, feedback, strict=True):
+        assert msg.arbitration_id == 0x200 + motor
+        decoded = db.decode_message(msg.arbitration_id, bytes(msg.data))
+        assert decoded == {
+            "Angle": fb.angle,
+            "Speed": fb.speed_rpm,
+            "Current": pytest.approx(fb.current / 1000),
+            "Temperature": fb.temperature,
+        }
+    # the timestamps are the frames' own, in order, and the last feedback of each motor is the bus's
+    times = [m.timestamp for m in frames]
+    assert all(t > 1e9 for t in times) and times == sorted(times)
+    assert [received[-3 + i].timestamp for i in range(3)] == pytest.approx(stamps, abs=1e-6)

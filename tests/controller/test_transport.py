@@ -1,14 +1,17 @@
-"""Transports: never block; drop whole frames when the peer stalls; memory pair; serial over a pty."""
+"""Transports: never block; drop whole frames when the peer stalls; memory pair; serial over a pty;
+pyserial URL handlers (spy://) on the board link."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from controller.errors import PortError
 from controller.transport import MemoryTransport, SerialTransport
+from protocol.link import encode_frame
 
 
 def test_memory_pair_carries_bytes_both_ways() -> None:
@@ -97,3 +100,31 @@ def test_serial_transport_over_loop_url_never_blocks() -> None:
         assert data[:1000] == bytes([0]) * 1000
     finally:
         t.close()
+
+
+def test_spy_url_logs_the_board_link_over_a_pty(tmp_path: Path) -> None:
+    """pyserial's spy:// handler sees both directions because the transport reads and writes through it."""
+    log = tmp_path / "link.txt"
+    master, slave = os.openpty()
+    try:
+        t = SerialTransport(f"spy://{os.ttyname(slave)}?file={log}")
+        try:
+            frame = encode_frame(0x0201, bytes(12), seq=7)
+            assert t.write(frame)
+            assert os.read(master, 100) == frame
+            os.write(master, b"\x5a\x42\x17")
+            got = b""
+            for _ in range(1000):
+                got += t.read()
+                if got:
+                    break
+            assert got == b"\x5a\x42\x17"
+        finally:
+            t.close()
+    finally:
+        os.close(slave)
+        os.close(master)
+    text = log.read_text()
+    tx_hex = " ".join(f"{b:02X}" for b in frame[:8])
+    assert any(line.split()[1] == "TX" and tx_hex in line for line in text.splitlines())
+    assert any(line.split()[1] == "RX" and "5A 42 17" in line for line in text.splitlines())
