@@ -17,6 +17,7 @@ import math
 import struct
 from collections.abc import Callable, Sequence
 from operator import index
+from pathlib import Path
 from typing import NamedTuple
 
 from protocol.errors import DecodeError
@@ -28,6 +29,7 @@ __all__ = [
     "COMMAND_ID_HIGH",
     "COMMAND_ID_LOW",
     "CURRENT_RAW_MAX",
+    "DBC_PATH",
     "FEEDBACK_FORMAT",
     "FEEDBACK_ID_BASE",
     "FRAME_LEN",
@@ -50,6 +52,10 @@ __all__ = [
     "unpack_currents",
     "unpack_currents3",
 ]
+
+DBC_PATH = Path(__file__).with_name("c610.dbc")
+"""The C610 frames as a DBC (package data beside this module): the command on 0x200 and the feedback on
+0x201-0x204, for cantools, SavvyCAN or a candump log's decoder (``cantools decode``)."""
 
 COMMAND_ID_LOW = 0x200
 """Command frame for motors 1-4."""

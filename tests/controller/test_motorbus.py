@@ -4,7 +4,6 @@ emulator with a fake C610 trio behind it)."""
 
 from __future__ import annotations
 
-import importlib.resources
 import os
 import time
 from collections.abc import Iterator
@@ -18,7 +17,7 @@ from c610_rigs import C610TrioServer, SlcanAdapterEmulator
 from controller.errors import BusError, PortError
 from controller.fake_c610 import FakeC610Trio
 from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus, feedback_filters
-from protocol.c610 import MotorFeedback, current_command
+from protocol.c610 import DBC_PATH, MotorFeedback, current_command
 
 
 class RecordingBus(MotorBus):
@@ -215,9 +214,7 @@ def test_feedback_timestamps_are_the_frames_own(monkeypatch: pytest.MonkeyPatch)
 
 
 def _c610_db() -> cantools.database.can.Database:
-    path = importlib.resources.files("protocol").joinpath("c610.dbc")
-    with importlib.resources.as_file(path) as dbc:
-        db = cantools.database.load_file(str(dbc))
+    db = cantools.database.load_file(str(DBC_PATH))
     assert isinstance(db, cantools.database.can.Database)
     return db
 

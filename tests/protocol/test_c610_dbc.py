@@ -4,7 +4,6 @@ and any value), and encodes the same bytes."""
 from __future__ import annotations
 
 import functools
-import importlib.resources
 
 import cantools
 import pytest
@@ -14,6 +13,7 @@ from hypothesis import strategies as st
 from protocol.c610 import (
     ANGLE_COUNTS,
     CURRENT_RAW_MAX,
+    DBC_PATH,
     MotorFeedback,
     current_command,
     feedback_id,
@@ -30,10 +30,10 @@ int16 = st.integers(-32768, 32767)
 @functools.cache
 def c610_db() -> cantools.database.can.Database:
     """The shipped DBC, loaded once, from the installed ``protocol`` package's data."""
-    resource = importlib.resources.files("protocol").joinpath("c610.dbc")
-    assert resource.is_file(), "c610.dbc must ship inside the protocol package"
-    with importlib.resources.as_file(resource) as path:
-        database = cantools.database.load_file(str(path))
+    # By the module's own path: under pytest's importlib mode the name "protocol" can resolve to
+    # tests/protocol (the packaging test checks the installed package data with importlib.resources).
+    assert DBC_PATH.is_file(), "c610.dbc must ship inside the protocol package"
+    database = cantools.database.load_file(str(DBC_PATH))
     assert isinstance(database, cantools.database.can.Database)
     return database
 
