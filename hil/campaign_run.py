@@ -309,6 +309,7 @@ def execute_ray(
     try:
         if address is None:
             ray.init(
+                address="local",  # a new node, never a cluster another `ray start` left running here
                 num_cpus=jobs,
                 include_dashboard=False,
                 _node_ip_address="127.0.0.1",
