@@ -217,41 +217,57 @@ def execute_local(
 ) -> Iterator[dict[str, Any]]:
     """Run ``runs`` over ``jobs`` local worker processes, yielding each row as it finishes.
 
-    At most ``2 * jobs`` runs are queued at once. A worker that dies (killed, out of memory) breaks the
-    pool: the pool is started again and the runs it held are queued again, each at most ``max_retries``
-    times, then recorded as an ``error`` row. Stops (terminating its workers) once ``stop`` is set.
+    At most ``2 * jobs`` runs are in flight. A worker that dies (killed, out of memory) breaks the whole
+    pool, and the pool cannot say which run killed it: the runs it held are started again one at a time
+    in a new pool, where a death is that run's own; a run whose worker died alone more than
+    ``max_retries`` times is an ``error`` row. Stops (terminating its workers) once ``stop`` is set.
     """
     todo = list(reversed(runs))  # popped from the end: the campaign's order
+    suspects: list[Run] = []  # in flight when a pool broke: run alone until cleared
     tries: dict[str, int] = {}
-    while todo and not stop.is_set():
+    while (todo or suspects) and not stop.is_set():
         pool = ProcessPoolExecutor(max_workers=jobs, initializer=_ignore_ctrl_c)
         running: dict[Future[dict[str, Any]], Run] = {}
         busy = True
         try:
-            while (todo or running) and not stop.is_set():
-                while todo and len(running) < 2 * jobs:
+            while (todo or suspects or running) and not stop.is_set():
+                if suspects and not running:
+                    run = suspects.pop()
+                    running[pool.submit(fn, run)] = run
+                while todo and not suspects and len(running) < 2 * jobs:
                     run = todo.pop()
                     running[pool.submit(fn, run)] = run
                 finished, _ = wait(running, timeout=POLL_S, return_when=FIRST_COMPLETED)
-                broken = False
+                lost: list[Run] = []
                 for fut in finished:
                     run = running.pop(fut)
                     try:
                         yield fut.result()
                     except BrokenProcessPool:
-                        broken = True
-                        tries[run.key] = tries.get(run.key, 0) + 1
-                        if tries[run.key] > max_retries:
-                            yield _lost_row(run, tries[run.key])
-                        else:
-                            todo.append(run)
-                if broken:
-                    todo.extend(running.values())  # the whole pool is gone: queue what it held again
+                        lost.append(run)
+                if lost:
+                    lost.extend(running.values())  # the whole pool is gone with what it held
                     running.clear()
+                    yield from _requeue(lost, suspects, tries, max_retries)
                     break
             busy = bool(running)
         finally:
             _stop_pool(pool, busy)
+
+
+def _requeue(
+    lost: list[Run], suspects: list[Run], tries: dict[str, int], max_retries: int
+) -> Iterator[dict[str, Any]]:
+    """Queue the runs a broken pool held to run alone; a run that was alone when it broke pays a try."""
+    if len(lost) > 1:
+        suspects.extend(lost)
+        return
+    run = lost[0]
+    tries[run.key] = tries.get(run.key, 0) + 1
+    if tries[run.key] > max_retries:
+        yield _lost_row(run, tries[run.key])
+    else:
+        suspects.append(run)
 
 
 def _stop_pool(pool: ProcessPoolExecutor, busy: bool) -> None:

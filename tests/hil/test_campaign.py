@@ -255,11 +255,13 @@ def test_ctrl_c_keeps_the_file_and_resume_runs_only_what_is_missing(tmp_path: Pa
 
 
 def _dying_run(marker_dir: Path, always: bool, run: Run) -> dict[str, Any]:
-    """A run whose worker dies (the first time, or always) for seed 1; a row for the others."""
+    """A run whose worker dies (the first time, or always) for seed 1; a row for the others, which take
+    long enough to be in flight when the pool breaks."""
     marker = marker_dir / run.key
     if run.inputs["seed"] == 1 and (always or not marker.exists()):
         marker.touch()
         os._exit(1)
+    time.sleep(0.3)
     return {"key": run.key, "inputs": dict(run.inputs), "outcome": "success", "measured": {}, "run_time_s": 0}
 
 
