@@ -286,9 +286,21 @@ def parse_campaign(raw: Mapping[str, Any]) -> Campaign:
         for name, spec in table.items():
             axes[f"{section}.{name}"] = spec
     _check_axes(kind, axes, sampling)
+    axes = {
+        name: _as_floats(spec) if _key_type(kind, name) == _FLOAT else spec for name, spec in axes.items()
+    }
     campaign = Campaign(kind, sampling, int(samples or 0), int(seed), seeds, axes)
     _check_points(campaign)
     return campaign
+
+
+def _as_floats(spec: Any) -> Any:
+    """A number key's values as floats: ``x_m = 0`` and ``x_m = 0.0`` are the same run, with one key."""
+    if isinstance(spec, dict):
+        return {k: v if k == "n" else float(v) for k, v in spec.items()}
+    if isinstance(spec, list):
+        return [float(v) for v in spec]
+    return float(spec)
 
 
 def _is_int(v: Any) -> bool:

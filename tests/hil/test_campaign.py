@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from hil.campaign import CampaignError, Run, load_campaign, parse_campaign
+from hil.campaign import Campaign, CampaignError, Run, load_campaign, parse_campaign
 from hil.campaign_run import ResultsFile, execute_local, stable_row
 from hil.campaign_summary import design_rates, success_maps
 from hil.cli import main
@@ -66,6 +66,13 @@ def test_a_grid_runs_every_combination_once_with_stable_keys() -> None:
     assert {r.inputs["design.arm_friction"] for r in runs} == {0.5, 0.7, 0.9}
     assert {r.inputs["seed"] for r in runs} == {4, 7}
     assert [r.key for r in parse_campaign(raw).runs()] == [r.key for r in runs]
+
+    def key(mu: float) -> Campaign:
+        return parse_campaign(
+            {"kind": "scenario", "scenario": {"name": "rc-loss"}, "design": {"cable_mu": mu}}
+        )
+
+    assert key(1).runs()[0].key == key(1.0).runs()[0].key  # 1 and 1.0 are one run
 
 
 def test_a_random_sample_is_drawn_from_its_seed_within_its_ranges() -> None:
