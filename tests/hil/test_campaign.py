@@ -342,7 +342,7 @@ def ray_head(tmp_path: Path) -> Iterator[tuple[str, dict[str, str]]]:
     """A one-CPU Ray head on 127.0.0.1 started by the test (its own token, no dashboard, no usage
     stats) and stopped by it: its process group, by id, so no other Ray on the machine is touched."""
     ray = shutil.which("ray", path=str(Path(PYTHON).parent))
-    assert ray is not None
+    assert ray is not None, "the ray command is missing: install the test extra (pip install -e '.[test]')"
     port = _free_port()
     temp_dir = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # Ray's socket paths must stay under 108 bytes
     env = dict(
@@ -358,7 +358,9 @@ def ray_head(tmp_path: Path) -> Iterator[tuple[str, dict[str, str]]]:
         "--temp-dir", temp_dir,
     ]  # fmt: skip
     log = (tmp_path / "head.log").open("w")
-    head = subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    head = subprocess.Popen(
+        argv, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True
+    )  # its workers import this checkout's code, as the campaign's driver does
     try:
         deadline = time.monotonic() + 90
         while "Ray runtime started" not in (tmp_path / "head.log").read_text():
