@@ -23,7 +23,7 @@ __all__ = ["DesignRate", "design_rates", "success_maps"]
 
 _CHOICE_PREFIXES = ("design.", "controller.")
 _MAP_BINS_N = 8
-"""A placement axis with more distinct values than this (a random sample) is binned into this many."""
+"""The most cells along a placement axis of a map."""
 
 
 @dataclass(frozen=True)
@@ -100,19 +100,17 @@ def design_rates(rows: Iterable[Mapping[str, Any]]) -> list[DesignRate]:
     return sorted(out, key=rank, reverse=True)
 
 
-def _edges(values: Sequence[float]) -> tuple[list[float], np.ndarray]:
-    """Cell centres and edges of one placement axis: one cell per distinct value, or even bins."""
-    distinct = sorted(set(values))
-    if len(distinct) <= _MAP_BINS_N:
-        mids = np.asarray(distinct, dtype=np.float64)
-        if len(mids) == 1:
-            return distinct, np.asarray([mids[0] - 0.005, mids[0] + 0.005])
-        inner = (mids[1:] + mids[:-1]) / 2
-        first = mids[0] - (inner[0] - mids[0])
-        last = mids[-1] + (mids[-1] - inner[-1])
-        return distinct, np.concatenate([[first], inner, [last]])
-    edges = np.linspace(distinct[0], distinct[-1], _MAP_BINS_N + 1)
-    return list((edges[1:] + edges[:-1]) / 2), edges
+def _edges(values: Sequence[float]) -> np.ndarray:
+    """Cell edges of one placement axis: one cell per value of an evenly spaced axis (a grid's) of at
+    most :data:`_MAP_BINS_N` values, else that many even bins (a random sample's)."""
+    distinct = np.asarray(sorted(set(values)), dtype=np.float64)
+    if len(distinct) == 1:
+        return np.asarray([distinct[0] - 0.005, distinct[0] + 0.005])
+    steps = np.diff(distinct)
+    if len(distinct) <= _MAP_BINS_N and np.ptp(steps) <= 0.01 * steps.mean():
+        half = steps[0] / 2
+        return np.append(distinct - half, distinct[-1] + half)
+    return np.linspace(distinct[0], distinct[-1], min(_MAP_BINS_N, len(distinct)) + 1)
 
 
 def success_maps(rows: Sequence[Mapping[str, Any]], out_dir: Path) -> list[Path]:
@@ -126,8 +124,8 @@ def success_maps(rows: Sequence[Mapping[str, Any]], out_dir: Path) -> list[Path]
     placed = [r for r in rows if r["outcome"] != "error" and "object.x_m" in r["inputs"]]
     if not placed:
         return []
-    _, x_edges = _edges([r["inputs"]["object.x_m"] for r in placed])
-    _, z_edges = _edges([r["inputs"]["object.z_m"] for r in placed])
+    x_edges = _edges([r["inputs"]["object.x_m"] for r in placed])
+    z_edges = _edges([r["inputs"]["object.z_m"] for r in placed])
     groups = _group(placed)
     plt = pyplot()
     paths = []

@@ -61,7 +61,7 @@ def configure_campaign(p: argparse.ArgumentParser) -> None:
         "--out",
         type=Path,
         metavar="PATH",
-        help="JSON-lines results file (default: FILE's stem + .jsonl, here)",
+        help="JSON-lines results file (default: FILE's stem + .jsonl in the current directory)",
     )
     p.add_argument("--resume", action="store_true", help="go on with --out: skip the runs already in it")
     p.add_argument(
