@@ -44,6 +44,7 @@ __all__ = [
     "build_firmware",
     "load_campaign",
     "parse_campaign",
+    "run_key",
 ]
 
 KINDS = ("grasp", "scenario")
