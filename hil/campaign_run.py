@@ -15,6 +15,7 @@ import logging
 import math
 import os
 import signal
+import socket
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -28,7 +29,9 @@ from .campaign import CampaignError, Run, build_design, build_firmware
 __all__ = [
     "MAX_RETRIES_N",
     "POLL_S",
+    "RAY_MISSING",
     "ResultsFile",
+    "check_ray_address",
     "execute_local",
     "execute_ray",
     "run_one",
@@ -294,6 +297,29 @@ def _lost_row(run: Run, attempts: int) -> dict[str, Any]:
     }
 
 
+_CONNECT_TIMEOUT_S = 5.0
+"""How long ``--ray-address`` may take to accept a TCP connection [s]."""
+
+
+def check_ray_address(address: str) -> None:
+    """A ``HOST:PORT`` that takes no connection is one line now, not Ray's minute of retries and warnings.
+
+    Raises:
+        CampaignError: nothing listens there (other address forms, ``auto`` or ``ray://``, are Ray's).
+    """
+    if "://" in address or address == "auto":
+        return
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise CampaignError(
+            f"--ray-address wants HOST:PORT (what 'ray start --head' printed), got {address!r}"
+        )
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=_CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise CampaignError(f"cannot reach Ray at {address}: {exc.strerror or exc}") from None
+
+
 RAY_MISSING = "--ray and --ray-address need Ray: pip install 'spirob-teleop[ray]'"
 """The one line a Ray campaign prints when Ray is not installed."""
 
@@ -321,6 +347,8 @@ def execute_ray(
         from ray.exceptions import RayError
     except ImportError:
         raise CampaignError(RAY_MISSING) from None
+    if address is not None:
+        check_ray_address(address)
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # a campaign phones nobody
     try:
         if address is None:

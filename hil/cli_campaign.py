@@ -27,7 +27,14 @@ from controller.cli_kit import (
 )
 
 from .campaign import Campaign, Run, load_campaign
-from .campaign_run import MAX_RETRIES_N, RAY_MISSING, ResultsFile, execute_local, execute_ray
+from .campaign_run import (
+    MAX_RETRIES_N,
+    RAY_MISSING,
+    ResultsFile,
+    check_ray_address,
+    execute_local,
+    execute_ray,
+)
 
 __all__ = ["CAMPAIGN_HELP", "configure_campaign", "run_campaign_command"]
 
@@ -99,6 +106,8 @@ def _check_args(args: argparse.Namespace) -> None:
         raise UsageError(f"no such campaign file: {args.file}", PROG)
     if (args.ray or args.ray_address) and importlib.util.find_spec("ray") is None:
         raise UsageError(RAY_MISSING, PROG)
+    if args.ray_address:
+        check_ray_address(args.ray_address)
 
 
 def run_campaign_command(args: argparse.Namespace) -> int:

@@ -37,6 +37,13 @@ seeds = 3
 name = ["startup-gate", "overcurrent"]
 """
 """Six runs of 1.5 simulated seconds each."""
+SCENARIO_ARGS = ["campaign", "--set", "kind=scenario", "--set", "scenario.name=rc-loss", "-o", "x.jsonl"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
 
 
 def rows_of(path: Path) -> list[dict[str, Any]]:
@@ -169,6 +176,14 @@ def test_a_malformed_campaign_is_one_clear_line(
         (["campaign", "--set", "kind=scenario"], "name the results file with --out"),
         (["campaign", "--set", "kind", "-o", "x.jsonl"], "--set wants KEY=VALUE"),
         (["campaign", "--set", "kind=scenario", "-o", "x.jsonl", "--jobs", "0"], "--jobs must be"),
+        (
+            [*SCENARIO_ARGS, "--ray-address", "127.0.0.1"],
+            "--ray-address wants HOST:PORT",
+        ),
+        (
+            [*SCENARIO_ARGS, "--ray-address", f"127.0.0.1:{_free_port()}"],
+            "cannot reach Ray at 127.0.0.1:",
+        ),
     ],
 )
 def test_bad_command_lines_are_one_line(
@@ -329,12 +344,6 @@ def test_a_grasp_campaign_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 
 # ---------------------------------------------------------------------- Ray
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture
