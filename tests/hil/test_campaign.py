@@ -23,7 +23,7 @@ from typing import Any
 import pytest
 
 from hil.campaign import Campaign, CampaignError, Run, load_campaign, parse_campaign
-from hil.campaign_run import ResultsFile, execute_local, stable_row
+from hil.campaign_run import ResultsFile, execute_local, run_one, stable_row
 from hil.campaign_summary import design_rates, success_maps
 from hil.cli import main
 
@@ -409,3 +409,32 @@ def test_a_ray_cluster_gives_the_rows_of_local_processes(
     local = {r["key"]: stable_row(r) for r in execute_local(runs, 2, threading.Event())}
     assert sorted(local) == sorted(r.key for r in runs)
     assert {r["key"]: stable_row(r) for r in rows_of(on_ray)} == local
+
+
+@pytest.mark.ray
+def test_ray_starts_a_local_node_and_stops_it(tmp_path: Path) -> None:
+    temp_dir = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # Ray's socket paths must stay under 108 bytes
+    env = dict(
+        os.environ,
+        RAY_USAGE_STATS_ENABLED="0",
+        RAY_AUTH_MODE="token",
+        RAY_AUTH_TOKEN=secrets.token_hex(16),
+        RAY_TMPDIR=temp_dir,  # its session files, apart from any other Ray on the machine
+    )
+    out = tmp_path / "ray.jsonl"
+    argv = [*SCENARIO_ARGS[:-1], str(out), "--set", "scenario.name=startup-gate", "--ray", "--jobs", "1"]
+    try:
+        done = subprocess.run(
+            [PYTHON, "-m", "hil.cli", *argv, "--json"], cwd=ROOT, env=env, capture_output=True, text=True,
+            timeout=180,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        assert "on a local Ray of 1 CPUs" in done.stderr
+        assert json.loads(done.stdout)["ran_n"] == 1
+        (row,) = rows_of(out)
+        (run,) = parse_campaign({"kind": "scenario", "scenario": {"name": "startup-gate"}}).runs()
+        assert stable_row(row) == stable_row(run_one(run))
+        raylets = subprocess.run(["pgrep", "-f", temp_dir], capture_output=True, text=True).stdout.split()
+        assert raylets == [], "the local Ray node outlived its campaign"
+    finally:
+        shutil.rmtree(temp_dir, ignore_errors=True)
