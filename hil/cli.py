@@ -35,6 +35,7 @@ from controller.cli_kit import (
     writable_dir,
     writable_file,
 )
+from hil.cli_campaign import CAMPAIGN_HELP, configure_campaign, run_campaign_command
 from hil.cli_design import add_design_arguments, design_from_args, model_from_args
 from hil.cli_experiments import EXPERIMENT_HELP, configure_experiment, run_experiment_command
 from hil.mjcf import write_mjcf
@@ -551,6 +552,7 @@ COMMANDS: list[Command] = [
         configure_experiment,
         run_experiment_command,
     ),
+    Command("campaign", CAMPAIGN_HELP, configure_campaign, run_campaign_command),
 ]
 """The subcommands, in ``--help`` order. Later issues append theirs."""
 
