@@ -29,7 +29,7 @@ from controller.config import FirmwareConfig
 
 from .errors import HilError
 from .faults import Fault
-from .model_config import ModelConfig
+from .model_config import PHYSICS_STEPS_S, ModelConfig
 from .model_presets import PRESETS
 from .spiral import SpiralDesign, b_from_taper, taper_from_b
 
@@ -63,6 +63,7 @@ _SECTIONS = ("design", "object", "controller", "scenario")
 _FLOAT, _INT, _BOOL, _STR = "float", "int", "bool", "str"
 _DESIGN_KEYS = {
     "preset": _STR,
+    "physics": _STR,
     "length_m": _FLOAT,
     "tip_width_m": _FLOAT,
     "taper_deg": _FLOAT,
@@ -440,12 +441,15 @@ def _check_points(campaign: Campaign) -> None:
 # ---------------------------------------------------------------------- what a run's inputs build
 
 
-def build_design(inputs: Mapping[str, Any]) -> tuple[SpiralDesign, ModelConfig]:
+def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[SpiralDesign, ModelConfig]:
     """The arm and the plant model of a run's ``design.*`` inputs.
 
     ``design.preset`` (default ``prototype``) gives the plant model and, unless physical inputs
     (``length_m``, ``tip_width_m``, ``taper_deg`` or ``b``, ``dtheta_deg``) are given, the design;
-    ``cables``, ``base_stiffness_nm_per_rad``, ``cable_mu`` and ``arm_friction`` change either.
+    ``cables``, ``base_stiffness_nm_per_rad``, ``cable_mu`` and ``arm_friction`` change either;
+    ``design.physics`` (default ``physics``: ``fine`` for grasp trials, as the experiments run them,
+    ``board`` for scenarios) names the physics step and constraint stiffness
+    (:data:`~hil.model_config.PHYSICS_STEPS_S`).
 
     Raises:
         CampaignError: an unknown preset, incomplete physical inputs or values that make no design.
@@ -455,6 +459,9 @@ def build_design(inputs: Mapping[str, Any]) -> tuple[SpiralDesign, ModelConfig]:
     if name not in PRESETS:
         raise CampaignError(f"design.preset: unknown preset {name!r} (known: {', '.join(PRESETS)})")
     chosen = PRESETS[name]
+    physics = d.get("physics", physics)
+    if physics not in PHYSICS_STEPS_S:
+        raise CampaignError(f"design.physics: unknown {physics!r} (known: {', '.join(PHYSICS_STEPS_S)})")
     try:
         if any(k in d for k in _PHYSICAL):
             design = _physical_design(d)
@@ -471,7 +478,7 @@ def build_design(inputs: Mapping[str, Any]) -> tuple[SpiralDesign, ModelConfig]:
             "geom_friction": d.get("arm_friction"),
         }
         arm = replace(chosen.model.arm, **{k: v for k, v in arm_changes.items() if v is not None})
-        model = replace(chosen.model, arm=arm)
+        model = replace(chosen.model, arm=arm).with_physics(PHYSICS_STEPS_S[physics])
         model.validate()
     except CampaignError:
         raise

@@ -75,7 +75,7 @@ def _grasp(run: Run) -> dict[str, Any]:
     from .experiments.grasp import GraspSetup, grasp_trial
 
     i = run.inputs
-    design, model = build_design(i)
+    design, model = build_design(i, physics="fine")
     optional = {
         "mass_kg": i.get("object.mass_kg"),
         "length_m": i.get("object.length_m"),

@@ -528,3 +528,9 @@ class ModelConfig:
     def with_objects(self, *objects: ObjectConfig) -> ModelConfig:
         """A copy with ``objects`` appended."""
         return replace(self, objects=self.objects + tuple(objects))
+
+
+PHYSICS_STEPS_S = {"fine": 0.25e-3, "board": SolverConfig().timestep_s}
+"""Named physics settings, their steps (:meth:`ModelConfig.with_physics` sets the constraints from the step):
+``fine`` is what the experiments and grasp campaigns run (four steps per 1 ms control tick, contacts and
+limits at 0.5 ms); ``board`` is the real-time board's (one step per tick, 2 ms constraints)."""

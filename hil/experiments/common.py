@@ -7,7 +7,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from ..model_config import ModelConfig
+from ..model_config import PHYSICS_STEPS_S, ModelConfig
 from ..plant_types import PhysicsExtremes
 
 Progress = Callable[[int, int], None]
@@ -38,14 +38,14 @@ SUCCESS_WRAP_DEG = 180.0
 BOARD_MODEL = ModelConfig()
 """The plant's default model as the real-time board runs it: a 1 ms step (one per control tick), contacts
 and joint limits at 2 ms."""
-EXPERIMENT_STEP_S = 0.25e-3
+EXPERIMENT_STEP_S = PHYSICS_STEPS_S["fine"]
 """The experiments' physics step: four per 1 ms control tick."""
 DEFAULT_MODEL = BOARD_MODEL.with_physics(EXPERIMENT_STEP_S)
 """What an experiment runs on unless given a preset or a variant: the plant's default model at a 0.25 ms
 step with 0.5 ms contacts and joint limits (:meth:`ModelConfig.with_physics`). The board's 1 ms step lets a
 fast grasp's whipping tip sink up to 2.8 mm into the object and the joints pass their limits by 8°; this
 keeps both inside their goals (< 1 mm or < 10 % of the radius; < 1°) at four times the run time."""
-PHYSICS = {"fine": EXPERIMENT_STEP_S, "board": BOARD_MODEL.solver.timestep_s}
+PHYSICS = PHYSICS_STEPS_S
 """``--physics`` choices: the physics step; :meth:`ModelConfig.with_physics` sets the constraints from it."""
 
 SIZES = ("tiny", "default", "large")
