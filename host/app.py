@@ -16,6 +16,7 @@ from controller.cli_kit import EXIT_OK
 from host.board_client import BoardClient, BoardLinkError, LinkState, load_scaled_s
 from host.errors import HostError
 from host.model import CLI_CLIENT, UiModel
+from host.object_spec import ObjectSpec, plant_objects
 from host.options import (
     HostOptions,
     check_signing_timestamp_writable,
@@ -144,6 +145,8 @@ class HostApp:
         from hil.errors import HilError  # type: ignore[import-not-found,unused-ignore]
 
         config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
+        if self.options.objects:
+            config = _with_objects(config, self.options.objects)
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
             url = str(self.board.start(timeout_s=load_scaled_s(30.0)))
@@ -366,6 +369,13 @@ def _replace(obj: Any, **changes: Any) -> Any:
     import dataclasses
 
     return dataclasses.replace(obj, **changes)
+
+
+def _with_objects(config: Any, specs: tuple[ObjectSpec, ...]) -> Any:
+    """``config`` (a ``hil.board.BoardConfig``) with the ``--object`` objects added to its plant."""
+    model = config.plant.model
+    model = model.with_objects(*plant_objects(specs, model))
+    return _replace(config, plant=_replace(config.plant, model=model))
 
 
 def ned_to_scene(position: Any, attitude: Any) -> DronePose:

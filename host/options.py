@@ -17,6 +17,7 @@ from pathlib import Path
 from controller.cli_kit import Parser, port_number, positive_duration
 from host.errors import HostError
 from host.model import new_token
+from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
 from protocol.dbus import Lever
 
 __all__ = [
@@ -74,6 +75,17 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --port: do not run the shadow plant (the arm's shape from the measured motor currents "
         "of a board that sends no poses)",
     )
+    src.add_argument(
+        "--object",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="virtual board only, repeatable: a fixed object in the scene, placed from the arm's base "
+        "(x forward, y left, z up), lengths with units: SHAPE:d=DIAMETER,z=HEIGHT[,x=..][,y=..][,len=..]"
+        "[,axis=x|y|z], SHAPE cylinder or capsule, e.g. cylinder:d=20mm,x=40mm,z=-110mm. "
+        f"Default: one {describe_object(DEFAULT_OBJECT)}, a pole the grasp strategy wraps",
+    )
+    src.add_argument("--no-object", action="store_true", help="virtual board only: an empty scene")
     ui = p.add_argument_group("panel")
     ui.add_argument("--ui-host", default="127.0.0.1", help="address the panel binds (default 127.0.0.1)")
     ui.add_argument("--ui-port", type=port_number, default=8080, help="panel port (default 8080; 0 = any)")
@@ -141,6 +153,8 @@ class HostOptions:
         mav_signing_timestamp: file persisting the signing timestamp (None with a key:
             ``<key file>.timestamp``).
         shadow: with ``port``, run the shadow plant when the board sends no poses.
+        objects: fixed objects added to the virtual board's scene (the command line's default:
+            ``host.object_spec.DEFAULT_OBJECT``; ``--no-object``: none).
     """
 
     port: str | None = None
@@ -159,6 +173,7 @@ class HostOptions:
     mav_signing_key: Path | None = None
     mav_signing_timestamp: Path | None = None
     shadow: bool = True
+    objects: tuple[ObjectSpec, ...] = ()
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> HostOptions:
@@ -184,6 +199,7 @@ class HostOptions:
                 raise HostError(f"{ns.replay} is not an MCAP recording")
         if ns.port is not None:
             check_board_url(ns.port)
+        objects = _objects_from_args(ns)
         if ns.mavlink is not None:
             check_mavlink_url(ns.mavlink)
         if ns.record is not None and not ns.record.parent.exists():
@@ -222,7 +238,34 @@ class HostOptions:
             mav_signing_key=ns.mav_signing_key,
             mav_signing_timestamp=ns.mav_signing_timestamp,
             shadow=not ns.no_shadow,
+            objects=objects,
         )
+
+
+def _objects_from_args(ns: argparse.Namespace) -> tuple[ObjectSpec, ...]:
+    """``--object`` / ``--no-object``: the virtual board's objects (the default demo's one if neither).
+
+    Raises:
+        HostError: a malformed spec, or objects asked of a board that has no scene to add them to.
+    """
+    if ns.no_object and ns.object:
+        raise HostError("--object and --no-object cannot be combined")
+    if ns.port is not None or ns.replay is not None:
+        if ns.object or ns.no_object:
+            flag = "--object" if ns.object else "--no-object"
+            raise HostError(f"{flag} is for the virtual board (no --port, no --replay)")
+        return ()
+    if ns.no_object:
+        return ()
+    if not ns.object:
+        return (DEFAULT_OBJECT,)
+    specs = []
+    for text in ns.object:
+        try:
+            specs.append(parse_object(text))
+        except ValueError as exc:
+            raise HostError(f"--object {text}: {exc}") from None
+    return tuple(specs)
 
 
 def signing_timestamp_path(options: HostOptions) -> Path | None:
