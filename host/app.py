@@ -64,6 +64,7 @@ class HostApp:
         self.recording: LinkRecording | None = None
         self.shadow: ShadowPlant | None = None
         self.drone_link: Any = None
+        self.gamepad: Any = None
         self.url = ""
         self.board_url = ""
         self.objects: list[SceneObject] = []
@@ -128,6 +129,8 @@ class HostApp:
             self._spawn(self._replay_loop, "replay")
         if o.virtual_rc is not None:
             self._spawn(self._virtual_rc_loop, "virtual-rc")
+        if o.gamepad is not None:
+            self._start_gamepad(o.gamepad)
 
     def _spawn(self, target: Callable[[], None], name: str) -> None:
         t = threading.Thread(target=target, name=name, daemon=True)
@@ -155,6 +158,16 @@ class HostApp:
         # The objects of the plant we asked for (free objects drawn where they start).
         self.objects.extend(scene_objects(config.plant.model.objects))
         return url
+
+    def _start_gamepad(self, path: str) -> None:
+        from host.gamepad import Gamepad
+
+        pad = Gamepad(path, self.model, CLI_CLIENT, self.options.gamepad_map)
+        try:
+            pad.start()
+        except OSError as exc:
+            raise HostError(f"--gamepad {path}: {exc.strerror or exc}") from exc
+        self.gamepad = pad
 
     def _start_drone_link(self) -> None:
         o = self.options
@@ -337,6 +350,9 @@ class HostApp:
         for t in self._threads:
             t.join(timeout=3.0)
         self._threads = []
+        if self.gamepad is not None:
+            self.gamepad.stop()
+            self.gamepad = None
         if self.panel is not None:
             self.panel.stop()
             self.panel = None

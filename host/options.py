@@ -16,6 +16,7 @@ from pathlib import Path
 
 from controller.cli_kit import Parser, port_number, positive_duration
 from host.errors import HostError
+from host.gamepad import DEFAULT_MAPPING, GamepadMapping, format_mapping, parse_mapping
 from host.model import new_token
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
 from protocol.dbus import Lever
@@ -86,6 +87,19 @@ def build_parser() -> argparse.ArgumentParser:
         f"Default: one {describe_object(DEFAULT_OBJECT)}, a pole the grasp strategy wraps",
     )
     src.add_argument("--no-object", action="store_true", help="virtual board only: an empty scene")
+    src.add_argument(
+        "--gamepad",
+        metavar="DEVICE",
+        help="a Linux joystick device (/dev/input/js0) as the virtual radio: right stick ch0/ch1, left "
+        "stick ch2/ch3, D-pad up/down steps the right lever, Y/A the left lever, Start asks for control "
+        "(Xbox layout); a browser tab that asks for control gets it",
+    )
+    src.add_argument(
+        "--gamepad-map",
+        metavar="MAP",
+        help="with --gamepad: change inputs of the mapping, e.g. ch1=-a4,right=b5/b4 (chN=[-]aK axis K, "
+        f"levers UP/DOWN inputs aK, -aK or bK); default {format_mapping(DEFAULT_MAPPING)}",
+    )
     ui = p.add_argument_group("panel")
     ui.add_argument("--ui-host", default="127.0.0.1", help="address the panel binds (default 127.0.0.1)")
     ui.add_argument("--ui-port", type=port_number, default=8080, help="panel port (default 8080; 0 = any)")
@@ -155,6 +169,8 @@ class HostOptions:
         shadow: with ``port``, run the shadow plant when the board sends no poses.
         objects: fixed objects added to the virtual board's scene (the command line's default:
             ``host.object_spec.DEFAULT_OBJECT``; ``--no-object``: none).
+        gamepad: joystick device driving the virtual radio (None: none).
+        gamepad_map: its mapping.
     """
 
     port: str | None = None
@@ -174,6 +190,8 @@ class HostOptions:
     mav_signing_timestamp: Path | None = None
     shadow: bool = True
     objects: tuple[ObjectSpec, ...] = ()
+    gamepad: str | None = None
+    gamepad_map: GamepadMapping = DEFAULT_MAPPING
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> HostOptions:
@@ -191,6 +209,8 @@ class HostOptions:
                 raise HostError("--replay and --record cannot be combined")
             if ns.virtual_rc is not None:
                 raise HostError("--virtual-rc needs a board; it cannot be used with --replay")
+            if ns.gamepad is not None:
+                raise HostError("--gamepad needs a board; it cannot be used with --replay")
             if not ns.replay.is_file():
                 raise HostError(f"no such recording: {ns.replay}")
             from hil.recording import is_mcap
@@ -200,6 +220,7 @@ class HostOptions:
         if ns.port is not None:
             check_board_url(ns.port)
         objects = _objects_from_args(ns)
+        gamepad_map = _gamepad_from_args(ns)
         if ns.mavlink is not None:
             check_mavlink_url(ns.mavlink)
         if ns.record is not None and not ns.record.parent.exists():
@@ -239,7 +260,33 @@ class HostOptions:
             mav_signing_timestamp=ns.mav_signing_timestamp,
             shadow=not ns.no_shadow,
             objects=objects,
+            gamepad=ns.gamepad,
+            gamepad_map=gamepad_map,
         )
+
+
+def _gamepad_from_args(ns: argparse.Namespace) -> GamepadMapping:
+    """Check ``--gamepad`` / ``--gamepad-map``; the mapping to use.
+
+    Raises:
+        HostError: a combination that cannot work, a device that cannot be read, a malformed mapping.
+    """
+    if ns.gamepad is None:
+        if ns.gamepad_map is not None:
+            raise HostError("--gamepad-map needs --gamepad")
+        return DEFAULT_MAPPING
+    if ns.virtual_rc is not None:
+        raise HostError("--gamepad and --virtual-rc cannot be combined (both drive the virtual radio)")
+    if not os.path.exists(ns.gamepad):
+        raise HostError(f"--gamepad {ns.gamepad}: no such device")
+    if not os.access(ns.gamepad, os.R_OK):
+        raise HostError(f"--gamepad {ns.gamepad}: not readable (is your user in the 'input' group?)")
+    if ns.gamepad_map is None:
+        return DEFAULT_MAPPING
+    try:
+        return parse_mapping(ns.gamepad_map)
+    except ValueError as exc:
+        raise HostError(f"--gamepad-map {ns.gamepad_map}: {exc}") from None
 
 
 def _objects_from_args(ns: argparse.Namespace) -> tuple[ObjectSpec, ...]:

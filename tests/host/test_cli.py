@@ -138,6 +138,11 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--object", "cylinder:d=2mm,z=0m", "--no-object"], "--object and --no-object cannot be combined"),
         (["--object", "cylinder:d=2mm,z=0m", "--port", "loop://"], "--object is for the virtual board"),
         (["--no-object", "--port", "loop://"], "--no-object is for the virtual board"),
+        (["--gamepad", "/nonexistent/js0", "--headless"], "--gamepad /nonexistent/js0: no such device"),
+        (["--gamepad", "/dev/null", "--virtual-rc", "safe"], "--gamepad and --virtual-rc cannot be combined"),
+        (["--gamepad", "/dev/null", "--replay", "x.mcap"], "cannot be used with --replay"),
+        (["--gamepad-map", "ch0=a1", "--headless"], "--gamepad-map needs --gamepad"),
+        (["--gamepad", "/dev/null", "--gamepad-map", "ch0=b1"], "a stick channel needs an axis"),
     ],
 )
 def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
