@@ -11,6 +11,7 @@ import errno
 import ipaddress
 import os
 import socket
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -277,16 +278,30 @@ def _gamepad_from_args(ns: argparse.Namespace) -> GamepadMapping:
         return DEFAULT_MAPPING
     if ns.virtual_rc is not None:
         raise HostError("--gamepad and --virtual-rc cannot be combined (both drive the virtual radio)")
-    if not os.path.exists(ns.gamepad):
-        raise HostError(f"--gamepad {ns.gamepad}: no such device")
+    mapping = DEFAULT_MAPPING
+    if ns.gamepad_map is not None:
+        try:
+            mapping = parse_mapping(ns.gamepad_map)
+        except ValueError as exc:
+            raise HostError(f"--gamepad-map {ns.gamepad_map}: {exc}") from None
+    try:
+        st = os.stat(ns.gamepad)
+    except FileNotFoundError:
+        raise HostError(f"--gamepad {ns.gamepad}: no such device") from None
+    except OSError as exc:
+        raise HostError(f"--gamepad {ns.gamepad}: {exc.strerror or exc}") from None
+    # A joystick is a character device of the input major (13); a FIFO delivers recorded events. Anything
+    # else (a file, /dev/null) would read as a pad unplugged over and over.
+    joystick = stat.S_ISCHR(st.st_mode) and os.major(st.st_rdev) == _INPUT_MAJOR
+    if not (joystick or stat.S_ISFIFO(st.st_mode)):
+        raise HostError(f"--gamepad {ns.gamepad}: not a joystick device (/dev/input/jsN)")
     if not os.access(ns.gamepad, os.R_OK):
         raise HostError(f"--gamepad {ns.gamepad}: not readable (is your user in the 'input' group?)")
-    if ns.gamepad_map is None:
-        return DEFAULT_MAPPING
-    try:
-        return parse_mapping(ns.gamepad_map)
-    except ValueError as exc:
-        raise HostError(f"--gamepad-map {ns.gamepad_map}: {exc}") from None
+    return mapping
+
+
+_INPUT_MAJOR = 13
+"""Linux's input subsystem's device major number (``/dev/input/js*``, ``event*``)."""
 
 
 def _objects_from_args(ns: argparse.Namespace) -> tuple[ObjectSpec, ...]:

@@ -142,6 +142,7 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--gamepad", "/dev/null", "--virtual-rc", "safe"], "--gamepad and --virtual-rc cannot be combined"),
         (["--gamepad", "/dev/null", "--replay", "x.mcap"], "cannot be used with --replay"),
         (["--gamepad-map", "ch0=a1", "--headless"], "--gamepad-map needs --gamepad"),
+        (["--gamepad", "/dev/null", "--headless"], "--gamepad /dev/null: not a joystick device"),
         (["--gamepad", "/dev/null", "--gamepad-map", "ch0=b1"], "a stick channel needs an axis"),
     ],
 )
