@@ -26,6 +26,7 @@ from controller.cli_kit import (
 )
 from host.app import HostApp
 from host.errors import HostError
+from host.object_spec import describe_object
 from host.options import PROG, HostOptions, build_parser
 
 __all__ = ["HostApp", "HostError", "HostOptions", "build_parser", "main"]
@@ -61,6 +62,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return EXIT_USAGE
             source = f"replay {options.replay}" if options.replay else app.board_url
             print(f"{PROG}: board link {source}", flush=True)
+            for n, spec in enumerate(options.objects, start=1):
+                print(f"{PROG}: scene object{n} {describe_object(spec)}", flush=True)
             if app.url:
                 print(f"{PROG}: panel at {app.url}", flush=True)
                 if options.token is None:

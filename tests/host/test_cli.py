@@ -343,7 +343,10 @@ def test_mavlink_signing_timestamp_path_flag(tmp_path: Path, capsys: pytest.Capt
 
 def test_default_starts_the_virtual_board(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--headless", "--duration", "2", "--virtual-rc", "safe"]) == 0
-    assert "board link" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "board link" in out
+    assert "scene object1 cylinder:d=20mm,len=60mm,x=70mm,y=0mm,z=-140mm,axis=y" in out  # the default demo's
+    assert "summary:" in out and "ended in mode SAFE, phase OK" in out
 
 
 def test_virtual_board_over_a_pty_with_manual_rc() -> None:
