@@ -5,15 +5,17 @@ arm's HEARTBEAT, reads its parameters, sets one, grabs with MAV_CMD_DO_GRIPPER (
 ACCEPTED), reads the NAMED_VALUE_FLOAT tensions, and measures the command round trip. Everything in and
 out is written to a .tlog that ``mavlogdump.py`` reads.
 
-    .venv/bin/python examples/04_drone_link.py
+    .venv/bin/python examples/04_drone_link.py       # under 10 s (1.5 s measured on a loaded 2-core machine)
     .venv/bin/python examples/04_drone_link.py --url udpout:127.0.0.1:14550 --seconds 60
 
 With ``--url`` it just runs the link for a while so you can attach MAVProxy or QGroundControl, e.g.
 ``mavproxy.py --master=udpin:127.0.0.1:14550 --target-system=1 --target-component=25 --mav20`` then
 ``param fetch``, ``long DO_GRIPPER 25 1``, ``watch NAMED_VALUE_FLOAT``.
 
-The board here is a few lines of script standing in for the firmware (armed, GRASP mode, a grasp that
-reaches, wraps and holds); ``spirob-host --mavlink URL`` wires the same link to the real board.
+The demo exits 1 with one line when a step does not happen (a message missing for 5 s, the parameter not
+taken, the grab not ACCEPTED). The board here is a few lines of script standing in for the firmware
+(armed, GRASP mode, a grasp that reaches, wraps and holds); ``spirob-host --mavlink URL`` wires the same
+link to the real board.
 """
 
 from __future__ import annotations
@@ -105,7 +107,7 @@ def free_udp_port() -> int:
 def recv(gcs: object, mtype: str, timeout_s: float = 5.0, cond: str | None = None) -> object:
     msg = gcs.recv_match(type=mtype, blocking=True, timeout=timeout_s, condition=cond)  # type: ignore[attr-defined]
     if msg is None:
-        sys.exit(f"no {mtype} within {timeout_s} s")
+        sys.exit(f"demo failed: no {mtype} within {timeout_s} s")
     return msg
 
 
@@ -129,6 +131,8 @@ def demo(tlog: Path) -> None:
             gcs.mav.param_set_send(1, 25, b"PRETENSION_N", 0.8, mav.ParamType.REAL32)
             pv = recv(gcs, "PARAM_VALUE", cond="PARAM_VALUE.param_id=='PRETENSION_N'")
             print(f"  set PRETENSION_N -> board took {pv.param_value:g}")  # type: ignore[attr-defined]
+            if abs(pv.param_value - 0.8) > 1e-6:  # type: ignore[attr-defined]
+                sys.exit(f"demo failed: PRETENSION_N is {pv.param_value:g}, not 0.8")  # type: ignore[attr-defined]
 
             gcs.mav.command_long_send(
                 1, 25, mav.MAV_CMD_DO_GRIPPER, 0, 25, mav.GripperAction.GRAB, 0, 0, 0, 0, 0
@@ -138,6 +142,8 @@ def demo(tlog: Path) -> None:
                 print(f"  DO_GRIPPER grab: {mav.MavResult(ack.result).name} progress {ack.progress}")  # type: ignore[attr-defined]
                 if ack.result != mav.MavResult.IN_PROGRESS:  # type: ignore[attr-defined]
                     break
+            if ack.result != mav.MavResult.ACCEPTED:  # type: ignore[attr-defined]
+                sys.exit(f"demo failed: DO_GRIPPER grab ended {mav.MavResult(ack.result).name}")  # type: ignore[attr-defined]
 
             values = {}
             while len(values) < 6:

@@ -24,10 +24,11 @@ def add_design_arguments(parser: argparse.ArgumentParser) -> None:
 
     A design is one of: a preset (default ``prototype``: a model preset, :mod:`hil.model_presets`,
     which names its design and its plant model); physical inputs (``--length`` and ``--tip-width`` with
-    ``--taper-deg`` or ``--base-width``); or spiral parameters (``--a``, ``--b``, ``--theta0-deg`` or
-    ``--units``). ``--dtheta-deg`` and ``--cables`` apply to the last two forms.
+    ``--taper-deg`` or ``--base-width``); spiral parameters (``--a``, ``--b``, ``--theta0-deg`` or
+    ``--units``); or a preset with single values of one of the other two forms changed (the rest are the
+    preset's). ``--dtheta-deg`` applies to every form but a bare preset; ``--cables`` to every form.
     """
-    g = parser.add_argument_group("design (default: --preset prototype)")
+    g = parser.add_argument_group("design (default: --preset prototype)", _COMBINATIONS)
     listing = "; ".join(f"{p.name}: {p.summary}" for p in PRESETS.values())
     g.add_argument(
         "--preset",
@@ -55,6 +56,15 @@ def add_design_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--cables", type=int, choices=(1, 2, 3), help="number of cables (default 3)")
 
 
+_COMBINATIONS = (
+    "Valid combinations: (1) nothing, or --preset NAME: a named design; (2) physical inputs: --length and "
+    "--tip-width with exactly one of --taper-deg / --base-width; (3) spiral parameters: --a and --b with "
+    "exactly one of --theta0-deg / --units; (4) --preset NAME with any single values of (2) or of (3), not "
+    "both: the preset's design with those values changed (e.g. --preset prototype --length 0.3, --preset "
+    "authors --units 20). --dtheta-deg goes with (2), (3) and (4); --cables with all of them."
+)
+
+
 def design_from_args(args: argparse.Namespace) -> SpiralDesign:
     """Build the design the options of :func:`add_design_arguments` describe.
 
@@ -79,11 +89,14 @@ def design_from_args(args: argparse.Namespace) -> SpiralDesign:
 def _design_from_args(args: argparse.Namespace) -> SpiralDesign:
     physical = [args.length, args.tip_width, args.taper_deg, args.base_width]
     params = [args.a, args.b, args.theta0_deg, args.units]
-    forms = sum(
-        [args.preset is not None, any(v is not None for v in physical), any(v is not None for v in params)]
-    )
-    if forms > 1:
-        raise UsageError("give a --preset, physical inputs or spiral parameters, not a mix")
+    has_physical = any(v is not None for v in physical)
+    has_params = any(v is not None for v in params)
+    if has_physical and has_params:
+        raise UsageError(
+            "give physical inputs or spiral parameters, not both (--help lists the combinations)"
+        )
+    if args.preset is not None and (has_physical or has_params or args.dtheta_deg is not None):
+        return _preset_overridden(args, physical=has_physical, params=has_params)
     cables = 3 if args.cables is None else args.cables
     dtheta = math.radians(30.0 if args.dtheta_deg is None else args.dtheta_deg)
     if any(v is not None for v in physical):
@@ -119,6 +132,59 @@ def _design_from_args(args: argparse.Namespace) -> SpiralDesign:
     if args.cables is not None:
         return design.with_cables(cables)
     return design if chosen.cables is None else design.with_cables(chosen.cables)
+
+
+def _preset_overridden(args: argparse.Namespace, *, physical: bool, params: bool) -> SpiralDesign:
+    """The ``--preset``'s design with the single values given on the command line changed.
+
+    Physical overrides start from the preset's physical inputs when it was built from them (the
+    prototype: the requested 0.23 m, not the realised length), else from its derived length, tip width and
+    taper; spiral-parameter overrides start from its ``a``, ``b``, θ0 and Δθ. ``--dtheta-deg`` alone keeps
+    the preset's own form.
+    """
+    chosen = PRESETS[args.preset]
+    base = SpiralDesign.preset(chosen.design_preset)
+    cables = args.cables if args.cables is not None else (chosen.cables or base.cables)
+    inputs = dict(base.inputs)
+    built_physical = "length_m" in inputs
+    dtheta = base.dtheta_rad if args.dtheta_deg is None else math.radians(args.dtheta_deg)
+    if params or (not physical and not built_physical):
+        if args.theta0_deg is not None and args.units is not None:
+            raise UsageError("give at most one of --theta0-deg and --units")
+        if args.units is not None:
+            if not 1 <= args.units <= MAX_UNITS_N:
+                raise ValueError(f"--units must be 1..{MAX_UNITS_N}, got {args.units}")
+            theta0 = args.units * dtheta
+        elif args.theta0_deg is not None:
+            theta0 = math.radians(args.theta0_deg)
+        else:
+            # Δθ changed alone: keep the unit count (θ0 scales with it).
+            theta0 = base.units * dtheta
+        a = base.a_m if args.a is None else args.a
+        b = base.b if args.b is None else args.b
+        return SpiralDesign.from_params(a, b, theta0, dtheta, cables)
+    length = inputs.get("length_m", base.length_m) if args.length is None else args.length
+    tip = inputs.get("tip_width_m", base.tip_width_m) if args.tip_width is None else args.tip_width
+    if args.taper_deg is not None and args.base_width is not None:
+        raise UsageError("give at most one of --taper-deg and --base-width")
+    taper: float | None
+    base_width: float | None = args.base_width
+    if args.taper_deg is not None:
+        taper = math.radians(args.taper_deg)
+    elif base_width is not None:
+        taper = None
+    elif "base_width_m" in inputs:
+        taper, base_width = None, inputs["base_width_m"]
+    else:
+        taper = inputs.get("taper_rad", base.taper_rad)
+    return SpiralDesign.from_physical(
+        length_m=length,
+        tip_width_m=tip,
+        taper_rad=taper,
+        base_width_m=base_width,
+        dtheta_rad=dtheta,
+        cables=cables,
+    )
 
 
 def model_from_args(args: argparse.Namespace) -> ModelConfig:

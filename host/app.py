@@ -12,10 +12,11 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from controller.cli_kit import EXIT_OK
+from controller.cli_kit import EXIT_FAILURE, EXIT_OK
 from host.board_client import BoardClient, BoardLinkError, LinkState, load_scaled_s
 from host.errors import HostError
 from host.model import CLI_CLIENT, UiModel
+from host.object_spec import ObjectSpec, plant_objects
 from host.options import (
     HostOptions,
     check_signing_timestamp_writable,
@@ -25,6 +26,7 @@ from host.options import (
 )
 from host.panel_guard import PanelGuard, start_guarded_server
 from host.recording import LinkRecording, replay_messages
+from host.run_summary import RunSummary, SummaryReport
 from host.scene import DronePose, SceneObject, scene_objects
 from host.shadow import ShadowPlant
 from protocol.dbus import Lever
@@ -63,6 +65,11 @@ class HostApp:
         self.recording: LinkRecording | None = None
         self.shadow: ShadowPlant | None = None
         self.drone_link: Any = None
+        self.gamepad: Any = None
+        self.summary = RunSummary()
+        """Modes, phases, failsafes and faults of the run (the summary at exit)."""
+        self.report: SummaryReport | None = None
+        """The summary, taken when :meth:`run` returns."""
         self.url = ""
         self.board_url = ""
         self.objects: list[SceneObject] = []
@@ -101,6 +108,7 @@ class HostApp:
             self.model.link_stats_fn = self.client.stats
             self.model.source_label = "virtual board" if o.port is None else f"board {o.port}"
             self.client.add_listener(self.model.on_board_message)
+            self.client.add_listener(self.summary.on_board_message)
             self.client.add_state_listener(self.model.on_link_state)
             if o.port is not None and o.shadow:
                 # A board that sends no SimPoses (hardware) gets its shape from a local plant driven by
@@ -127,6 +135,8 @@ class HostApp:
             self._spawn(self._replay_loop, "replay")
         if o.virtual_rc is not None:
             self._spawn(self._virtual_rc_loop, "virtual-rc")
+        if o.gamepad is not None:
+            self._start_gamepad(o.gamepad)
 
     def _spawn(self, target: Callable[[], None], name: str) -> None:
         t = threading.Thread(target=target, name=name, daemon=True)
@@ -144,6 +154,8 @@ class HostApp:
         from hil.errors import HilError  # type: ignore[import-not-found,unused-ignore]
 
         config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
+        if self.options.objects:
+            config = _with_objects(config, self.options.objects)
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
             url = str(self.board.start(timeout_s=load_scaled_s(30.0)))
@@ -152,6 +164,16 @@ class HostApp:
         # The objects of the plant we asked for (free objects drawn where they start).
         self.objects.extend(scene_objects(config.plant.model.objects))
         return url
+
+    def _start_gamepad(self, path: str) -> None:
+        from host.gamepad import Gamepad
+
+        pad = Gamepad(path, self.model, CLI_CLIENT, self.options.gamepad_map)
+        try:
+            pad.start()
+        except OSError as exc:
+            raise HostError(f"--gamepad {path}: {exc.strerror or exc}") from exc
+        self.gamepad = pad
 
     def _start_drone_link(self) -> None:
         o = self.options
@@ -285,6 +307,7 @@ class HostApp:
                 if delay > 0 and self._stop.wait(delay):
                     break
                 self.model.on_board_message(msg)
+                self.summary.on_board_message(msg)
         if messages:
             _log.info("replay finished: %d messages", len(messages))
         else:
@@ -294,10 +317,12 @@ class HostApp:
         self.replay_done.set()
 
     def run(self, duration_s: float | None = None, stop: threading.Event | None = None) -> int:
-        """Serve until ``duration_s`` passes, ``stop`` is set, or (headless) a replay ends.
+        """Serve until ``duration_s`` passes, ``stop`` is set, or (headless) a replay ends; then take the
+        run's summary (:attr:`report`).
 
         Returns:
-            The exit status.
+            The exit status: 1 if a ``--virtual-rc`` run ended latched in a failsafe, saw a fault or no
+            telemetry at all (:meth:`SummaryReport.failure`), else 0.
         """
         stop = stop or threading.Event()
         end = None if duration_s is None else time.monotonic() + duration_s
@@ -313,7 +338,17 @@ class HostApp:
                 _log.info("%s", self.status_line())
             wait = 0.1 if end is None else max(0.0, min(0.1, end - now))
             stop.wait(wait)
+        self.report = self.take_report()
+        if self.options.virtual_rc is not None and self.report.failure() is not None:
+            return EXIT_FAILURE
         return EXIT_OK
+
+    def take_report(self) -> SummaryReport:
+        """The run's summary so far, with the virtual radio's gaps from the link (when there is one)."""
+        if self.client is None:
+            return self.summary.report()
+        stats = self.client.stats()
+        return self.summary.report(stats.rc_gaps_over_timeout, stats.rc_max_gap_us)
 
     def status_line(self) -> str:
         """One line of progress: link state, telemetry count, mode and phase."""
@@ -334,6 +369,9 @@ class HostApp:
         for t in self._threads:
             t.join(timeout=3.0)
         self._threads = []
+        if self.gamepad is not None:
+            self.gamepad.stop()
+            self.gamepad = None
         if self.panel is not None:
             self.panel.stop()
             self.panel = None
@@ -366,6 +404,13 @@ def _replace(obj: Any, **changes: Any) -> Any:
     import dataclasses
 
     return dataclasses.replace(obj, **changes)
+
+
+def _with_objects(config: Any, specs: tuple[ObjectSpec, ...]) -> Any:
+    """``config`` (a ``hil.board.BoardConfig``) with the ``--object`` objects added to its plant."""
+    model = config.plant.model
+    model = model.with_objects(*plant_objects(specs, model))
+    return _replace(config, plant=_replace(config.plant, model=model))
 
 
 def ned_to_scene(position: Any, attitude: Any) -> DronePose:

@@ -5,8 +5,9 @@ on http://127.0.0.1:8080. ``--port`` connects to a real board (``/dev/ttyACM0``)
 instead. Start-up errors (wrong port, busy port, UI port taken, bad flags) print one line and exit 2;
 a board that vanishes mid-run is retried until it comes back, with the panel showing "disconnected".
 
-Exit status: 0 normal end (``--duration`` elapsed, Ctrl-C, replay finished headless), 1 runtime failure,
-2 start-up or usage error.
+Exit status: 0 normal end (``--duration`` elapsed, Ctrl-C, replay finished headless), 1 runtime failure
+or a ``--virtual-rc`` run that ended latched in a failsafe, saw a fault or got no telemetry, 2 start-up or
+usage error. A summary of the run (time per mode and phase, failsafes, faults, RC gaps) is printed at exit.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from controller.cli_kit import (
 )
 from host.app import HostApp
 from host.errors import HostError
+from host.object_spec import describe_object
 from host.options import PROG, HostOptions, build_parser
 
 __all__ = ["HostApp", "HostError", "HostOptions", "build_parser", "main"]
@@ -40,7 +42,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     # viser server and numpy work run in other threads (default 5 ms).
     sys.setswitchinterval(0.001)
     logging.basicConfig(
-        level=getattr(logging, ns.log_level.upper()), format="%(levelname)s %(name)s: %(message)s"
+        level=getattr(logging, ns.log_level.upper()),
+        format="%(asctime)s.%(msecs)03d %(levelname)s %(name)s: %(message)s",
+        datefmt="%H:%M:%S",
     )
     try:
         options = HostOptions.from_args(ns)
@@ -59,6 +63,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return EXIT_USAGE
             source = f"replay {options.replay}" if options.replay else app.board_url
             print(f"{PROG}: board link {source}", flush=True)
+            for n, spec in enumerate(options.objects, start=1):
+                print(f"{PROG}: scene object{n} {describe_object(spec)}", flush=True)
             if app.url:
                 print(f"{PROG}: panel at {app.url}", flush=True)
                 if options.token is None:
@@ -69,7 +75,15 @@ def main(argv: Sequence[str] | None = None) -> int:
                     )
             if options.record is not None:
                 print(f"{PROG}: recording to {options.record}", flush=True)
-            return app.run(options.duration_s, stop)
+            status = app.run(options.duration_s, stop)
+            report = app.report
+            if report is not None:
+                for line in report.lines():
+                    print(f"{PROG}: {line}", flush=True)
+                failure = report.failure()
+                if status == EXIT_FAILURE and failure is not None:
+                    error_line(PROG, f"--virtual-rc run failed: {failure}")
+            return status
         except KeyboardInterrupt:  # Ctrl-C outside the main thread's handler: a normal end too
             return EXIT_OK
         except Exception as exc:  # never a traceback for the user; the log has it at debug level

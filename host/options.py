@@ -11,12 +11,15 @@ import errno
 import ipaddress
 import os
 import socket
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
 from controller.cli_kit import Parser, port_number, positive_duration
 from host.errors import HostError
+from host.gamepad import DEFAULT_MAPPING, GamepadMapping, format_mapping, parse_mapping
 from host.model import new_token
+from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
 from protocol.dbus import Lever
 
 __all__ = [
@@ -73,6 +76,30 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="with --port: do not run the shadow plant (the arm's shape from the measured motor currents "
         "of a board that sends no poses)",
+    )
+    src.add_argument(
+        "--object",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="virtual board only, repeatable: a fixed object in the scene, placed from the arm's base "
+        "(x forward, y left, z up), lengths with units: SHAPE:d=DIAMETER,z=HEIGHT[,x=..][,y=..][,len=..]"
+        "[,axis=x|y|z], SHAPE cylinder or capsule, e.g. cylinder:d=20mm,x=40mm,z=-110mm. "
+        f"Default: one {describe_object(DEFAULT_OBJECT)}, a pole the grasp strategy wraps",
+    )
+    src.add_argument("--no-object", action="store_true", help="virtual board only: an empty scene")
+    src.add_argument(
+        "--gamepad",
+        metavar="DEVICE",
+        help="a Linux joystick device (/dev/input/js0) as the virtual radio: right stick ch0/ch1, left "
+        "stick ch2/ch3, D-pad up/down steps the right lever, Y/A the left lever, Start asks for control "
+        "(Xbox layout); a browser tab that asks for control gets it",
+    )
+    src.add_argument(
+        "--gamepad-map",
+        metavar="MAP",
+        help="with --gamepad: change inputs of the mapping, e.g. ch1=-a4,right=b5/b4 (chN=[-]aK axis K, "
+        f"levers UP/DOWN inputs aK, -aK or bK); default {format_mapping(DEFAULT_MAPPING)}",
     )
     ui = p.add_argument_group("panel")
     ui.add_argument("--ui-host", default="127.0.0.1", help="address the panel binds (default 127.0.0.1)")
@@ -141,6 +168,10 @@ class HostOptions:
         mav_signing_timestamp: file persisting the signing timestamp (None with a key:
             ``<key file>.timestamp``).
         shadow: with ``port``, run the shadow plant when the board sends no poses.
+        objects: fixed objects added to the virtual board's scene (the command line's default:
+            ``host.object_spec.DEFAULT_OBJECT``; ``--no-object``: none).
+        gamepad: joystick device driving the virtual radio (None: none).
+        gamepad_map: its mapping.
     """
 
     port: str | None = None
@@ -159,6 +190,9 @@ class HostOptions:
     mav_signing_key: Path | None = None
     mav_signing_timestamp: Path | None = None
     shadow: bool = True
+    objects: tuple[ObjectSpec, ...] = ()
+    gamepad: str | None = None
+    gamepad_map: GamepadMapping = DEFAULT_MAPPING
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> HostOptions:
@@ -176,6 +210,8 @@ class HostOptions:
                 raise HostError("--replay and --record cannot be combined")
             if ns.virtual_rc is not None:
                 raise HostError("--virtual-rc needs a board; it cannot be used with --replay")
+            if ns.gamepad is not None:
+                raise HostError("--gamepad needs a board; it cannot be used with --replay")
             if not ns.replay.is_file():
                 raise HostError(f"no such recording: {ns.replay}")
             from hil.recording import is_mcap
@@ -184,6 +220,8 @@ class HostOptions:
                 raise HostError(f"{ns.replay} is not an MCAP recording")
         if ns.port is not None:
             check_board_url(ns.port)
+        objects = _objects_from_args(ns)
+        gamepad_map = _gamepad_from_args(ns)
         if ns.mavlink is not None:
             check_mavlink_url(ns.mavlink)
         if ns.record is not None and not ns.record.parent.exists():
@@ -222,7 +260,74 @@ class HostOptions:
             mav_signing_key=ns.mav_signing_key,
             mav_signing_timestamp=ns.mav_signing_timestamp,
             shadow=not ns.no_shadow,
+            objects=objects,
+            gamepad=ns.gamepad,
+            gamepad_map=gamepad_map,
         )
+
+
+def _gamepad_from_args(ns: argparse.Namespace) -> GamepadMapping:
+    """Check ``--gamepad`` / ``--gamepad-map``; the mapping to use.
+
+    Raises:
+        HostError: a combination that cannot work, a device that cannot be read, a malformed mapping.
+    """
+    if ns.gamepad is None:
+        if ns.gamepad_map is not None:
+            raise HostError("--gamepad-map needs --gamepad")
+        return DEFAULT_MAPPING
+    if ns.virtual_rc is not None:
+        raise HostError("--gamepad and --virtual-rc cannot be combined (both drive the virtual radio)")
+    mapping = DEFAULT_MAPPING
+    if ns.gamepad_map is not None:
+        try:
+            mapping = parse_mapping(ns.gamepad_map)
+        except ValueError as exc:
+            raise HostError(f"--gamepad-map {ns.gamepad_map}: {exc}") from None
+    try:
+        st = os.stat(ns.gamepad)
+    except FileNotFoundError:
+        raise HostError(f"--gamepad {ns.gamepad}: no such device") from None
+    except OSError as exc:
+        raise HostError(f"--gamepad {ns.gamepad}: {exc.strerror or exc}") from None
+    # A joystick is a character device of the input major (13); a FIFO delivers recorded events. Anything
+    # else (a file, /dev/null) would read as a pad unplugged over and over.
+    joystick = stat.S_ISCHR(st.st_mode) and os.major(st.st_rdev) == _INPUT_MAJOR
+    if not (joystick or stat.S_ISFIFO(st.st_mode)):
+        raise HostError(f"--gamepad {ns.gamepad}: not a joystick device (/dev/input/jsN)")
+    if not os.access(ns.gamepad, os.R_OK):
+        raise HostError(f"--gamepad {ns.gamepad}: not readable (is your user in the 'input' group?)")
+    return mapping
+
+
+_INPUT_MAJOR = 13
+"""Linux's input subsystem's device major number (``/dev/input/js*``, ``event*``)."""
+
+
+def _objects_from_args(ns: argparse.Namespace) -> tuple[ObjectSpec, ...]:
+    """``--object`` / ``--no-object``: the virtual board's objects (the default demo's one if neither).
+
+    Raises:
+        HostError: a malformed spec, or objects asked of a board that has no scene to add them to.
+    """
+    if ns.no_object and ns.object:
+        raise HostError("--object and --no-object cannot be combined")
+    if ns.port is not None or ns.replay is not None:
+        if ns.object or ns.no_object:
+            flag = "--object" if ns.object else "--no-object"
+            raise HostError(f"{flag} is for the virtual board (no --port, no --replay)")
+        return ()
+    if ns.no_object:
+        return ()
+    if not ns.object:
+        return (DEFAULT_OBJECT,)
+    specs = []
+    for text in ns.object:
+        try:
+            specs.append(parse_object(text))
+        except ValueError as exc:
+            raise HostError(f"--object {text}: {exc}") from None
+    return tuple(specs)
 
 
 def signing_timestamp_path(options: HostOptions) -> Path | None:

@@ -23,3 +23,22 @@ def test_example_runs(example: Path, tmp_path: Path) -> None:
     )
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert proc.stdout.strip()
+
+
+def test_the_host_example_fails_with_one_line_and_exit_1() -> None:
+    """A demo that cannot run says why in one line and exits 1 (never a traceback, never exit 0)."""
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on: take one, then free it
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    example = ROOT / "examples" / "03_host_panel.py"
+    proc = subprocess.run(
+        [sys.executable, str(example), "--port", f"socket://127.0.0.1:{port}"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("03_host_panel: cannot start: board link:"), lines

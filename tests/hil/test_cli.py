@@ -12,6 +12,8 @@ import pytest
 from hil.cli import COMMANDS, build_parser, main
 from hil.spiral import AUTHORS_DEFAULT, PAPER_PROTOTYPE
 
+PAPER_PROTOTYPE_INPUTS = {k: v for k, v in PAPER_PROTOTYPE.inputs}
+
 
 def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
     status = main(argv)
@@ -105,6 +107,35 @@ def test_an_experiment_runs_on_the_preset_it_is_given(capsys: pytest.CaptureFixt
     assert json.loads(out)["timestep_s"] == 0.0005
 
 
+def test_design_from_a_preset_with_single_values_changed(capsys: pytest.CaptureFixture[str]) -> None:
+    def design(*argv: str) -> dict[str, object]:
+        status, out, _ = run(["design", "--json", *argv], capsys)
+        assert status == 0
+        data: dict[str, object] = json.loads(out)
+        return data
+
+    longer = design("--preset", "prototype", "--length", "0.3")
+    # The prototype's own inputs (tip 7 mm, taper 6.5°, Δθ 30°) with the length changed.
+    assert longer["inputs"] == {**PAPER_PROTOTYPE_INPUTS, "length_m": 0.3}
+    assert longer["b"] == pytest.approx(PAPER_PROTOTYPE.b) and longer["units"] > PAPER_PROTOTYPE.units
+    fewer = design("--preset", "authors", "--units", "20")
+    assert fewer["units"] == 20 and fewer["a_m"] == pytest.approx(AUTHORS_DEFAULT.a_m)
+    assert fewer["b"] == pytest.approx(AUTHORS_DEFAULT.b)
+    finer = design("--preset", "prototype", "--dtheta-deg", "20")
+    assert finer["dtheta_rad"] == pytest.approx(math.radians(20)) and finer["units"] > PAPER_PROTOTYPE.units
+    table = design("--preset", "table", "--tip-width", "0.01")
+    assert table["cables"] == 2  # the table preset's cable count stays
+    assert design("--preset", "prototype", "--b", "0.2")["b"] == 0.2
+
+
+def test_design_help_lists_the_valid_combinations(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["design", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "Valid combinations: (1) nothing, or --preset NAME" in out
+    assert "(4) --preset NAME with any single values of (2) or of (3), not both" in out
+
+
 @pytest.mark.parametrize(
     "argv",
     [
@@ -116,8 +147,12 @@ def test_an_experiment_runs_on_the_preset_it_is_given(capsys: pytest.CaptureFixt
         ["design", "--a", "0.005", "--b", "0.15", "--units", "0"],
         ["design", "--length", "0.2", "--tip-width", "0.007"],
         ["design", "--length", "0.2", "--taper-deg", "6"],
-        ["design", "--preset", "authors", "--length", "0.2"],
-        ["design", "--preset", "prototype", "--dtheta-deg", "20"],
+        # a preset takes single values of one form, never of both; the result must still be a design
+        ["design", "--preset", "authors", "--length", "0.2", "--a", "0.005"],
+        ["design", "--preset", "authors", "--theta0-deg", "100"],
+        ["design", "--preset", "authors", "--theta0-deg", "720", "--units", "24"],
+        ["design", "--preset", "prototype", "--taper-deg", "6", "--base-width", "0.03"],
+        ["design", "--preset", "prototype", "--base-width", "0.005"],
         ["design", "--preset", "nope"],
         ["model", "export", "-o", "x.xml", "--preset", "nope"],
         ["experiment", "packing", "--preset", "nope"],

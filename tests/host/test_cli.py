@@ -17,6 +17,7 @@ from link_peer import LinkPeer
 from terminal import ctrl_c, start_in_own_group
 
 from host.cli import HostApp, HostOptions, build_parser, main
+from host.object_spec import DEFAULT_OBJECT, ObjectSpec
 from protocol.dbus import Lever
 from protocol.messages import Mode, Phase
 
@@ -130,11 +131,38 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--mavlink", "udpout:127.0.0.1:99999", "--headless"], "port 99999 is out of range 1..65535"),
         (["--mavlink", "udpout:127.0.0.1", "--headless"], "expected udpout:HOST:PORT"),
         (["--mavlink", "bogus:://x", "--headless"], "unknown connection type 'bogus'"),
+        (["--object", "cylinder:d=20,z=-110mm", "--headless"], "d=20: give a unit (mm, cm or m)"),
+        (["--object", "cube:d=20mm,z=-110mm", "--headless"], "unknown shape 'cube'"),
+        (["--object", "cylinder:d=20mm", "--headless"], "z= is required"),
+        (["--object", "cylinder:d=20mm,z=-9m", "--headless"], "z must be within"),
+        (["--object", "cylinder:d=2mm,z=0m", "--no-object"], "--object and --no-object cannot be combined"),
+        (["--object", "cylinder:d=2mm,z=0m", "--port", "loop://"], "--object is for the virtual board"),
+        (["--no-object", "--port", "loop://"], "--no-object is for the virtual board"),
+        (["--gamepad", "/nonexistent/js0", "--headless"], "--gamepad /nonexistent/js0: no such device"),
+        (["--gamepad", "/dev/null", "--virtual-rc", "safe"], "--gamepad and --virtual-rc cannot be combined"),
+        (["--gamepad", "/dev/null", "--replay", "x.mcap"], "cannot be used with --replay"),
+        (["--gamepad-map", "ch0=a1", "--headless"], "--gamepad-map needs --gamepad"),
+        (["--gamepad", "/dev/null", "--headless"], "--gamepad /dev/null: not a joystick device"),
+        (["--gamepad", "/dev/null", "--gamepad-map", "ch0=b1"], "a stick channel needs an axis"),
     ],
 )
 def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(argv) == 2
     assert needle in one_error_line(capsys.readouterr().err)
+
+
+def test_object_flags_choose_the_virtual_boards_scene() -> None:
+    def objects(*argv: str) -> tuple[ObjectSpec, ...]:
+        return HostOptions.from_args(build_parser().parse_args(list(argv))).objects
+
+    assert objects() == (DEFAULT_OBJECT,)  # the default demo has something to grasp
+    assert objects("--no-object") == ()
+    assert objects("--port", "loop://") == ()  # a real board's scene is not ours to fill
+    two = objects("--object", "cylinder:d=20mm,x=40mm,z=-110mm", "--object", "capsule:d=1cm,z=-0.2m")
+    assert [(o.shape, o.diameter_m, o.z_m) for o in two] == [
+        ("cylinder", 0.02, -0.11),
+        ("capsule", 0.01, -0.2),
+    ]
 
 
 def test_replay_of_a_file_that_is_not_a_recording_exits_2(
@@ -315,7 +343,10 @@ def test_mavlink_signing_timestamp_path_flag(tmp_path: Path, capsys: pytest.Capt
 
 def test_default_starts_the_virtual_board(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--headless", "--duration", "2", "--virtual-rc", "safe"]) == 0
-    assert "board link" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "board link" in out
+    assert "scene object1 cylinder:d=20mm,len=60mm,x=70mm,y=0mm,z=-140mm,axis=y" in out  # the default demo's
+    assert "summary:" in out and "ended in mode SAFE, phase OK" in out
 
 
 def test_virtual_board_over_a_pty_with_manual_rc() -> None:
@@ -405,6 +436,15 @@ def test_the_virtual_boards_objects_are_drawn() -> None:
         assert [o.name for o in app.objects] == ["branch"]
         assert app.panel is not None and len(app.panel.scene.handles.objects) == 1
         assert app.shadow is None  # the embedded virtual board sends its own poses
+
+
+def test_command_line_objects_reach_the_virtual_board() -> None:
+    pole = ObjectSpec("capsule", 0.02, 0.1, 0.09, 0.0, -0.15, "y")
+    with HostApp(HostOptions(ui=False, objects=(pole,))) as app:
+        app.start()
+        assert [(o.name, o.kind) for o in app.objects] == [("object1", "capsule")]
+        # The default drone's mount is at z = 0.98 m.
+        assert app.objects[0].position_m == pytest.approx((0.09, 0.0, 0.83))
 
 
 def test_ctrl_c_in_a_terminal_stops_everything_without_a_traceback() -> None:

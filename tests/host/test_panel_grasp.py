@@ -1,0 +1,109 @@
+"""The default demo's object grasped from the panel, in real headless Chromium.
+
+`spirob-host`'s default scene (the options the command line builds with no flags: the virtual board with
+``host.object_spec.DEFAULT_OBJECT``), driven as a first-time pilot would: take control, right lever DOWN
+(the start-up gate), UP (GRASP mode: the arm packs), then the *Grasp* button; the board's grasp state
+machine reaches HOLD around the pole, and *Release* lets it go.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+from chromium import CHROMIUM, CHROMIUM_ARGS, page_load, page_load_ms
+from playwright import sync_api
+from realtime_guard import scaled_s, timed_out
+
+from host.cli import HostApp, HostOptions, build_parser
+from host.object_spec import DEFAULT_OBJECT
+from host.panel import PanelConfig
+from protocol.messages import GraspState, Mode, Phase
+
+pytestmark = pytest.mark.browser
+
+TOKEN = "t0ken-for-test"
+PANEL = PanelConfig(scene_hz=8.0, plot_hz=2.0, health_hz=4.0)
+
+if shutil.which(CHROMIUM) is None:
+    pytest.fail(f"{CHROMIUM} is not installed: the browser tests need it", pytrace=False)
+
+
+def wait_for(cond: Callable[[], bool], timeout_s: float = 20.0) -> bool:
+    """Poll ``cond`` for ``timeout_s`` scaled with the load (``realtime_guard.scaled_s``)."""
+    deadline = time.monotonic() + scaled_s(timeout_s)
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.05)
+    return cond()
+
+
+@pytest.fixture
+def app() -> Iterator[HostApp]:
+    opts = HostOptions.from_args(build_parser().parse_args(["--ui-port", "0", "--token", TOKEN]))
+    assert opts.objects == (DEFAULT_OBJECT,)  # the default scene, as `spirob-host` builds it
+    with HostApp(opts, panel_config=PANEL) as host:
+        host.start()
+        if not wait_for(lambda: host.model.telemetry is not None, 60.0):
+            timed_out("the first telemetry from the board")
+        yield host
+
+
+@pytest.fixture
+def page(tmp_path_factory: pytest.TempPathFactory, app: HostApp) -> Iterator[Any]:
+    with sync_api.sync_playwright() as p:
+        ctx = p.chromium.launch_persistent_context(
+            str(tmp_path_factory.mktemp("chromium")),
+            executable_path=CHROMIUM,
+            headless=True,
+            args=CHROMIUM_ARGS,
+            viewport={"width": 960, "height": 680},
+        )
+        try:
+            pg = ctx.new_page()
+            with page_load("the panel page"):
+                pg.goto(app.url + "&fixedDpr=1", timeout=page_load_ms())
+                pg.get_by_role("button", exact=True, name="Grasp").wait_for(timeout=page_load_ms())
+            with contextlib.suppress(Exception):  # the software-WebGL toast covers the scene
+                pg.locator(".mantine-Notification-closeButton").first.click(timeout=3_000)
+            yield pg
+        finally:
+            ctx.close()
+
+
+def test_the_default_scenes_object_is_grasped_from_the_panel(app: HostApp, page: Any) -> None:
+    m = app.model
+    assert [o.name for o in app.objects] == ["object1"]
+    assert app.panel is not None and len(app.panel.scene.handles.objects) == 1
+
+    def telemetry() -> Any:
+        return m.telemetry
+
+    page.get_by_role("button", exact=True, name="Take control").click()
+    assert wait_for(lambda: m.holder is not None)
+    page.get_by_role("button", exact=True, name="DOWN").first.click()  # the right lever
+    assert wait_for(lambda: telemetry().phase == Phase.OK), telemetry()
+    page.get_by_role("button", exact=True, name="UP").first.click()
+    assert wait_for(lambda: telemetry().mode == Mode.GRASP), telemetry()
+    # GRASP mode packs the arm (12 N/s up to 18 N): give it 3 s of board time, as the lockstep test does.
+    packed_us = telemetry().time_us + 3_000_000
+    assert wait_for(lambda: telemetry().time_us >= packed_us, 10.0)
+    assert telemetry().grasp_state == GraspState.IDLE
+
+    page.get_by_role("button", exact=True, name="Grasp").click()
+    assert wait_for(lambda: telemetry().grasp_state != GraspState.IDLE, 10.0), telemetry()
+    # Reach, contact, wrap, HOLD: about 4 s of board time in lockstep.
+    assert wait_for(lambda: telemetry().grasp_state in (GraspState.HOLD, GraspState.FAILED), 30.0), (
+        telemetry()
+    )
+    t = telemetry()
+    assert t.grasp_state == GraspState.HOLD, f"the grasp ended {t.grasp_state.name}: {t}"
+    assert t.phase == Phase.OK and m.last_ack is not None
+
+    page.get_by_role("button", exact=True, name="Release").click()
+    assert wait_for(lambda: telemetry().grasp_state != GraspState.HOLD, 10.0), telemetry()
