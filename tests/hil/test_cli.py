@@ -101,7 +101,7 @@ def test_an_experiment_runs_on_the_preset_it_is_given(capsys: pytest.CaptureFixt
     status, out, _ = run(argv, capsys)
     assert status == 0
     assert json.loads(out)["preset"] == "gravity-off"
-    argv = ["experiment", "packing", "--timestep-ms", "0.5", "--size", "tiny", "--json"]
+    argv = ["experiment", "packing", "--physics", "board", "--timestep-ms", "0.5", "--size", "tiny", "--json"]
     status, out, _ = run(argv, capsys)
     assert status == 0
     assert json.loads(out)["timestep_s"] == 0.0005
