@@ -169,6 +169,8 @@ class UiModel:
         self.limits = limits or ControlLimits()
         self.token = token
         self._lock = threading.RLock()
+        self.history_s = history_s
+        """Seconds of telemetry kept for the plots."""
         self.history = RingBuffer(max(10, int(history_s * telemetry_hz)), len(PLOT_COLUMNS))
         self.telemetry: Telemetry | None = None
         self.telemetry_count = 0

@@ -270,3 +270,21 @@ def test_event_console_is_bounded_and_keeps_board_times() -> None:
     m.on_board_message(Event(2_500_000, EventKind.FAULT, 2, 0.0, "motor 2 silent"))
     (entry,) = m.events.entries()
     assert entry.board_time_us == 2_500_000 and entry.level == "error" and "motor 2 silent" in entry.text
+
+
+def test_camera_presets_follow_the_stick_axes() -> None:
+    from host.scene import CAMERA_PRESETS, camera_view
+
+    drone = DronePose((0.0, 0.0, 1.0))
+    centre, tip = (0.0, 0.0, 0.9), (0.0, 0.0, 0.76)
+    views = {p: camera_view(p, centre, drone, tip) for p in CAMERA_PRESETS}
+    # Stick view: from -y looking +y, so stick right (+x) is screen right and stick up (+y) is away.
+    pos, look = views["sticks"]
+    assert pos[1] < look[1] and abs(pos[0] - look[0]) < 1e-9
+    assert views["top"][0][2] > 1.5 and views["tip"][1] == tip
+    # Behind the drone follows its yaw: nose (body +x) turned to +y puts the camera at -y.
+    yawed = DronePose((0.0, 0.0, 1.0), (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)))
+    pos, look = camera_view("behind", centre, yawed, tip)
+    assert pos[1] < look[1] - 1.0 and abs(pos[0]) < 1e-6
+    with pytest.raises(ValueError, match="camera preset"):
+        camera_view("nowhere", centre, drone, tip)
