@@ -20,6 +20,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+ROOT = Path(__file__).resolve().parents[1]
+"""The checkout this script belongs to: its panel is the one photographed (not an installed copy)."""
 CHROMIUM = "/usr/bin/chromium"
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"]
 STEP_S = 60.0
@@ -113,6 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("docs/figures"), help="directory of the PNGs")
     args = parser.parse_args(argv)
+    sys.path.insert(0, str(ROOT))
     try:
         take(args.out)
     except StepFailed as exc:
