@@ -371,7 +371,7 @@ class UiModel:
     def on_host_command(self, msg: Message, source: str) -> None:
         """Log a command another part of the host sends to the board (the drone link: ``MAVLink``)."""
         if isinstance(msg, Command):
-            self.log(source, "info", f"{CommandCode(msg.code).name} {_args_text(msg.args)}")
+            self.log(source, "info", f"{CommandCode(msg.code).name}{_args_text(msg.args)}")
         elif isinstance(msg, ParamSet):
             self.log(source, "info", f"set {msg.name} = {msg.value:g}")
 
@@ -607,7 +607,7 @@ class UiModel:
         else:
             a = (0.0, 0.0, 0.0)
         who = "the host" if client == CLI_CLIENT else f"Tab {client}"
-        self.log("panel", "info", f"{code.name} {_args_text(a)} by {who}")
+        self.log("panel", "info", f"{code.name}{_args_text(a)} by {who}")
         return self._forward(Command(code, (a[0], a[1], a[2])), client)
 
     def estop(self, client: int) -> bool:
@@ -694,4 +694,4 @@ class UiModel:
 
 def _args_text(args: tuple[float, ...]) -> str:
     shown = [f"{a:g}" for a in args if a != 0.0]
-    return f"({', '.join(shown)})" if shown else ""
+    return f" ({', '.join(shown)})" if shown else ""

@@ -76,7 +76,8 @@ class PanelConfig:
         scene_hz: scene update loop rate (an update is sent only when new poses arrived).
         plot_hz: plot refresh rate.
         health_hz: health and control-state refresh rate.
-        plot_window_s: seconds shown in the plots.
+        plot_window_s: seconds shown in the plots at first (the Window slider changes it, up to the
+            model's history).
         plot_points: most points per plotted series.
     """
 

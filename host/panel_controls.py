@@ -303,15 +303,20 @@ def build_control_panel(
     centre.on_click(_centre)
     centre_cmd.on_trigger(_centre)
 
-    @right_lever.on_click
-    def _(event: Any) -> None:
-        if own(event):
-            model.set_lever(cid, "right", str(event.target.value).removeprefix(SELECTED))
+    def _lever(event: Any, which: str) -> None:
+        if not own(event):
+            return
+        # viser's button groups cannot be disabled: a watcher's click is refused here, and said.
+        if not model.set_lever(cid, which, str(event.target.value).removeprefix(SELECTED)):
+            client.add_notification(
+                "Lever not moved",
+                "Take control first: only the holder's levers reach the board.",
+                color="yellow",
+                auto_close_seconds=5.0,
+            )
 
-    @left_lever.on_click
-    def _(event: Any) -> None:
-        if own(event):
-            model.set_lever(cid, "left", str(event.target.value).removeprefix(SELECTED))
+    right_lever.on_click(lambda event: _lever(event, "right"))
+    left_lever.on_click(lambda event: _lever(event, "left"))
 
     def _cmd(button: Any, code: CommandCode, args: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         def _(event: Any) -> None:

@@ -288,3 +288,14 @@ def test_camera_presets_follow_the_stick_axes() -> None:
     assert pos[1] < look[1] - 1.0 and abs(pos[0]) < 1e-6
     with pytest.raises(ValueError, match="camera preset"):
         camera_view("nowhere", centre, drone, tip)
+
+
+def test_mavlink_commands_are_logged_in_the_event_console() -> None:
+    from protocol.messages import ParamSet
+
+    m, _ = make_model()
+    m.on_board_message(Telemetry(3_000_000))
+    m.on_host_command(Command(CommandCode.GRASP), "MAVLink")
+    m.on_host_command(ParamSet("SLEW_N_S", 40.0), "MAVLink")
+    lines = [(e.source, e.text, e.board_time_us) for e in m.events.entries()]
+    assert lines == [("MAVLink", "GRASP", 3_000_000), ("MAVLink", "set SLEW_N_S = 40", 3_000_000)]
