@@ -426,4 +426,7 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
     seen = ""
     if telemetry is not None and telemetry.right_lever in (1, 2, 3):
         seen = f" · the board sees right **{Lever(telemetry.right_lever).name}**"
-    h.levers_md.content = f"Sent: right lever **{right.name}** · left lever **{left.name}**{seen}"
+    if holder is None:
+        h.levers_md.content = f"No RC sent: nobody holds control{seen}"
+    else:
+        h.levers_md.content = f"Sent: right lever **{right.name}** · left lever **{left.name}**{seen}"
