@@ -10,6 +10,7 @@ import socket
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from controller.cli_kit import EXIT_FAILURE, EXIT_OK
@@ -25,6 +26,7 @@ from host.options import (
     signing_timestamp_path,
 )
 from host.panel_guard import PanelGuard, start_guarded_server
+from host.panel_record import RecordingSwitch
 from host.recording import LinkRecording, replay_messages
 from host.run_summary import RunSummary, SummaryReport
 from host.scene import DronePose, SceneObject, scene_objects
@@ -64,6 +66,8 @@ class HostApp:
         self.panel: Any = None
         self.recording: LinkRecording | None = None
         self.shadow: ShadowPlant | None = None
+        self.recorder: RecordingSwitch | None = None
+        """Recordings started from the panel (None in replay)."""
         self.drone_link: Any = None
         self.gamepad: Any = None
         self.summary = RunSummary()
@@ -120,6 +124,13 @@ class HostApp:
                 self.recording = LinkRecording(o.record, {"source": "spirob-host", "port": self.board_url})
                 self.client.add_tap(self.recording.tap)
                 self.client.add_listener(self.recording.on_board_message)
+            # Always on the link (it forwards nothing until the panel starts a recording).
+            self.recorder = RecordingSwitch(
+                (o.record.parent if o.record is not None else Path("recordings")).resolve(),
+                {"source": "spirob-host (panel)", "port": self.board_url},
+            )
+            self.client.add_tap(self.recorder.tap)
+            self.client.add_listener(self.recorder.on_board_message)
             if o.mavlink is not None:
                 self._start_drone_link()
             try:
@@ -190,7 +201,10 @@ class HostApp:
                 cfg = _replace(cfg, tlog_path=o.record.with_suffix(".tlog"))
             client = self.client
 
+            model = self.model
+
             def to_board(msg: Message) -> None:
+                model.on_host_command(msg, "MAVLink")  # the panel's event console lists them
                 client.send(msg)
 
             link = drone_link.DroneLink(cfg, send_to_board=to_board)
@@ -205,7 +219,7 @@ class HostApp:
 
         o = self.options
         # viser prints its own banner (with a URL lacking the token): ours replaces it.
-        self.guard = PanelGuard(o.token, loopback=is_loopback(o.ui_host))
+        self.guard = guard = PanelGuard(o.token, loopback=is_loopback(o.ui_host))
         with contextlib.redirect_stdout(io.StringIO()):
             server = start_guarded_server(
                 self.guard, host=o.ui_host, port=o.ui_port, label="SpiRob teleop", verbose=False
@@ -223,6 +237,8 @@ class HostApp:
             drone_pose=self._drone_pose if self.drone_link is not None else None,
             mavlink_status=self._mavlink_status if self.drone_link is not None else None,
             shadow_status=self._shadow_status if self.shadow is not None else None,
+            malformed_n=lambda: guard.stats.malformed_messages_n,
+            recorder=self.recorder,
             config=self.panel_config,
         )
         self.panel.start()
@@ -394,6 +410,9 @@ class HostApp:
         if self.recording is not None:
             self.recording.close()
             self.recording = None
+        if self.recorder is not None:
+            self.recorder.stop()
+            self.recorder = None
         if self.board is not None:
             with contextlib.suppress(Exception):
                 self.board.stop()

@@ -24,15 +24,17 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import numpy as np
-import numpy.typing as npt
-
 from host.board_client import LinkState, LinkStats
+from host.event_console import EventConsole
+from host.history import PLOT_COLUMNS, RingBuffer
+from host.param_table import PARAM_NAMES, ParamStatus, param_check
 from protocol.dbus import CH_LIMIT, Lever, RcFrame
 from protocol.messages import (
     HOLD_HERE,
     HOLD_RELEASE,
     HOLD_UNCHANGED,
+    PARAM_LIST_ALL,
+    AckResult,
     BoardStatus,
     Command,
     CommandAck,
@@ -41,6 +43,8 @@ from protocol.messages import (
     EventKind,
     Message,
     Mode,
+    ParamRequest,
+    ParamSet,
     ParamValue,
     Phase,
     SimPoses,
@@ -64,25 +68,8 @@ CLI_CLIENT = -1
 SendFn = Callable[[Message], bool]
 
 _RAW_PER_AMP = 1000.0  # C610: 1000 raw units per amp
-
-PLOT_COLUMNS = (
-    "tension_target_1",
-    "tension_target_2",
-    "tension_target_3",
-    "tension_est_1",
-    "tension_est_2",
-    "tension_est_3",
-    "commanded_a_1",
-    "commanded_a_2",
-    "commanded_a_3",
-    "measured_a_1",
-    "measured_a_2",
-    "measured_a_3",
-    "cable_mm_1",
-    "cable_mm_2",
-    "cable_mm_3",
-)
-"""Columns of the telemetry history (after the time column)."""
+_ACK_OWNER_S = 5.0
+"""An answer to a command code a tab sent that long ago or less goes to that tab."""
 
 
 def new_token() -> str:
@@ -140,54 +127,6 @@ class Notice:
     client: int | None = None
 
 
-class RingBuffer:
-    """Fixed-capacity rows of floats (time first); the newest ``capacity`` rows are kept."""
-
-    def __init__(self, capacity: int, columns: int) -> None:
-        """Create an empty buffer.
-
-        Args:
-            capacity: rows kept.
-            columns: values per row, not counting the time column.
-
-        Raises:
-            ValueError: a size is not positive.
-        """
-        if capacity <= 0 or columns <= 0:
-            raise ValueError("capacity and columns must be > 0")
-        self._data = np.zeros((capacity, columns + 1), dtype=np.float64)
-        self._n = 0
-        self._i = 0
-
-    def __len__(self) -> int:
-        return self._n
-
-    def append(self, t: float, values: tuple[float, ...] | list[float]) -> None:
-        """Add one row."""
-        row = self._data[self._i]
-        row[0] = t
-        row[1:] = values
-        self._i = (self._i + 1) % len(self._data)
-        self._n = min(self._n + 1, len(self._data))
-
-    def clear(self) -> None:
-        """Drop every row."""
-        self._n = 0
-        self._i = 0
-
-    def snapshot(self, max_points: int | None = None) -> npt.NDArray[np.float64]:
-        """Rows oldest first (a copy), decimated to at most ``max_points`` rows."""
-        cap = len(self._data)
-        if self._n < cap:
-            out = self._data[: self._n].copy()
-        else:
-            out = np.concatenate((self._data[self._i :], self._data[: self._i]))
-        if max_points is not None and len(out) > max_points > 0:
-            step = math.ceil(len(out) / max_points)
-            out = out[::-1][::step][::-1].copy()
-        return out
-
-
 @dataclass
 class _Operator:
     """What the control holder set (already clamped)."""
@@ -230,6 +169,8 @@ class UiModel:
         self.limits = limits or ControlLimits()
         self.token = token
         self._lock = threading.RLock()
+        self.history_s = history_s
+        """Seconds of telemetry kept for the plots."""
         self.history = RingBuffer(max(10, int(history_s * telemetry_hz)), len(PLOT_COLUMNS))
         self.telemetry: Telemetry | None = None
         self.telemetry_count = 0
@@ -259,6 +200,14 @@ class UiModel:
         self.commands_sent = 0
         self.commands_refused = 0
         self._rc_changed_us = 0
+        self.events = EventConsole()
+        """The event console (board events, failsafes, acks, commands)."""
+        self._ack_owner: dict[int, tuple[int, float]] = {}
+        """Command code -> (client, host time s) of the last panel command with that code."""
+        self.param_status: dict[str, ParamStatus] = {}
+        """Parameter name -> the last value a tab asked for and what the board read back."""
+        self.params_count = 0
+        """How many parameters the board says it has (0 until the first ``ParamValue``)."""
 
     # ------------------------------------------------------------------ board side (listeners)
 
@@ -279,13 +228,39 @@ class UiModel:
             with self._lock:
                 self.status = msg
         elif isinstance(msg, ParamValue):
-            with self._lock:
-                self.params[msg.name] = msg.value
-                if msg.name == "tension_max_n" and msg.value > 0:
-                    self.limits = ControlLimits(self.limits.channel_limit, float(msg.value))
+            self._on_param(msg)
         elif isinstance(msg, CommandAck):
-            with self._lock:
-                self.last_ack = msg
+            self._on_ack(msg)
+
+    def _on_param(self, msg: ParamValue) -> None:
+        with self._lock:
+            self.params[msg.name] = msg.value
+            self.params_count = msg.count
+            # The wire name (controller.config.PARAMS): the DIRECT sliders' ceiling follows the board's.
+            if msg.name == "TENSION_MAX_N" and msg.value > 0:
+                self.limits = ControlLimits(self.limits.channel_limit, float(msg.value))
+            pending = self.param_status.get(msg.name)
+            if pending is not None and pending.confirmed is None:
+                self.param_status[msg.name] = ParamStatus(
+                    pending.requested, pending.sent_s, msg.value, pending.note
+                )
+
+    def _on_ack(self, ack: CommandAck) -> None:
+        code = ack.command
+        name = code.name if isinstance(code, CommandCode) else f"command {code}"
+        now_s = time.monotonic()
+        with self._lock:
+            self.last_ack = ack
+            owner = self._ack_owner.get(int(code))
+        client = owner[0] if owner is not None and now_s - owner[1] <= _ACK_OWNER_S else None
+        result = ack.result
+        ok = result in (AckResult.ACCEPTED, AckResult.IN_PROGRESS)
+        why = f": {ack.text}" if ack.text else ""
+        self.log("ack", "info" if ok else "warning", f"{name} {result.name}{why}")
+        if not ok:
+            # Every refusal is said, with the board's reason, to the tab that asked (else to everyone:
+            # a command from MAVLink or a tab that left).
+            self._notify("warning", f"Board refused {name}", ack.text or result.name.lower(), client=client)
 
     def on_shadow_poses(self, poses: SimPoses) -> bool:
         """Poses of the shadow plant (``host.shadow``); ignored once the board itself sent ``SimPoses``.
@@ -324,6 +299,7 @@ class UiModel:
                 self._last_phase = phase
 
     def _phase_notice(self, phase: Phase) -> None:
+        self.log("failsafe", "info" if phase in (Phase.OK, Phase.GATE) else "warning", f"phase {phase.name}")
         text = {
             Phase.OK: ("info", "Failsafe cleared", "phase OK: current may flow"),
             Phase.GATE: ("info", "Start-up gate", "waiting for valid RC with the right lever DOWN"),
@@ -335,6 +311,16 @@ class UiModel:
         self._notify(*text)
 
     def _on_event(self, e: Event) -> None:
+        level = "error" if e.kind == EventKind.FAULT else "info"
+        self.log("board", level, f"{e.kind.name}: {e.text or e.code}", board_time_us=e.time_us)
+        if e.kind == EventKind.PARAM and e.text.startswith("rejected") and 0 <= e.code < len(PARAM_NAMES):
+            with self._lock:
+                name = PARAM_NAMES[e.code]
+                pending = self.param_status.get(name)
+                if pending is not None:
+                    self.param_status[name] = ParamStatus(
+                        pending.requested, pending.sent_s, pending.confirmed, e.text
+                    )
         if e.kind == EventKind.FAULT:
             self._notify("error", "Fault", e.text or f"fault code {e.code}")
         elif e.kind == EventKind.GRASP:
@@ -374,6 +360,20 @@ class UiModel:
         """Notices newer than ``seq``, oldest first."""
         with self._lock:
             return [n for n in self._notices if n.seq > seq]
+
+    def log(self, source: str, level: str, text: str, *, board_time_us: int | None = None) -> None:
+        """Add a line to the event console (see :class:`ConsoleEntry`)."""
+        with self._lock:
+            if board_time_us is None and self.telemetry is not None:
+                board_time_us = self.telemetry.time_us
+        self.events.add(board_time_us, source, level, text)
+
+    def on_host_command(self, msg: Message, source: str) -> None:
+        """Log a command another part of the host sends to the board (the drone link: ``MAVLink``)."""
+        if isinstance(msg, Command):
+            self.log(source, "info", f"{CommandCode(msg.code).name}{_args_text(msg.args)}")
+        elif isinstance(msg, ParamSet):
+            self.log(source, "info", f"set {msg.name} = {msg.value:g}")
 
     # ------------------------------------------------------------------ authorisation and control
 
@@ -426,7 +426,10 @@ class UiModel:
             self._pending = client
             self._control_version += 1
             holder = self._holder
-        self._notify("warning", "Control requested", f"client {client} asks for control", client=holder)
+        who = "The command line" if client == CLI_CLIENT else f"Tab {client}"
+        self._notify(
+            "warning", "Control requested", f"{who} asks for control: hand it over or keep it", client=holder
+        )
         return ControlResult.PENDING
 
     def answer_request(self, holder: int, grant: bool) -> bool:
@@ -547,15 +550,27 @@ class UiModel:
 
     # ------------------------------------------------------------------ commands
 
-    def _forward(self, msg: Message) -> bool:
+    def _forward(self, msg: Message, client: int | None = None) -> bool:
         send = self._send
         if send is None:
+            self._refused(client, "no board to send it to (replay)")
             return False
+        if isinstance(msg, Command):
+            with self._lock:
+                self._ack_owner[int(msg.code)] = (CLI_CLIENT if client is None else client, time.monotonic())
         ok = send(msg)
         with self._lock:
             if ok:
                 self.commands_sent += 1
+        if not ok:
+            self._refused(client, "the board link is down")
         return ok
+
+    def _refused(self, client: int | None, why: str) -> None:
+        with self._lock:
+            self.commands_refused += 1
+        if client is not None and client != CLI_CLIENT:
+            self._notify("warning", "Not sent", why, client=client)
 
     def command(
         self, client: int, code: CommandCode, args: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -572,8 +587,7 @@ class UiModel:
         if code == CommandCode.ESTOP:
             return self.estop(client)
         if not self.has_control(client):
-            with self._lock:
-                self.commands_refused += 1
+            self._refused(client, f"{code.name}: this tab does not hold control")
             return False
         a = tuple(_finite(x) for x in args)
         if code == CommandCode.HOLD_LENGTHS:
@@ -582,8 +596,7 @@ class UiModel:
             try:
                 Mode(int(a[0]))
             except ValueError:
-                with self._lock:
-                    self.commands_refused += 1
+                self._refused(client, f"SET_MODE: no mode {a[0]:g}")
                 return False
             a = (float(int(a[0])), 0.0, 0.0)
         elif code == CommandCode.SET_TENSIONS:
@@ -593,7 +606,9 @@ class UiModel:
             a = (1.0 if a[0] else 0.0, 0.0, 0.0)
         else:
             a = (0.0, 0.0, 0.0)
-        return self._forward(Command(code, (a[0], a[1], a[2])))
+        who = "the host" if client == CLI_CLIENT else f"Tab {client}"
+        self.log("panel", "info", f"{code.name}{_args_text(a)} by {who}")
+        return self._forward(Command(code, (a[0], a[1], a[2])), client)
 
     def estop(self, client: int) -> bool:
         """Emergency stop: any authorised client may press it; the levers also go to SAFE."""
@@ -605,10 +620,9 @@ class UiModel:
             self._op.right_lever = Lever.DOWN
             self._op.sticks = [0, 0, 0, 0]
             self._rc_changed_us = time.monotonic_ns() // 1000
-        ok = self._forward(Command(CommandCode.ESTOP))
-        self._notify(
-            "error", "E-STOP pressed", f"by client {client}" if client != CLI_CLIENT else "by the host"
-        )
+        ok = self._forward(Command(CommandCode.ESTOP), client)
+        self._notify("error", "E-STOP pressed", f"by Tab {client}" if client != CLI_CLIENT else "by the host")
+        self.log("panel", "error", "ESTOP by " + (f"Tab {client}" if client != CLI_CLIENT else "the host"))
         return ok
 
     def set_direct_tension(self, client: int, cable: int, tension_n: float) -> bool:
@@ -623,7 +637,7 @@ class UiModel:
                 return False
             self._op.direct_tensions_n[cable] = v
             t = tuple(self._op.direct_tensions_n)
-        return self._forward(Command(CommandCode.SET_TENSIONS, (t[0], t[1], t[2])))
+        return self._forward(Command(CommandCode.SET_TENSIONS, (t[0], t[1], t[2])), client)
 
     def set_length_hold(self, client: int, cable: int, hold: bool) -> bool:
         """Hold one cable at its present length, or release it (``HOLD_LENGTHS``; holder only).
@@ -639,4 +653,45 @@ class UiModel:
             return False
         args = [HOLD_UNCHANGED, HOLD_UNCHANGED, HOLD_UNCHANGED]
         args[cable] = HOLD_HERE if hold else HOLD_RELEASE
-        return self._forward(Command(CommandCode.HOLD_LENGTHS, (args[0], args[1], args[2])))
+        return self._forward(Command(CommandCode.HOLD_LENGTHS, (args[0], args[1], args[2])), client)
+
+    # ------------------------------------------------------------------ parameters
+
+    def request_params(self) -> bool:
+        """Ask the board for every parameter (it answers with one ``ParamValue`` each)."""
+        send = self._send
+        return send is not None and send(ParamRequest(PARAM_LIST_ALL))
+
+    def set_param(self, client: int, name: str, value: float) -> str | None:
+        """Ask the board to take ``value`` for parameter ``name`` (holder only); the board reads it back.
+
+        Checked here first against the firmware's bounds (``controller.config``), so an out-of-range
+        value is refused with its reason before it travels.
+
+        Returns:
+            None if sent (watch :attr:`param_status` for the board's answer), else why not.
+        """
+        if name not in PARAM_NAMES:
+            return f"unknown parameter {name!r}"
+        if not self.has_control(client):
+            return "this tab does not hold control"
+        v = float(value)
+        with self._lock:
+            values = dict(self.params)
+        why = param_check(values, name, v)
+        if why is not None:
+            return why
+        with self._lock:
+            self.param_status[name] = ParamStatus(v, time.monotonic())
+        who = "the host" if client == CLI_CLIENT else f"Tab {client}"
+        self.log("panel", "info", f"set {name} = {v:g} by {who}")
+        if not self._forward(ParamSet(name, v), client):
+            with self._lock:
+                self.param_status.pop(name, None)
+            return "the board link is down"
+        return None
+
+
+def _args_text(args: tuple[float, ...]) -> str:
+    shown = [f"{a:g}" for a in args if a != 0.0]
+    return f" ({', '.join(shown)})" if shown else ""

@@ -8,10 +8,19 @@ Areas and who sees what (one module each, a builder returning its handles: ``hos
   hotkey), grasp / release / hold, and the per-cable tension sliders of DIRECT mode. Controls are
   disabled for tabs that do not hold control; the model refuses their input anyway (server-side check
   and clamp of every value).
-- **Plots** (shared): uPlot charts of tensions, commanded and measured currents, cable lengths.
-- **Health** (shared): link state, rates, errors, latency, loop statistics (late count, execution and
-  lateness p99), RC / motors, failsafe phase, pose source (simulation, shadow plant, none), MAVLink
-  state.
+- **State bar** (per tab, on top): phase, mode and the one next step for the pilot
+  (``host.panel_state``), an E-stop banner while latched; Space is E-stop in every field.
+- **View** (per tab): camera presets (aligned with the sticks by default, behind the drone, side,
+  top, following the tip), also on the keys 1-5.
+- **Parameters** (per tab, ``host.panel_params``): the board's parameters with units and bounds,
+  set by the control holder and read back by the board.
+- **Plots** (shared): uPlot charts of tensions, commanded and measured currents, cable lengths, with
+  pause, window length, chart and cable choice (``host.panel_plots``).
+- **Recording** (shared, ``host.panel_record``): start and stop a recording mid-run.
+- **Events** (shared): the event console (board events, failsafes, acks, commands, board times).
+- **Health** (shared): checked numbers with thresholds and colours (and the malformed panel messages
+  count), link state, rates, errors, latency, loop statistics, RC / motors, failsafe phase, pose
+  source (simulation, shadow plant, none), MAVLink state.
 
 :class:`TeleopPanel` pushes the model to the browser at fixed rates from one thread (scene at up to
 60 Hz when new poses arrive, plots at 10 Hz, health and control state at 4 Hz): the latest value wins,
@@ -35,12 +44,23 @@ from typing import Any, Literal
 import numpy as np
 import viser
 
+from host.event_console import console_html
 from host.model import PoseSource, UiModel
 from host.panel_controls import ControlHandles, build_control_panel, refresh_control
 from host.panel_guard import request_token
-from host.panel_health import build_health_panel, health_text
-from host.panel_plots import build_plot_panel
-from host.scene import ArmGeometry, DronePose, SceneObject, SceneView, build_scene, default_hanging_pose
+from host.panel_health import build_health_panel, health_checks, health_html, health_text
+from host.panel_params import ParamHandles, build_param_panel, refresh_params
+from host.panel_plots import CHART_COLUMNS, build_plot_panel, fixed_scales, plot_frame, y_range
+from host.panel_record import RecordHandles, RecordingSwitch, build_record_panel, refresh_record
+from host.scene import (
+    ArmGeometry,
+    DronePose,
+    SceneObject,
+    SceneView,
+    build_scene,
+    camera_view,
+    default_hanging_pose,
+)
 from protocol.messages import TelemetryFlags
 
 __all__ = ["PanelConfig", "TeleopPanel", "client_url_token", "harden"]
@@ -56,7 +76,8 @@ class PanelConfig:
         scene_hz: scene update loop rate (an update is sent only when new poses arrived).
         plot_hz: plot refresh rate.
         health_hz: health and control-state refresh rate.
-        plot_window_s: seconds shown in the plots.
+        plot_window_s: seconds shown in the plots at first (the Window slider changes it, up to the
+            model's history).
         plot_points: most points per plotted series.
     """
 
@@ -105,6 +126,8 @@ class TeleopPanel:
         drone_pose: optional provider of the drone pose (MAVLink), in the scene's z-up world frame.
         mavlink_status: optional provider of a one-line MAVLink link state.
         shadow_status: optional provider of a one-line shadow-plant state (``host.shadow``).
+        malformed_n: optional provider of the count of malformed panel messages (``host.panel_guard``).
+        recorder: optional recording switch (the Recording folder is shown with one).
         config: rates.
     """
 
@@ -118,6 +141,8 @@ class TeleopPanel:
         drone_pose: Callable[[], DronePose | None] | None = None,
         mavlink_status: Callable[[], str] | None = None,
         shadow_status: Callable[[], str] | None = None,
+        malformed_n: Callable[[], int] | None = None,
+        recorder: RecordingSwitch | None = None,
         config: PanelConfig | None = None,
     ) -> None:
         self.server = server
@@ -127,20 +152,30 @@ class TeleopPanel:
         self._drone_pose = drone_pose
         self._mavlink_status = mavlink_status
         self._shadow_status = shadow_status
+        self._malformed_n = malformed_n
         harden(server)
         server.gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         self._framed = False
-        self._frame_camera(np.array([0.0, 0.0, 1.08]))
         self.scene: SceneView = build_scene(server, self.geometry, objects)
-        self.plots = build_plot_panel(server)
+        self._frame_camera()
+        self.plots = build_plot_panel(server, window_s=self.config.plot_window_s, history_s=model.history_s)
+        self.recorder = recorder
+        self.record: RecordHandles | None = None
+        if recorder is not None:
+            self.record = build_record_panel(server, recorder, model)
+        with server.gui.add_folder("Events", order=180.0, expand_by_default=False):
+            self.console = server.gui.add_html(console_html([]))
+        self._console_seq = 0
         self.health = build_health_panel(server)
+        self._y_ranges: dict[str, tuple[float, float]] = {}
+        self._params: dict[int, ParamHandles] = {}
         self._controls: dict[int, ControlHandles] = {}
         self._controls_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._last_poses = -1
         self._last_notice = 0
-        self._health_cache: tuple[str, str, str] = ("", "", "")
+        self._health_cache: tuple[str, str, str, str] = ("", "", "", "")
         self.pose_source = PoseSource.NONE.value
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
@@ -151,15 +186,32 @@ class TeleopPanel:
         cid = client.client_id
         token = client_url_token(self.server, cid)
         self.model.authorise(cid, token)
-        handles = build_control_panel(client, self.model, tension_max_n=self.model.limits.tension_max_n)
+        handles = build_control_panel(
+            client, self.model, tension_max_n=self.model.limits.tension_max_n, set_camera=self.set_camera
+        )
+        params = build_param_panel(client, self.model)
         with self._controls_lock:
             self._controls[cid] = handles
+            self._params[cid] = params
         refresh_control(handles, self.model, force=True)
+        refresh_params(params, self.model, force=True)
+        if not self.model.params:
+            self.model.request_params()  # the editor shows the board's values, not the defaults
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._controls_lock:
             self._controls.pop(client.client_id, None)
+            self._params.pop(client.client_id, None)
         self.model.client_left(client.client_id)
+
+    def set_camera(self, client: viser.ClientHandle, preset: str) -> None:
+        """Move one tab's camera to a preset (``host.scene.CAMERA_PRESETS``)."""
+        sv = self.scene
+        position, look_at = camera_view(preset, sv.centre_m, sv.drone, sv.tip_m)
+        with client.atomic():
+            client.camera.up_direction = (0.0, 0.0, 1.0)
+            client.camera.look_at = look_at
+            client.camera.position = position
 
     def controls(self) -> dict[int, ControlHandles]:
         """Control handles per connected tab (a copy)."""
@@ -215,11 +267,12 @@ class TeleopPanel:
                     break
                 _log.exception("panel update failed")
 
-    def _frame_camera(self, centre: Any) -> None:
-        """Point new tabs' camera at the arm: slightly below the drone, from the side."""
-        c = np.asarray(centre, dtype=np.float64)
-        self.server.initial_camera.look_at = (float(c[0]), float(c[1]), float(c[2]))
-        self.server.initial_camera.position = (float(c[0]) + 0.38, float(c[1]) - 0.52, float(c[2]) + 0.12)
+    def _frame_camera(self) -> None:
+        """New tabs start in the stick view: stick right = screen right, stick up = away."""
+        sv = self.scene
+        position, look_at = camera_view("sticks", sv.centre_m, sv.drone, sv.tip_m)
+        self.server.initial_camera.look_at = look_at
+        self.server.initial_camera.position = position
 
     def _drone_override(self) -> DronePose | None:
         if self._drone_pose is None:
@@ -243,9 +296,6 @@ class TeleopPanel:
             # "simulation (SimPoses)" or "shadow plant (measured currents)": said in the scene and in
             # the health area, so nobody mistakes a model's shape for the measured one.
             self.pose_source = source.value
-            if not self._framed:
-                self._framed = True
-                self._frame_camera(np.mean(np.asarray(poses.positions_m), axis=0))
             label = f"pose source: {source.value}"
             if drone is not None:
                 label += " · drone: MAVLink"
@@ -255,6 +305,9 @@ class TeleopPanel:
                 drone_override=drone,
                 label=label,
             )
+            if not self._framed:
+                self._framed = True
+                self._frame_camera()
             return True
         # Hardware or replay without poses: draw the arm hanging, say there is no pose source.
         t = m.telemetry
@@ -275,21 +328,23 @@ class TeleopPanel:
         return True
 
     def update_plots(self) -> None:
-        """Refresh the three charts from the model's history."""
-        data = self.model.history.snapshot(max_points=None)
-        if len(data) == 0:
+        """Refresh the charts from the model's history (nothing while paused)."""
+        p = self.plots
+        if bool(p.pause.value):
             return
-        t_end = data[-1, 0]
-        data = data[data[:, 0] >= t_end - self.config.plot_window_s]
-        if len(data) > self.config.plot_points:
-            step = int(np.ceil(len(data) / self.config.plot_points))
-            data = data[::-1][::step][::-1]
-        x = data[:, 0] - t_end
-        cols = [data[:, i] for i in range(1, data.shape[1])]
+        data = self.model.history.snapshot(max_points=None)
+        x, series = plot_frame(data, float(p.window.value), str(p.cables.value), self.config.plot_points)
         with self.server.atomic():
-            self.plots.tensions.data = (x, *cols[0:6])
-            self.plots.currents.data = (x, *cols[6:12])
-            self.plots.lengths.data = (x, *cols[12:15])
+            for chart in CHART_COLUMNS:
+                handle = p.chart(chart)
+                if not bool(p.show[chart].value):
+                    continue
+                empty = (0.0, self.model.limits.tension_max_n) if chart == "tensions" else None
+                rng = y_range(np.concatenate(series[chart]), chart, empty)
+                if self._y_ranges.get(chart) != rng:
+                    self._y_ranges[chart] = rng
+                    handle.scales = fixed_scales(*rng)
+                handle.data = (x, *series[chart])
 
     def update_health(self) -> None:
         """Refresh the health text (only what changed is sent)."""
@@ -306,9 +361,14 @@ class TeleopPanel:
                 shadow = self._shadow_status()
             except Exception:
                 shadow = "error reading the shadow plant's state"
-        texts = health_text(self.model, self.pose_source, status, shadow)
+        malformed = 0
+        if self._malformed_n is not None:
+            malformed = self._malformed_n()
+        checks = health_html(health_checks(self.model, malformed))
+        texts = (checks, *health_text(self.model, self.pose_source, status, shadow))
+        h = self.health
         for handle, old, new in zip(
-            (self.health.summary, self.health.link, self.health.loop), self._health_cache, texts, strict=True
+            (h.checks, h.summary, h.link, h.loop), self._health_cache, texts, strict=True
         ):
             if old != new:
                 handle.content = new
@@ -316,11 +376,28 @@ class TeleopPanel:
 
     def update_controls(self) -> None:
         """Refresh each tab's control state (holder, requests, enabled widgets)."""
+        with self._controls_lock:
+            params = list(self._params.values())
         for h in self.controls().values():
             try:
                 refresh_control(h, self.model)
+                if h.follow_tip:
+                    client = self.server.get_clients().get(h.client_id)
+                    if client is not None:
+                        self.set_camera(client, "tip")
             except Exception:
                 _log.debug("control refresh failed for tab %s", h.client_id, exc_info=True)
+        for ph in params:
+            try:
+                refresh_params(ph, self.model)
+            except Exception:
+                _log.debug("parameter refresh failed for tab %s", ph.client_id, exc_info=True)
+        if self.record is not None and self.recorder is not None:
+            refresh_record(self.record, self.recorder)
+        seq = self.model.events.seq
+        if seq != self._console_seq:
+            self._console_seq = seq
+            self.console.content = console_html(self.model.events.entries())
 
     def push_notices(self) -> None:
         """Show new notices as browser notifications (to everyone or to the one tab concerned)."""
@@ -344,7 +421,8 @@ class TeleopPanel:
                         n.title,
                         n.body,
                         color=colors.get(n.level, "blue"),
-                        auto_close_seconds=None if n.level == "error" else 6.0,
+                        # Every toast closes itself (errors stay longer); the event console keeps them.
+                        auto_close_seconds=15.0 if n.level == "error" else 6.0,
                     )
                 except Exception:
                     _log.debug("notification failed", exc_info=True)

@@ -2,25 +2,55 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import viser
 
 from host.model import CLI_CLIENT, ControlResult, UiModel
+from host.panel_state import KEY_HOOK_HTML, pilot_state, state_bar_html
+from host.scene import CAMERA_PRESETS
+from protocol.dbus import Lever
 from protocol.messages import CommandCode, Mode, TelemetryFlags
 
-__all__ = ["LEVER_OPTIONS", "STICK_CHANNELS", "ControlHandles", "build_control_panel", "refresh_control"]
+__all__ = [
+    "LEVER_OPTIONS",
+    "STICK_CHANNELS",
+    "ControlHandles",
+    "build_control_panel",
+    "lever_options",
+    "refresh_control",
+]
 
 STICK_CHANNELS = (
-    (3, "Left ↕ curl"),
-    (2, "Left ↔"),
-    (0, "Right ↔ bend"),
-    (1, "Right ↕ bend"),
+    (1, "Right ↕ bend away / toward"),
+    (0, "Right ↔ bend right / left"),
+    (3, "Left ↕ tighten all cables"),
 )
-"""Slider order in the panel: (DBUS channel, label). ch3 = left vertical = common tension (curl)."""
+"""Slider order in the panel: (DBUS channel, label), named after what MANUAL does with them
+(``controller.cables.CableMapper.manual``): the right stick pulls the cables on its side, so the arm
+bends toward +x (right) and +y (away, in the default view); left stick up adds the same tension to every
+cable (down does nothing). The left stick's ↔ (ch2) is not used by the board: no slider."""
 LEVER_OPTIONS = ("UP", "MIDDLE", "DOWN")
-_ORDER_CONTROL = 0.0  # folder order in the panel: Control (0), Plots (100), Health (200)
+SELECTED = "● "
+"""Prefix of the lever button in the position this tab sends."""
+CAMERA_LABELS = {
+    "sticks": ("Stick view", "1"),
+    "behind": ("Behind the drone", "2"),
+    "side": ("Side", "3"),
+    "top": ("Top", "4"),
+    "tip": ("Follow the tip", "5"),
+}
+"""Preset -> (button label, hotkey). Digits and C only: viser's camera owns WASD, Q/E and the arrows."""
+_ORDER_STATE = -10.0  # the state bar first, then Control (0), Plots (100), Health (200)
+_ORDER_CONTROL = 0.0
+_ORDER_VIEW = 50.0
+
+
+def lever_options(selected: Lever) -> tuple[str, ...]:
+    """The lever's buttons with the selected one marked (``● DOWN``)."""
+    return tuple(SELECTED + o if o == selected.name else o for o in LEVER_OPTIONS)
 
 
 @dataclass
@@ -50,6 +80,10 @@ class ControlHandles:
     tensions: list[Any]
     holds: list[Any]
     estop_command: Any
+    state_bar: Any
+    camera: list[Any]
+    commands: list[Any]
+    follow_tip: bool = False
     shown: dict[str, Any] = field(default_factory=dict)
 
     def action_widgets(self) -> list[Any]:
@@ -70,11 +104,27 @@ class ControlHandles:
 
 
 def build_control_panel(
-    client: viser.ClientHandle, model: UiModel, *, tension_max_n: float
+    client: viser.ClientHandle,
+    model: UiModel,
+    *,
+    tension_max_n: float,
+    set_camera: Callable[[viser.ClientHandle, str], None] | None = None,
 ) -> ControlHandles:
-    """Build one tab's Control folder; every callback writes to ``model`` on behalf of that tab."""
+    """Build one tab's state bar, Control folder and View folder.
+
+    Every callback writes to ``model`` on behalf of that tab (or moves this tab's own camera).
+
+    Args:
+        client: the tab.
+        model: the UI model.
+        tension_max_n: the DIRECT sliders' ceiling.
+        set_camera: moves a tab's camera to a preset (``host.scene.CAMERA_PRESETS``).
+    """
     cid = client.client_id
     gui = client.gui
+    first = pilot_state(None, model.link_state, mine=False, holder_known=False)
+    state_bar = gui.add_html(state_bar_html(first), order=_ORDER_STATE)
+    gui.add_html(KEY_HOOK_HTML, order=_ORDER_STATE + 1)
 
     def own(event: Any) -> bool:
         # Server-side assignments (client_id None) are echoes of our own updates, not user input.
@@ -95,10 +145,18 @@ def build_control_panel(
                 ch: gui.add_slider(label, min=-660.0, max=660.0, step=1.0, initial_value=0.0, disabled=True)
                 for ch, label in STICK_CHANNELS
             }
-            centre = gui.add_button("Centre sticks", disabled=True)
+            centre = gui.add_button("Centre sticks  [C]", disabled=True)
+            gui.add_markdown(
+                "Right stick: the arm bends that way (right = right, up = away in the stick view). "
+                "Left ↕ up: every cable tighter. Left ↔: not used by the board."
+            )
         with gui.add_folder("Levers"):
-            right_lever = gui.add_button_group("Right lever (mode)", LEVER_OPTIONS)
-            left_lever = gui.add_button_group("Left lever", LEVER_OPTIONS)
+            right_lever = gui.add_button_group(
+                "Right lever", lever_options(Lever.DOWN), hint="DOWN = SAFE, MIDDLE = drive, UP = grasp"
+            )
+            left_lever = gui.add_button_group(
+                "Left lever", lever_options(Lever.DOWN), hint="In GRASP: UP = grasp, DOWN = release"
+            )
             levers_md = gui.add_markdown("")
         with gui.add_folder("Commands"):
             arm = gui.add_button("Arm", disabled=True)
@@ -129,9 +187,17 @@ def build_control_panel(
                 )
                 for i in range(3)
             ]
+    with gui.add_folder("View", order=_ORDER_VIEW, expand_by_default=False):
+        camera = [gui.add_button(f"{CAMERA_LABELS[p][0]}  [{CAMERA_LABELS[p][1]}]") for p in CAMERA_PRESETS]
+        gui.add_markdown("Camera keys: WASD / Q E / arrows (viser's); 1-5 presets; C centres the sticks.")
     estop_cmd = gui.add_command(
         "E-STOP", description="Emergency stop (zero current, latched)", hotkey="space"
     )
+    commands = [
+        gui.add_command(label, description="Camera preset", hotkey=key)  # type: ignore[arg-type]
+        for label, key in (CAMERA_LABELS[p] for p in CAMERA_PRESETS)
+    ]
+    centre_cmd = gui.add_command("Centre sticks", description="All sticks to the centre", hotkey="C")
 
     h = ControlHandles(
         cid,
@@ -157,7 +223,23 @@ def build_control_panel(
         tensions,
         holds,
         estop_cmd,
+        state_bar,
+        camera,
+        [*commands, centre_cmd],
     )
+
+    def _view(preset: str) -> None:
+        h.follow_tip = preset == "tip"
+        if set_camera is not None:
+            set_camera(client, preset)
+
+    for preset, button, command in zip(CAMERA_PRESETS, camera, commands, strict=True):
+
+        def _on_view(_event: Any, preset: str = preset) -> None:
+            _view(preset)
+
+        button.on_click(_on_view)
+        command.on_trigger(_on_view)
 
     @take.on_click
     def _(event: Any) -> None:
@@ -211,23 +293,30 @@ def build_control_panel(
 
         slider.on_update(_stick)
 
-    @centre.on_click
-    def _(event: Any) -> None:
-        if own(event):
+    def _centre(event: Any) -> None:
+        if event.client_id is not None and event.client_id == cid and model.has_control(cid):
             model.centre_sticks(cid)
             for s in sticks.values():
                 handle: Any = s  # viser types the setter oddly (read-only to mypy)
                 handle.value = 0.0
 
-    @right_lever.on_click
-    def _(event: Any) -> None:
-        if own(event):
-            model.set_lever(cid, "right", str(event.target.value))
+    centre.on_click(_centre)
+    centre_cmd.on_trigger(_centre)
 
-    @left_lever.on_click
-    def _(event: Any) -> None:
-        if own(event):
-            model.set_lever(cid, "left", str(event.target.value))
+    def _lever(event: Any, which: str) -> None:
+        if not own(event):
+            return
+        # viser's button groups cannot be disabled: a watcher's click is refused here, and said.
+        if not model.set_lever(cid, which, str(event.target.value).removeprefix(SELECTED)):
+            client.add_notification(
+                "Lever not moved",
+                "Take control first: only the holder's levers reach the board.",
+                color="yellow",
+                auto_close_seconds=5.0,
+            )
+
+    right_lever.on_click(lambda event: _lever(event, "right"))
+    left_lever.on_click(lambda event: _lever(event, "left"))
 
     def _cmd(button: Any, code: CommandCode, args: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         def _(event: Any) -> None:
@@ -279,6 +368,9 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
     authorised = m.is_authorised(cid)
     sticks, right, left, _ = m.operator_input()
     telemetry = m.telemetry
+    bar = state_bar_html(pilot_state(telemetry, m.link_state, mine=mine, holder_known=holder is not None))
+    if force or bar != h.shown.get("bar"):
+        h.state_bar.content = bar
     flags = int(telemetry.flags) if telemetry is not None else 0
     # What the board holds (it drops every hold on a mode change or failsafe): the toggles follow it.
     held = tuple(bool(flags & (TelemetryFlags.HOLD_1 << i)) for i in range(3))
@@ -303,6 +395,7 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
         "levers": (right, left),
         "sticks": None if mine else sticks,
         "held": held,
+        "bar": bar,
     }
     if not force and state == h.shown:
         return
@@ -323,8 +416,17 @@ def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> N
         # the holder's sticks (their own sliders are disabled).
         for ch, slider in h.sticks.items():
             slider.value = float(sticks[ch])
+    if force or prev.get("levers") != (right, left):
+        h.right_lever.options = lever_options(right)
+        h.left_lever.options = lever_options(left)
     if force or prev.get("held") != held:
         for box, on in zip(h.holds, held, strict=True):
             box_handle: Any = box
             box_handle.value = on
-    h.levers_md.content = f"Right lever **{right.name}** · left lever **{left.name}**"
+    seen = ""
+    if telemetry is not None and telemetry.right_lever in (1, 2, 3):
+        seen = f" · the board sees right **{Lever(telemetry.right_lever).name}**"
+    if holder is None:
+        h.levers_md.content = f"No RC sent: nobody holds control{seen}"
+    else:
+        h.levers_md.content = f"Sent: right lever **{right.name}** · left lever **{left.name}**{seen}"

@@ -33,12 +33,14 @@ import viser
 import viser.transforms as vtf
 
 __all__ = [
+    "CAMERA_PRESETS",
     "ArmGeometry",
     "DronePose",
     "SceneHandles",
     "SceneObject",
     "arm_drawing",
     "build_scene",
+    "camera_view",
     "default_hanging_pose",
     "quat_mul",
     "quat_rotate",
@@ -296,6 +298,68 @@ def _drone_mesh() -> trimesh.Trimesh:
     return mesh
 
 
+def _heading_mesh() -> trimesh.Trimesh:
+    """An arrow along body +x from the hub past the front rotors (the heading marker)."""
+    shaft = trimesh.creation.cylinder(radius=0.008, height=0.3, sections=12)
+    shaft.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, (0.0, 1.0, 0.0)))
+    shaft.apply_translation((0.15 + 0.06, 0.0, 0.03))
+    head = trimesh.creation.cone(radius=0.03, height=0.08, sections=16)
+    head.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, (0.0, 1.0, 0.0)))
+    head.apply_translation((0.36, 0.0, 0.03))
+    mesh = trimesh.util.concatenate([shaft, head])
+    assert isinstance(mesh, trimesh.Trimesh)
+    return mesh
+
+
+CAMERA_PRESETS = ("sticks", "behind", "side", "top", "tip")
+"""Camera presets: aligned with the sticks (the default), behind the drone, from the side, from above,
+following the arm's tip."""
+
+
+def camera_view(
+    preset: str, centre_m: Sequence[float], drone: DronePose, tip_m: Sequence[float]
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Camera position and look-at point of a preset.
+
+    The sticks bend the arm in the world's x-y plane (``controller.cables.CableMapper``: right stick
+    right = toward +x, up = toward +y), so the default view looks along +y from behind: stick right is
+    screen right and stick up is away from the viewer; ``top`` keeps that layout seen from above
+    (stick up = screen up). ``behind`` and ``side`` follow the drone's yaw (its nose is body +x).
+
+    Args:
+        preset: one of :data:`CAMERA_PRESETS`.
+        centre_m: the point to look at (the arm's middle).
+        drone: the drone's pose.
+        tip_m: the arm's tip.
+
+    Raises:
+        ValueError: an unknown preset.
+    """
+    c = np.asarray(centre_m, dtype=np.float64)
+    q = np.asarray(drone.wxyz, dtype=np.float64)
+    nose = quat_rotate(q, np.array([1.0, 0.0, 0.0]))
+    nose[2] = 0.0
+    nose = _normalize(nose, (1.0, 0.0, 0.0))
+    left = np.array([-nose[1], nose[0], 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    c = c - 0.05 * up  # a little below the arm's middle: the drone above and the arm's sweep below fit
+    if preset == "sticks":
+        pos, look = c + np.array([0.0, -1.1, 0.35]), c
+    elif preset == "behind":
+        pos, look = c - 1.1 * nose + 0.35 * up, c
+    elif preset == "side":
+        pos, look = c + 1.1 * left + 0.1 * up, c
+    elif preset == "top":
+        # Not straight down: an orbit camera cannot look along its own up axis.
+        pos, look = c + np.array([0.0, -0.02, 1.4]), c
+    elif preset == "tip":
+        t = np.asarray(tip_m, dtype=np.float64)
+        pos, look = t + np.array([0.0, -0.35, 0.15]), t
+    else:
+        raise ValueError(f"camera preset must be one of {', '.join(CAMERA_PRESETS)}, got {preset!r}")
+    return (float(pos[0]), float(pos[1]), float(pos[2])), (float(look[0]), float(look[1]), float(look[2]))
+
+
 def _object_mesh(obj: SceneObject) -> trimesh.Trimesh:
     mesh: trimesh.Trimesh
     if obj.kind == "cylinder":
@@ -357,6 +421,7 @@ class SceneHandles:
     """Handles of the scene nodes (one per kind of thing drawn)."""
 
     drone: Any
+    heading: Any
     units: Any
     cables: Any
     trail: Any
@@ -377,6 +442,13 @@ class SceneView:
         self._n_units = geom.units
         self._lock = threading.Lock()
         self._label_text = ""
+        pos, _ = default_hanging_pose(geom)
+        self.drone = DronePose((float(pos[0][0]), float(pos[0][1]), float(pos[0][2])))
+        """The drone's pose last drawn (for the camera presets)."""
+        self.centre_m = _xyz(np.mean(pos, axis=0))
+        """The middle of the arm last drawn."""
+        self.tip_m = _xyz(pos[-1])
+        """The arm's tip last drawn."""
 
     def update(
         self,
@@ -410,6 +482,10 @@ class SceneView:
             colors = (_UNIT_COLOR_BASE * (1 - f) + _UNIT_COLOR_TIP * f).astype(np.uint8)
         if trail:
             self._trail.append(drawing.tip_m)
+        p0, q0, tip = positions[0], quats[0], drawing.tip_m
+        self.drone = DronePose((float(p0[0]), float(p0[1]), float(p0[2])), _wxyz(q0))
+        self.centre_m = _xyz(np.mean(positions, axis=0))
+        self.tip_m = _xyz(tip)
         h = self.handles
         with self.server.atomic():
             h.drone.position = tuple(float(x) for x in positions[0])
@@ -432,6 +508,14 @@ class SceneView:
                 h.label.position = tuple(float(x) for x in positions[0] + np.array([0.0, 0.0, 0.15]))
         self.server.flush()
         self.updates += 1
+
+
+def _xyz(v: FloatArray) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _wxyz(q: FloatArray) -> tuple[float, float, float, float]:
+    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
 
 
 def _reroot(positions: FloatArray, quats: FloatArray, drone: DronePose) -> tuple[FloatArray, FloatArray]:
@@ -525,7 +609,16 @@ def build_scene(
                 wxyz=obj.wxyz,
             )
         )
-    handles = SceneHandles(drone_h, units_h, cables_h, trail_h, label_h, objs)
+    # The drone's nose (body +x, FLU): a child of /drone, so viser poses it with the drone.
+    nose = _heading_mesh()
+    heading_h = scene.add_mesh_simple(
+        "/drone/heading",
+        vertices=np.asarray(nose.vertices, dtype=np.float32),
+        faces=np.asarray(nose.faces, dtype=np.uint32),
+        color=(230, 50, 50),
+    )
+    scene.add_label("/drone/heading/label", text="nose", position=(0.42, 0.0, 0.04))
+    handles = SceneHandles(drone_h, heading_h, units_h, cables_h, trail_h, label_h, objs)
     return SceneView(server, geom, handles)
 
 

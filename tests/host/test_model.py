@@ -188,3 +188,114 @@ def test_quaternion_helpers() -> None:
     q = np.array([math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)])  # 90° about z
     assert np.allclose(quat_rotate(q, np.array([1.0, 0.0, 0.0])), [0.0, 1.0, 0.0])
     assert np.allclose(quat_mul(q, q), [0.0, 0.0, 0.0, 1.0])
+
+
+def test_refused_command_toasts_the_tab_that_sent_it_with_the_boards_reason() -> None:
+    from protocol.messages import AckResult, CommandAck
+
+    m, sent = make_model()
+    m.request_control(4)
+    assert m.command(4, CommandCode.SET_MODE, (float(Mode.DIRECT), 0.0, 0.0))
+    assert isinstance(sent[-1], Command)
+    seq = m.notices_after(0)[-1].seq if m.notices_after(0) else 0
+    m.on_board_message(CommandAck(CommandCode.SET_MODE, AckResult.REJECTED, 7, "right lever not MIDDLE"))
+    (notice,) = m.notices_after(seq)
+    assert notice.client == 4 and notice.title == "Board refused SET_MODE"
+    assert notice.body == "right lever not MIDDLE"
+    # An accepted one says nothing; both are in the event console.
+    m.on_board_message(CommandAck(CommandCode.SET_MODE, AckResult.ACCEPTED, 8))
+    assert m.notices_after(notice.seq) == []
+    lines = [e.text for e in m.events.entries() if e.source == "ack"]
+    assert lines == ["SET_MODE REJECTED: right lever not MIDDLE", "SET_MODE ACCEPTED"]
+    # An answer to a command no tab sent (MAVLink) goes to everyone.
+    m.on_board_message(CommandAck(CommandCode.GRASP, AckResult.DENIED, 9, "not in GRASP"))
+    assert m.notices_after(notice.seq)[-1].client is None
+
+
+def test_a_tab_that_cannot_act_is_told_why() -> None:
+    m, _ = make_model()
+    m.request_control(1)
+    assert not m.command(2, CommandCode.ARM)
+    notice = m.notices_after(0)[-1]
+    assert notice.client == 2 and "does not hold control" in notice.body
+
+
+def test_control_request_toast_names_the_tab() -> None:
+    m, _ = make_model()
+    m.request_control(11)
+    m.request_control(12)
+    notice = m.notices_after(0)[-1]
+    assert notice.client == 11 and notice.body.startswith("Tab 12 asks for control")
+
+
+def test_param_set_is_checked_sent_and_confirmed_by_the_board() -> None:
+    from protocol.messages import ParamSet, ParamValue
+
+    m, sent = make_model()
+    assert m.set_param(1, "PRETENSION_N", 1.0) == "this tab does not hold control"
+    m.request_control(1)
+    assert m.set_param(1, "NOPE", 1.0) == "unknown parameter 'NOPE'"
+    assert m.set_param(1, "CURRENT_LIMIT_A", 50.0) == "current_limit_a: must be in (0, 10] A (C610)"
+    assert not any(isinstance(x, ParamSet) for x in sent)
+    assert m.set_param(1, "PRETENSION_N", 0.75) is None
+    assert sent[-1] == ParamSet("PRETENSION_N", 0.75)
+    assert m.param_status["PRETENSION_N"].confirmed is None
+    m.on_board_message(ParamValue(5, 44, "PRETENSION_N", 0.75))
+    status = m.param_status["PRETENSION_N"]
+    assert status.confirmed == 0.75 and status.accepted
+    # The board keeps another value (a safety parameter outside SAFE): read back and its reason.
+    assert m.set_param(1, "CURRENT_LIMIT_A", 2.0) is None
+    m.on_board_message(Event(10, EventKind.PARAM, 4, 2.0, "rejected: only in SAFE"))
+    m.on_board_message(ParamValue(4, 44, "CURRENT_LIMIT_A", 3.0))
+    status = m.param_status["CURRENT_LIMIT_A"]
+    assert status.confirmed == 3.0 and not status.accepted and status.note == "rejected: only in SAFE"
+    # The DIRECT tension ceiling follows the board's TENSION_MAX_N.
+    m.on_board_message(ParamValue(8, 44, "TENSION_MAX_N", 12.0))
+    assert m.limits.tension_max_n == 12.0
+
+
+def test_event_console_is_bounded_and_keeps_board_times() -> None:
+    from host.event_console import EventConsole, console_html
+
+    c = EventConsole(3)
+    for i in range(5):
+        c.add(i * 1_000_000, "board", "info", f"e{i}")
+    assert [e.text for e in c.entries()] == ["e2", "e3", "e4"] and c.seq == 5
+    assert c.entries()[-1].line().split() == ["4.000", "s", "board", "e4"]
+    text = console_html(c.entries(), max_lines=2)
+    assert text.index("e4") < text.index("e3") and "e2" not in text
+    with pytest.raises(ValueError):
+        EventConsole(0)
+    m, _ = make_model()
+    m.on_board_message(Event(2_500_000, EventKind.FAULT, 2, 0.0, "motor 2 silent"))
+    (entry,) = m.events.entries()
+    assert entry.board_time_us == 2_500_000 and entry.level == "error" and "motor 2 silent" in entry.text
+
+
+def test_camera_presets_follow_the_stick_axes() -> None:
+    from host.scene import CAMERA_PRESETS, camera_view
+
+    drone = DronePose((0.0, 0.0, 1.0))
+    centre, tip = (0.0, 0.0, 0.9), (0.0, 0.0, 0.76)
+    views = {p: camera_view(p, centre, drone, tip) for p in CAMERA_PRESETS}
+    # Stick view: from -y looking +y, so stick right (+x) is screen right and stick up (+y) is away.
+    pos, look = views["sticks"]
+    assert pos[1] < look[1] and abs(pos[0] - look[0]) < 1e-9
+    assert views["top"][0][2] > 1.5 and views["tip"][1] == tip
+    # Behind the drone follows its yaw: nose (body +x) turned to +y puts the camera at -y.
+    yawed = DronePose((0.0, 0.0, 1.0), (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)))
+    pos, look = camera_view("behind", centre, yawed, tip)
+    assert pos[1] < look[1] - 1.0 and abs(pos[0]) < 1e-6
+    with pytest.raises(ValueError, match="camera preset"):
+        camera_view("nowhere", centre, drone, tip)
+
+
+def test_mavlink_commands_are_logged_in_the_event_console() -> None:
+    from protocol.messages import ParamSet
+
+    m, _ = make_model()
+    m.on_board_message(Telemetry(3_000_000))
+    m.on_host_command(Command(CommandCode.GRASP), "MAVLink")
+    m.on_host_command(ParamSet("SLEW_N_S", 40.0), "MAVLink")
+    lines = [(e.source, e.text, e.board_time_us) for e in m.events.entries()]
+    assert lines == [("MAVLink", "GRASP", 3_000_000), ("MAVLink", "set SLEW_N_S = 40", 3_000_000)]

@@ -122,6 +122,26 @@ def stick_input(page: Any, label: str) -> Any:
     ).first
 
 
+def lever_button(page: Any, lever: str, position: str) -> Any:
+    """The ``position`` button of the ``lever`` ("Right lever", "Left lever"), marked or not."""
+    return page.locator(
+        f"xpath=//*[normalize-space()='{lever}']/ancestor::div[contains(@class,'mantine-Flex-root')][1]"
+        f"//button[normalize-space()='{position}' or normalize-space()='● {position}']"
+    ).first
+
+
+def state_bar(page: Any) -> str:
+    return str(page.locator("[data-testid=state-bar]").first.inner_text())
+
+
+def wait_bar(page: Any, *texts: str) -> str:
+    """Wait until the state bar shows every one of ``texts``; returns its text."""
+    ok = wait_for(lambda: all(t in state_bar(page) for t in texts), 20.0)
+    text = state_bar(page)
+    assert ok, f"state bar {text!r} lacks {texts}"
+    return text
+
+
 def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     from PIL import Image, ImageStat
 
@@ -155,16 +175,16 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     page_a.get_by_role("button", exact=True, name="Take control").click()
     assert wait_for(lambda: m.holder == a)
     page_a.get_by_text("You hold control.").wait_for(timeout=10_000)
-    page_a.get_by_role("button", exact=True, name="DOWN").first.click()
+    lever_button(page_a, "Right lever", "DOWN").click()
     assert wait_for(lambda: m.telemetry is not None and m.telemetry.phase == Phase.OK)
-    page_a.get_by_role("button", exact=True, name="MIDDLE").first.click()
+    lever_button(page_a, "Right lever", "MIDDLE").click()
     page_a.get_by_role("button", exact=True, name="Arm").click()
     assert wait_for(lambda: m.telemetry is not None and m.telemetry.mode.name == "MANUAL")
     base = m.telemetry
     assert base is not None
 
-    # Move the curl stick in the page: the board's commanded tensions and currents follow.
-    curl = stick_input(page_a, "Left ↕ curl")
+    # Move the left stick up in the page: the board's commanded tensions and currents follow.
+    curl = stick_input(page_a, "Left ↕ tighten all cables")
     curl.fill("500")
     curl.press("Enter")
     assert wait_for(lambda: m.operator_input()[0][3] == 500, 10.0)
@@ -216,6 +236,67 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     page_a.close()
     page_b.close()
     assert wait_for(lambda: m.holder is None)
+
+
+def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> None:
+    """A first-time pilot's steps, each said by the panel: the state bar's next step in each phase, the
+    board's reason for a refused command, the control request toast, the parameter editor's round trip
+    through the board, and Space with the focus in a number box."""
+    m = app.model
+    page_a = open_panel(browser, app)
+    a = client_of(app, set())
+    # Nobody drives yet: no RC, the board waits (RC_LOST or GATE), the bar says how to start.
+    text = wait_bar(page_a, "Take control")
+    assert text.split(" · ")[0] in ("RC_LOST", "GATE"), text
+    page_a.get_by_role("button", exact=True, name="Take control").click()
+    assert wait_for(lambda: m.holder == a)
+    # The new holder sends the right lever DOWN: the gate opens, SAFE; the lever button shows it.
+    wait_bar(page_a, "OK · SAFE", "ARMED", "move the right lever to MIDDLE to drive")
+    assert lever_button(page_a, "Right lever", "DOWN").inner_text().strip() == "● DOWN"
+
+    # A refused command: DIRECT with the lever DOWN. The board's reason arrives as a toast.
+    page_a.get_by_text("Direct mode", exact=True).first.click()
+    page_a.get_by_role("button", exact=True, name="Enter DIRECT mode").click()
+    page_a.get_by_text("Board refused SET_MODE").first.wait_for(timeout=15_000)
+    page_a.get_by_text("DIRECT needs phase OK and the right lever MIDDLE").first.wait_for(timeout=5_000)
+    assert any("SET_MODE REJECTED" in e.text for e in m.events.entries())
+
+    # MIDDLE: MANUAL, and the bar says how to drive.
+    lever_button(page_a, "Right lever", "MIDDLE").click()
+    wait_bar(page_a, "OK · MANUAL", "driving")
+    assert lever_button(page_a, "Right lever", "MIDDLE").inner_text().strip() == "● MIDDLE"
+
+    # Another tab asks for control: the holder gets a toast naming it, and keeps control.
+    page_b = open_panel(browser, app)
+    b = client_of(app, {a})
+    page_b.get_by_role("button", exact=True, name="Take control").click()
+    page_a.get_by_text(f"Tab {b} asks for control").first.wait_for(timeout=15_000)
+    page_a.get_by_role("button", exact=True, name="Keep control").click()
+    assert wait_for(lambda: m.pending is None) and m.holder == a
+    page_b.close()
+
+    # The parameter editor: set STICK_DEADBAND, the board reads it back, the page shows it confirmed.
+    page_a.get_by_text("Parameters", exact=True).first.click()
+    page_a.get_by_label("Parameter").first.click()
+    page_a.get_by_role("option", name="STICK_DEADBAND", exact=True).click()
+    page_a.get_by_text("Bounds: must be 0..659 counts").first.wait_for(timeout=10_000)
+    old = m.params.get("STICK_DEADBAND")
+    new = 17 if old != 17 else 18
+    box = stick_input(page_a, "Value")
+    box.fill(str(new))
+    box.press("Enter")
+    page_a.get_by_role("button", exact=True, name="Set on board").click()
+    assert wait_for(lambda: m.params.get("STICK_DEADBAND") == new), m.params.get("STICK_DEADBAND")
+    page_a.get_by_text(f"Set to {new}: confirmed by the board").first.wait_for(timeout=10_000)
+
+    # Space with the focus in that number box: E-stop, the banner and the way out.
+    box.focus()
+    assert page_a.evaluate("document.activeElement.tagName") == "INPUT"
+    page_a.keyboard.press("Space")
+    assert wait_for(lambda: m.telemetry is not None and m.telemetry.phase == Phase.ESTOP), m.telemetry
+    page_a.get_by_text("E-STOP LATCHED").first.wait_for(timeout=10_000)
+    wait_bar(page_a, "ESTOP", "E-stop latched: clear it (Clear E-stop), then re-arm through SAFE")
+    page_a.close()
 
 
 OPEN_WS_JS = """([url, protocol]) => new Promise(done => {
