@@ -21,11 +21,13 @@ def test_round_trip_raw_and_json(tmp_path: Path) -> None:
         rec.write_raw(recording.CAN_TX, 1000, recording.pack_can(0x200, bytes(8)))
         rec.write_json(recording.TELEMETRY, 2000, {"mode": 1, "tension_n": [1.0, 2.0, 3.0]})
     records = list(read_records(path))
-    assert [r.topic for r in records] == [recording.DBUS_RX, recording.CAN_TX, recording.TELEMETRY]
-    assert [r.time_us for r in records] == [10, 1000, 2000]
+    # The first telemetry also writes the event of its mode (none before it: "-").
+    assert [r.topic for r in records] == [recording.DBUS_RX, recording.CAN_TX, recording.TELEMETRY, "/events"]
+    assert [r.time_us for r in records] == [10, 1000, 2000, 2000]
     assert recording.unpack_can(records[1].data) == (0x200, bytes(8))
     assert records[2].json() == {"mode": 1, "tension_n": [1.0, 2.0, 3.0]}
-    assert read_metadata(path) == {"scenario": "rc-loss", "seed": "3"}
+    meta = read_metadata(path)
+    assert (meta["scenario"], meta["seed"], meta["format"]) == ("rc-loss", "3", str(recording.FORMAT))
     only_can = list(read_records(path, topics={recording.CAN_TX}))
     assert len(only_can) == 1
 
