@@ -109,9 +109,13 @@ class HostApp:
                 self.client.add_listener(self.shadow.on_board_message)
                 self.shadow.start()
             if o.record is not None:
-                self.recording = LinkRecording(o.record, {"source": "spirob-host", "port": self.board_url})
+                meta = {"source": "spirob-host", "port": self.board_url}
+                if self.board is not None:  # the virtual board's design and firmware parameters
+                    meta.update(self.board_config.describe())
+                self.recording = LinkRecording(o.record, meta)
                 self.client.add_tap(self.recording.tap)
                 self.client.add_listener(self.recording.on_board_message)
+                self.client.add_state_listener(self.recording.on_link_state)
             if o.mavlink is not None:
                 self._start_drone_link()
             try:
@@ -144,6 +148,7 @@ class HostApp:
         from hil.errors import HilError  # type: ignore[import-not-found,unused-ignore]
 
         config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
+        self.board_config = config
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
             url = str(self.board.start(timeout_s=load_scaled_s(30.0)))

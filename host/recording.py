@@ -5,13 +5,19 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
+from host.board_client import LinkState
 from host.errors import HostError
-from protocol.messages import Message, Telemetry
+from protocol.messages import Message, SimPoses, Telemetry
 from protocol.stream import MessageStream
 
 __all__ = ["LinkRecording", "replay_messages"]
+
+
+def _now_us() -> int:
+    return time.monotonic_ns() // 1000
 
 
 class LinkRecording:
@@ -19,11 +25,19 @@ class LinkRecording:
 
     Raw bytes go to the same topics the virtual board uses (``/board/link_tx`` = board -> host,
     ``/board/link_rx`` = host -> board), so ``--replay`` and ``spirob-hil`` read either kind of file.
-    Decoded telemetry goes to ``/telemetry`` as JSON for plotting tools. Times are host µs (monotonic).
+    What the board reports goes to the Foxglove channels a ``spirob-hil`` recording has: telemetry in the
+    same JSON layout (``/telemetry``), its poses as transforms and the arm's shape (``/tf``,
+    ``/arm/scene``), and the link's state changes with the board's own as events (``/events``).
+    ``publish_time`` is the host's monotonic clock, ``log_time`` the Unix time of the same instant.
     """
 
-    def __init__(self, path: Path, metadata: dict[str, str]) -> None:
+    def __init__(self, path: Path, metadata: Mapping[str, str]) -> None:
         """Create the file.
+
+        Args:
+            path: the file.
+            metadata: the run's description (source, port, and the virtual board's ``design`` and
+                ``firmware`` when the host started it: the design sizes the arm's drawing).
 
         Raises:
             HostError: the file cannot be created.
@@ -32,7 +46,9 @@ class LinkRecording:
 
         self._rec_mod = recording
         try:
-            self._rec = recording.Recorder(path, metadata=metadata)
+            self._rec = recording.Recorder(
+                path, metadata=metadata, clock_offset_ns=recording.monotonic_clock_offset_ns()
+            )
         except OSError as exc:
             raise HostError(f"cannot record to {path}: {exc.strerror or exc}") from exc
         self._lock = threading.Lock()
@@ -45,23 +61,20 @@ class LinkRecording:
             self._rec.write_raw(topic, t_us, data)
 
     def on_board_message(self, msg: Message) -> None:
-        """Listener: decoded telemetry as JSON."""
-        if not isinstance(msg, Telemetry):
-            return
-        obj = {
-            "time_us": msg.time_us,
-            "mode": msg.mode.name,
-            "phase": msg.phase.name,
-            "grasp_state": msg.grasp_state.name,
-            "flags": int(msg.flags),
-            "tension_target_n": list(msg.tension_target_n),
-            "tension_est_n": list(msg.tension_est_n),
-            "commanded_current": list(msg.commanded_current),
-            "motor_current": list(msg.motor_current),
-            "cable_length_m": list(msg.cable_length_m),
-        }
+        """Listener: telemetry (and the events it shows) and the simulated poses."""
+        if isinstance(msg, Telemetry):
+            obj = self._rec_mod.telemetry_json(msg)
+            with self._lock, contextlib.suppress(ValueError):
+                self._rec.write_json(self._rec_mod.TELEMETRY, _now_us(), obj)
+        elif isinstance(msg, SimPoses) and msg.positions_m:
+            with self._lock, contextlib.suppress(ValueError):
+                self._rec.write_poses(_now_us(), msg.positions_m, msg.quats_wxyz)
+
+    def on_link_state(self, state: LinkState) -> None:
+        """State listener of :class:`BoardClient`: each change of the link's state is an event."""
+        warning = state is LinkState.DISCONNECTED
         with self._lock, contextlib.suppress(ValueError):
-            self._rec.write_json(self._rec_mod.TELEMETRY, time.monotonic_ns() // 1000, obj)
+            self._rec.write_event(_now_us(), f"board link {state.value}", warning=warning)
 
     def close(self) -> None:
         """Finish the file (safe twice)."""
