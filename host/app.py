@@ -61,6 +61,7 @@ class HostApp:
         self.guard: PanelGuard | None = None
         self.panel: Any = None
         self.recording: LinkRecording | None = None
+        self.foxglove: Any = None
         self.shadow: ShadowPlant | None = None
         self.drone_link: Any = None
         self.url = ""
@@ -108,14 +109,16 @@ class HostApp:
                 self.shadow = ShadowPlant(self.model.on_shadow_poses)
                 self.client.add_listener(self.shadow.on_board_message)
                 self.shadow.start()
+            meta = {"source": "spirob-host", "port": self.board_url}
+            if self.board is not None:  # the virtual board's design and firmware parameters
+                meta.update(self.board_config.describe())
             if o.record is not None:
-                meta = {"source": "spirob-host", "port": self.board_url}
-                if self.board is not None:  # the virtual board's design and firmware parameters
-                    meta.update(self.board_config.describe())
                 self.recording = LinkRecording(o.record, meta)
                 self.client.add_tap(self.recording.tap)
                 self.client.add_listener(self.recording.on_board_message)
                 self.client.add_state_listener(self.recording.on_link_state)
+            if o.foxglove_port is not None:
+                self._start_foxglove(meta)
             if o.mavlink is not None:
                 self._start_drone_link()
             try:
@@ -125,6 +128,10 @@ class HostApp:
         else:
             self.model.source_label = f"replay {o.replay}"
             self.model.link_state = LinkState.CONNECTED
+            if o.foxglove_port is not None:
+                from hil.recording import read_metadata  # type: ignore[import-not-found,unused-ignore]
+
+                self._start_foxglove(read_metadata(o.replay))
         if o.ui:
             self._start_ui()
         if o.replay is not None:
@@ -157,6 +164,17 @@ class HostApp:
         # The objects of the plant we asked for (free objects drawn where they start).
         self.objects.extend(scene_objects(config.plant.model.objects))
         return url
+
+    def _start_foxglove(self, metadata: dict[str, str]) -> None:
+        from host.foxglove_live import FoxgloveLive
+
+        assert self.options.foxglove_port is not None
+        live = FoxgloveLive(self.options.foxglove_port, metadata)
+        live.start()
+        self.foxglove = live
+        if self.client is not None:
+            self.client.add_listener(live.on_board_message)
+            self.client.add_state_listener(live.on_link_state)
 
     def _start_drone_link(self) -> None:
         o = self.options
@@ -290,6 +308,8 @@ class HostApp:
                 if delay > 0 and self._stop.wait(delay):
                     break
                 self.model.on_board_message(msg)
+                if self.foxglove is not None:
+                    self.foxglove.on_board_message(msg)
         if messages:
             _log.info("replay finished: %d messages", len(messages))
         else:
@@ -361,6 +381,9 @@ class HostApp:
         if self.recording is not None:
             self.recording.close()
             self.recording = None
+        if self.foxglove is not None:
+            self.foxglove.close()
+            self.foxglove = None
         if self.board is not None:
             with contextlib.suppress(Exception):
                 self.board.stop()

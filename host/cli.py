@@ -68,6 +68,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     )
             if options.record is not None:
                 print(f"{PROG}: recording to {options.record}", flush=True)
+            if app.foxglove is not None:
+                print(f"{PROG}: Foxglove live at {app.foxglove.url}", flush=True)
             return app.run(options.duration_s, stop)
         except KeyboardInterrupt:  # Ctrl-C outside the main thread's handler: a normal end too
             return EXIT_OK
