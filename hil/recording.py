@@ -262,6 +262,11 @@ class Recorder:
         for topic, data in messages:
             self._add(self._spec_channel(foxglove_log.CHANNELS[topic]), time_us, data)
 
+    @property
+    def clock_offset_ns(self) -> int:
+        """Unix time of board time 0 (``log_time - publish_time`` of every message)."""
+        return self._offset_ns
+
     def unix_ns(self, time_us: int) -> int:
         """The ``log_time`` of a message written at ``time_us``."""
         return time_us * 1000 + self._offset_ns
@@ -279,9 +284,12 @@ class Recorder:
         """Records body poses (drone first, then the units base to tip) as Foxglove transforms."""
         self._add_view(time_us, self._view.poses(self.unix_ns(time_us), time_us, positions_m, quats_wxyz))
 
-    def write_json(self, topic: str, time_us: int, obj: Mapping[str, Any]) -> None:
-        """Records a decoded object on a JSON channel with its schema (:data:`TELEMETRY`,
-        :data:`BOARD_CONFIG`); telemetry also writes an event for each change of state it shows.
+    def write_json(
+        self, topic: str, time_us: int, obj: Mapping[str, Any], *, schema: Mapping[str, Any] | None = None
+    ) -> None:
+        """Records a decoded object on a JSON channel with its JSON schema: :data:`TELEMETRY` and
+        :data:`BOARD_CONFIG` have theirs, another topic passes ``schema`` (its ``title`` names it).
+        Telemetry also writes an event for each change of state it shows.
 
         Raises:
             ValueError: a topic without a JSON schema, or the recording is closed.
@@ -290,6 +298,8 @@ class Recorder:
             self._add_view(time_us, self._view.telemetry(self.unix_ns(time_us), obj))
             return
         spec = _JSON_CHANNELS.get(topic)
+        if spec is None and schema is not None:
+            spec = foxglove_log.json_spec(topic, schema)
         if spec is None:
             raise ValueError(f"no JSON schema for topic {topic!r} (known: {', '.join(_JSON_CHANNELS)})")
         self._add(self._spec_channel(spec), time_us, json.dumps(obj, separators=(",", ":")).encode())

@@ -113,7 +113,8 @@ class HostApp:
             if self.board is not None:  # the virtual board's design and firmware parameters
                 meta.update(self.board_config.describe())
             if o.record is not None:
-                self.recording = LinkRecording(o.record, meta)
+                tlog = o.record.with_suffix(".tlog") if o.mavlink is not None else None
+                self.recording = LinkRecording(o.record, meta, tlog=tlog)
                 self.client.add_tap(self.recording.tap)
                 self.client.add_listener(self.recording.on_board_message)
                 self.client.add_state_listener(self.recording.on_link_state)

@@ -14,6 +14,9 @@ from foxglove_check import Checked, check_recording, poses_array
 from hil import foxglove_log, recording
 from hil.cli import main as hil_main
 from host.cli import main
+from host.drone_tlog import TLOG_LINK_IN, TLOG_LINK_OUT, TlogWriter
+from host.recording import MAVLINK, MAVLINK_SCHEMA, LinkRecording, read_tlog
+from protocol.mavlink import Attitude, Heartbeat, MavCodec
 from protocol.messages import SimPoses
 from protocol.stream import MessageStream
 
@@ -90,3 +93,37 @@ def test_link_state_and_board_state_are_events(host_run: tuple[Checked, int, int
     texts = [m.message for _, _, m in host_run[0].messages[foxglove_log.EVENTS]]
     assert "board link connected" in texts
     assert any(t.startswith("mode ") for t in texts), texts
+
+
+def test_the_tlog_is_copied_to_a_mavlink_channel(tmp_path: Path) -> None:
+    tlog_path = tmp_path / "run.tlog"
+    ours, autopilot = MavCodec(1, 25), MavCodec(1, 1)
+    out_pkt = ours.encode(Heartbeat(mav_type=48))
+    in_pkt = autopilot.encode(Attitude(1234, 0.1, -0.2, 1.5))
+    t0_us = time.time_ns() // 1000
+    tlog = TlogWriter(tlog_path)
+    tlog.write(out_pkt, t0_us, TLOG_LINK_OUT)
+    tlog.write(in_pkt, t0_us + 20_000, TLOG_LINK_IN)
+    tlog.close()
+    with open(tlog_path, "ab") as f:
+        f.write(b"\x00garbage\x00")  # bytes that start no record: skipped
+        f.write((t0_us + 40_000).to_bytes(8, "big") + in_pkt[:-3])  # a cut tail: ignored
+    assert len(read_tlog(tlog_path).packets) == 2
+
+    path = tmp_path / "run.mcap"
+    rec = LinkRecording(path, {"source": "test"}, tlog=tlog_path)
+    rec.close()
+    rec.close()
+    checked = check_recording(path)  # validated against the schema the file stores
+    assert checked.schemas[MAVLINK] == ("spirob.MavlinkPacket", "jsonschema", "json")
+    assert checked.json_schemas[MAVLINK] == MAVLINK_SCHEMA
+    got = checked.messages[MAVLINK]
+    assert [(o["direction"], o["type"], o["src_component"]) for _, _, o in got] == [
+        ("out", "HEARTBEAT", 25),
+        ("in", "ATTITUDE", 1),
+    ]
+    assert got[1][2]["fields"]["yaw_rad"] == pytest.approx(1.5)
+    assert bytes.fromhex(got[0][2]["raw_hex"]) == out_pkt
+    # log_time is the .tlog's own stamp (its two low bits hold the direction), to the µs.
+    for (log_ns, _, _), stamp_us in zip(got, (t0_us, t0_us + 20_000), strict=True):
+        assert abs(log_ns - (stamp_us & ~3) * 1000) < 1000
