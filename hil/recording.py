@@ -19,13 +19,14 @@ never an error. Such a file has no summary, which the mcap library's normal (see
 :func:`recover` copies what it holds into a complete file that reader opens, and
 :func:`is_truncated` tells the two apart.
 
-Timestamps: ``log_time`` is Unix time in nanoseconds, so a recording lines up with the ``.tlog`` and
-anything else logged beside it; ``publish_time`` is the board's clock (``time_us * 1000``): simulated time
-in lockstep runs (0 when the recorder started, which is the Unix time in the metadata key
-``clock_offset_ns``), the host's monotonic clock in a recording of a run against a port (metadata ``kind``
-= :data:`KIND_PORT`) and in ``spirob-host`` recordings. :attr:`Record.time_us` is read from
-``publish_time``; files of format 1 (no ``format`` key) had both times equal to the board's, so they read
-the same.
+Timestamps: ``publish_time`` is the board's clock (``time_us * 1000``) and ``log_time`` is
+``publish_time + clock_offset_ns`` (metadata key of that name). A recording of something that ran in real
+time (a run against a port, metadata ``kind`` = :data:`KIND_PORT`, and ``spirob-host`` recordings) is on
+the host's monotonic clock with the offset that makes ``log_time`` Unix time, so it lines up with the
+``.tlog`` and anything else logged beside it. A lockstep run has no wall clock: its simulated time runs
+faster than real time, and a recording of it stays byte-identical for a seed, so its offset is 0 and its
+``log_time`` is simulated time. :attr:`Record.time_us` is read from ``publish_time``; files of format 1 (no
+``format`` key) had both times equal to the board's, so they read the same.
 """
 
 from __future__ import annotations
@@ -197,10 +198,10 @@ class Recorder:
             ``format``, ``version`` (the package's) and ``clock_offset_ns`` are added.
         flush_every: Finish and flush the current chunk after this many messages, bounding what a
             killed process can lose.
-        clock_offset_ns: Unix time of board time 0, added to every ``time_us`` to make ``log_time``.
-            Default: now, for simulated time that starts with the recording; a recording of ``kind``
-            :data:`KIND_PORT` is on the monotonic clock, so its default is
-            :func:`monotonic_clock_offset_ns`.
+        clock_offset_ns: Added to every ``time_us`` (in ns) to make ``log_time``. Default: for a
+            recording of ``kind`` :data:`KIND_PORT` (the host's monotonic clock)
+            :func:`monotonic_clock_offset_ns`, so ``log_time`` is Unix time; else 0, simulated time
+            (deterministic: a lockstep recording is byte-identical for a seed).
     """
 
     def __init__(
@@ -216,7 +217,7 @@ class Recorder:
         meta = {str(k): str(v) for k, v in (metadata or {}).items()}
         if clock_offset_ns is None:
             port = meta.get("kind") == KIND_PORT
-            clock_offset_ns = monotonic_clock_offset_ns() if port else time.time_ns()
+            clock_offset_ns = monotonic_clock_offset_ns() if port else 0
         self._offset_ns = clock_offset_ns
         meta.update(format=str(FORMAT), version=package_version(), clock_offset_ns=str(clock_offset_ns))
         self.path = Path(path)
