@@ -67,7 +67,8 @@ class Checked:
 
 
 def check_recording(path: Path) -> Checked:
-    """Open ``path`` with the mcap library's (indexed) reader and check every message."""
+    """Open ``path`` with the mcap library's (indexed) reader and check every message, and that every
+    declared channel holds messages."""
     out = Checked()
     classes: dict[int, type[PbMessage]] = {}
     validators: dict[int, Any] = {}
@@ -96,6 +97,11 @@ def check_recording(path: Path) -> Checked:
                 decoded = json.loads(message.data)
                 validators[schema.id].validate(decoded)
             out.messages[channel.topic].append((message.log_time, message.publish_time, decoded))
+        summary = reader.get_summary()
+    assert summary is not None
+    declared = {c.topic for c in summary.channels.values()}
+    # A file declares no channel it does not hold.
+    assert declared == set(out.messages) | set(out.raw), declared ^ (set(out.messages) | set(out.raw))
     return out
 
 

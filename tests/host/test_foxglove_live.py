@@ -9,8 +9,10 @@ import struct
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
+import jsonschema
 import numpy as np
 import pytest
 from foxglove_check import decode_protobuf, poses_array, protobuf_class
@@ -123,3 +125,21 @@ def test_flag_default_is_foxglove_port() -> None:
     assert opts.foxglove_port == 8765
     assert HostOptions.from_args(build_parser().parse_args([])).foxglove_port is None
     assert HostOptions.from_args(build_parser().parse_args(["--foxglove", "9001"])).foxglove_port == 9001
+
+
+def test_a_replay_is_served_live_too(peer: LinkPeer, tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    assert main(["--port", peer.url, "--headless", "--duration", "1", "--record", str(path)]) == 0
+    with HostApp(HostOptions(replay=path, ui=False, foxglove_port=0, replay_speed=0.5)) as app:
+        app.start()
+        assert app.foxglove is not None
+        deadline = time.monotonic() + 20.0
+        with connect(app.foxglove.url, subprotocols=[SUBPROTOCOL], open_timeout=10) as ws:
+            channels = {c["topic"]: c for c in _json_until(ws, "advertise", deadline)["channels"]}
+            tel = channels[foxglove_log.TELEMETRY]
+            assert (tel["encoding"], tel["schemaEncoding"]) == ("json", "jsonschema")
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 3, "channelId": tel["id"]}]}))
+            _, payload = _binary_until(ws, 3, deadline)
+    obj = json.loads(payload)
+    jsonschema.validate(obj, json.loads(tel["schema"]))  # the schema the server advertised
+    assert obj["time_us"] > 0
