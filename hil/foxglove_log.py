@@ -351,9 +351,9 @@ def design_sizes(design_json: str | None) -> tuple[list[tuple[float, float]], li
         fields = json.loads(design_json)
         fields["inputs"] = tuple(tuple(p) for p in fields.get("inputs", ()))
         design = SpiralDesign(**fields)
-        return [tuple(w) for w in design.unit_widths_m()], list(design.unit_chords_m())  # type: ignore[misc]
-    except (TypeError, ValueError, KeyError):
+    except (TypeError, ValueError, AttributeError):  # not a design: draw from the poses alone
         return None
+    return list(design.unit_widths_m()), list(design.unit_chords_m())
 
 
 class FoxgloveView:

@@ -145,3 +145,19 @@ def test_view_logs_changes_with_their_level() -> None:
         "phase OK -> RC_LOST (board t=0.500 s)": LogLevel.Warning.value,
         "a motor went offline (board t=0.500 s)": LogLevel.Warning.value,
     }
+
+
+def test_design_sizes_from_metadata_or_none(hil_run: Checked) -> None:
+    sizes = foxglove_log.design_sizes(hil_run.metadata["design"])
+    assert sizes is not None
+    widths, lengths = sizes
+    assert len(widths) == len(lengths) > 5 and all(b > t > 0 for b, t in widths)
+    for bad in (None, "", "nonsense", "[1, 2]", '{"a_m": 1}'):
+        assert foxglove_log.design_sizes(bad) is None
+    # Without sizes, units are drawn from the poses alone: as long as the joint distance.
+    positions = [[0.0, 0.0, 1.0], [0.0, 0.0, 0.9], [0.0, 0.0, 0.8], [0.0, 0.0, 0.75]]
+    quats = [[1.0, 0.0, 0.0, 0.0]] * 4
+    shapes = foxglove_log.unit_shapes(positions, quats)
+    assert [round(s.length_m, 9) for s in shapes] == [0.1, 0.05, 0.05]
+    assert all(s.axis == pytest.approx((0.0, 0.0, -1.0)) for s in shapes)
+    assert shapes[0].base_width_m == pytest.approx(0.08)
