@@ -1,8 +1,16 @@
-"""Recordings in MCAP: every byte in and out of the board plus decoded telemetry.
+"""Recordings in MCAP: every byte in and out of the board, and the run in Foxglove's own schemas.
 
 Raw channels (``message_encoding`` ``spirob.raw``, no schema) hold the exact bytes that crossed each wire,
-so a recording can be replayed through the firmware byte for byte. Decoded channels hold JSON objects
-with a JSON schema, which Foxglove plots directly.
+so a recording can be replayed through the firmware byte for byte. The other channels are what Foxglove
+opens with no set-up (:mod:`hil.foxglove_log`): the drone and every unit as ``foxglove.FrameTransforms``
+(``/tf``), the arm's shape as ``foxglove.SceneUpdate`` (``/arm/scene``), events as ``foxglove.Log``
+(``/events``), and JSON channels with a real JSON schema (``/telemetry``, one layout for host and HIL
+recordings; ``/board/config``). A channel is declared when its first message is written, so a file
+declares no channel it does not hold.
+
+The writer is the ``mcap`` library's, fed the Foxglove SDK's encodings and schemas: it writes channels
+without a schema (the raw wires), flushes a finished chunk on demand and reads back sequentially, which
+the crash-safety below needs; the SDK's own writer does not expose those.
 
 The writer chunks and compresses (zstd) and flushes a finished chunk every ``flush_every`` messages (and
 the header with the metadata at once), so a process killed mid-run leaves a file whose complete chunks
@@ -11,17 +19,22 @@ never an error. Such a file has no summary, which the mcap library's normal (see
 :func:`recover` copies what it holds into a complete file that reader opens, and
 :func:`is_truncated` tells the two apart.
 
-Timestamps: ``log_time`` is the board's clock in nanoseconds (``time_us * 1000``): simulated time in
-lockstep runs, the monotonic clock in real-time runs; the host's monotonic clock in a recording of a run
-against a port (metadata ``kind`` = :data:`KIND_PORT`).
+Timestamps: ``publish_time`` is the board's clock (``time_us * 1000``) and ``log_time`` is
+``publish_time + clock_offset_ns`` (metadata key of that name). A recording of something that ran in real
+time (a run against a port, metadata ``kind`` = :data:`KIND_PORT`, and ``spirob-host`` recordings) is on
+the host's monotonic clock with the offset that makes ``log_time`` Unix time, so it lines up with the
+``.tlog`` and anything else logged beside it. A lockstep run has no wall clock: its simulated time runs
+faster than real time, and a recording of it stays byte-identical for a seed, so its offset is 0 and its
+``log_time`` is simulated time. :attr:`Record.time_us` is read from ``publish_time``; files of format 1 (no
+``format`` key) had both times equal to the board's, so they read the same.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import enum
+import importlib.metadata
 import json
 import struct
+import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,16 +43,53 @@ from typing import IO, Any, Final
 
 import numpy as np
 import numpy.typing as npt
+from foxglove.messages import LogLevel
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
-from protocol.messages import Telemetry
+from . import foxglove_log
+from .foxglove_log import TELEMETRY, ChannelSpec, FoxgloveView, telemetry_json
+
+__all__ = [
+    "BOARD_CONFIG",
+    "CAN_RX",
+    "CAN_TX",
+    "DBUS_RX",
+    "FORMAT",
+    "KIND_PORT",
+    "LINK_RX",
+    "LINK_TX",
+    "POSES",
+    "RAW_TOPICS",
+    "TELEMETRY",
+    "TICK",
+    "Record",
+    "Recorder",
+    "Recovered",
+    "is_mcap",
+    "is_truncated",
+    "monotonic_clock_offset_ns",
+    "pack_can",
+    "pack_poses",
+    "package_version",
+    "read_metadata",
+    "read_records",
+    "recording_format",
+    "recover",
+    "telemetry_json",
+    "unpack_can",
+    "unpack_poses",
+]
 
 PROFILE: Final = "spirob"
 RAW_ENCODING: Final = "spirob.raw"
+
+FORMAT: Final = 2
+"""Layout of the files this module writes (metadata ``format``). 1 (no key): JSON channels with an empty
+schema, ``log_time`` on the board's clock. 2: Foxglove's schemas, Unix ``log_time``."""
 
 # Raw wires, named from the board's side (rx = into the board).
 DBUS_RX: Final = "/board/dbus_rx"
@@ -58,9 +108,13 @@ POSES: Final = "/board/poses"
 """The plant's body poses as handed to the firmware's pose provider: n rows of x y z qw qx qy qz (f64)."""
 RAW_TOPICS: Final = (DBUS_RX, CAN_RX, CAN_TX, LINK_RX, LINK_TX, TICK, POSES)
 
-# Decoded channels (JSON) for people and plotting tools.
-TELEMETRY: Final = "/telemetry"
-"""The firmware's telemetry messages, decoded."""
+BOARD_CONFIG: Final = "/board/config"
+"""The virtual board's configuration (JSON, once at board time 0)."""
+
+_JSON_CHANNELS: Final[dict[str, ChannelSpec]] = {
+    TELEMETRY: foxglove_log.CHANNELS[TELEMETRY],
+    BOARD_CONFIG: foxglove_log.json_spec(BOARD_CONFIG, foxglove_log.BOARD_CONFIG_SCHEMA),
+}
 
 KIND_PORT: Final = "port"
 """Metadata ``kind`` of a recording of a run against a port (``spirob-hil run --port --record``): the
@@ -68,7 +122,6 @@ link's bytes as the host saw them (``/board/link_rx``, ``/board/link_tx``) and t
 the host's monotonic clock. It has none of the board's other inputs, so it cannot be replayed."""
 
 _CAN_HEADER = struct.Struct("<H")
-_JSON_SCHEMA: Final = json.dumps({"type": "object"}).encode()
 
 
 def pack_can(can_id: int, data: bytes) -> bytes:
@@ -93,13 +146,43 @@ def unpack_poses(data: bytes) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.f
     return rows[:, :3], rows[:, 3:]
 
 
+def monotonic_clock_offset_ns() -> int:
+    """Unix time minus the monotonic clock, in ns: what turns a monotonic time into a Unix one."""
+    return time.time_ns() - time.monotonic_ns()
+
+
+def package_version() -> str:
+    """The installed spirob-teleop version (``unknown`` when run from a tree that was never installed)."""
+    try:
+        return importlib.metadata.version("spirob-teleop")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def recording_format(meta: Mapping[str, str]) -> int:
+    """The ``format`` of a recording from its metadata (1 for files written before the key existed).
+
+    Raises:
+        ValueError: the key is not an integer.
+    """
+    return int(meta.get("format", "1"))
+
+
 @dataclass(frozen=True, slots=True)
 class Record:
-    """One recorded message."""
+    """One recorded message.
+
+    Attributes:
+        topic: its channel's topic.
+        time_us: the board's clock (MCAP ``publish_time``).
+        data: the payload.
+        log_time_ns: MCAP ``log_time`` (Unix ns in format 2).
+    """
 
     topic: str
     time_us: int
     data: bytes
+    log_time_ns: int = 0
 
     def json(self) -> Any:
         """The payload of a decoded (JSON) channel."""
@@ -111,58 +194,122 @@ class Recorder:
 
     Args:
         path: File to create (overwritten).
-        metadata: String pairs stored as the ``spirob`` metadata record (scenario, seed, design...).
+        metadata: String pairs stored as the ``spirob`` metadata record (scenario, seed, design...);
+            ``format``, ``version`` (the package's) and ``clock_offset_ns`` are added.
         flush_every: Finish and flush the current chunk after this many messages, bounding what a
             killed process can lose.
+        clock_offset_ns: Added to every ``time_us`` (in ns) to make ``log_time``. Default: for a
+            recording of ``kind`` :data:`KIND_PORT` (the host's monotonic clock)
+            :func:`monotonic_clock_offset_ns`, so ``log_time`` is Unix time; else 0, simulated time
+            (deterministic: a lockstep recording is byte-identical for a seed).
     """
 
     def __init__(
-        self, path: str | Path, *, metadata: Mapping[str, str] | None = None, flush_every: int = 2000
+        self,
+        path: str | Path,
+        *,
+        metadata: Mapping[str, str] | None = None,
+        flush_every: int = 2000,
+        clock_offset_ns: int | None = None,
     ) -> None:
         if flush_every < 1:
             raise ValueError("flush_every must be >= 1")
+        meta = {str(k): str(v) for k, v in (metadata or {}).items()}
+        if clock_offset_ns is None:
+            port = meta.get("kind") == KIND_PORT
+            clock_offset_ns = monotonic_clock_offset_ns() if port else 0
+        self._offset_ns = clock_offset_ns
+        meta.update(format=str(FORMAT), version=package_version(), clock_offset_ns=str(clock_offset_ns))
         self.path = Path(path)
         self._file: IO[bytes] = open(self.path, "wb")  # noqa: SIM115 - closed in close()
         self._writer = Writer(self._file, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
-        self._writer.start(profile=PROFILE, library="spirob-teleop")
+        self._writer.start(profile=PROFILE, library=f"spirob-teleop {meta['version']}")
         self._channels: dict[str, int] = {}
-        self._json_schema = self._writer.register_schema("spirob.json", "jsonschema", _JSON_SCHEMA)
+        self._view = FoxgloveView(foxglove_log.design_sizes(meta.get("design")))
         self._flush_every = flush_every
         self._since_flush = 0
         self._closed = False
         self.messages_written = 0
-        if metadata:
-            self._writer.add_metadata(PROFILE, {str(k): str(v) for k, v in metadata.items()})
+        self._writer.add_metadata(PROFILE, meta)
         # On disk at once: a file killed before its first chunk still says what it records.
         self._writer.flush()
 
-    def _channel(self, topic: str, raw: bool) -> int:
+    def _raw_channel(self, topic: str) -> int:
         channel = self._channels.get(topic)
         if channel is None:
-            if raw:
-                channel = self._writer.register_channel(topic, RAW_ENCODING, schema_id=0)
-            else:
-                channel = self._writer.register_channel(topic, "json", schema_id=self._json_schema)
+            channel = self._writer.register_channel(topic, RAW_ENCODING, schema_id=0)
             self._channels[topic] = channel
+        return channel
+
+    def _spec_channel(self, spec: ChannelSpec) -> int:
+        channel = self._channels.get(spec.topic)
+        if channel is None:
+            schema = self._writer.register_schema(spec.schema_name, spec.schema_encoding, spec.schema_data)
+            channel = self._writer.register_channel(spec.topic, spec.message_encoding, schema_id=schema)
+            self._channels[spec.topic] = channel
         return channel
 
     def _add(self, channel: int, time_us: int, data: bytes) -> None:
         if self._closed:
             raise ValueError(f"recording {self.path} is closed")
         t_ns = time_us * 1000
-        self._writer.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
+        self._writer.add_message(channel, log_time=t_ns + self._offset_ns, data=data, publish_time=t_ns)
         self.messages_written += 1
         self._since_flush += 1
         if self._since_flush >= self._flush_every:
             self.flush()
 
-    def write_raw(self, topic: str, time_us: int, data: bytes) -> None:
-        """Records the exact bytes that crossed a wire at ``time_us``."""
-        self._add(self._channel(topic, raw=True), time_us, bytes(data))
+    def _add_view(self, time_us: int, messages: list[tuple[str, bytes]]) -> None:
+        for topic, data in messages:
+            self._add(self._spec_channel(foxglove_log.CHANNELS[topic]), time_us, data)
 
-    def write_json(self, topic: str, time_us: int, obj: Mapping[str, Any]) -> None:
-        """Records a decoded object (numbers, strings, lists) for plotting tools."""
-        self._add(self._channel(topic, raw=False), time_us, json.dumps(obj, separators=(",", ":")).encode())
+    @property
+    def clock_offset_ns(self) -> int:
+        """Unix time of board time 0 (``log_time - publish_time`` of every message)."""
+        return self._offset_ns
+
+    def unix_ns(self, time_us: int) -> int:
+        """The ``log_time`` of a message written at ``time_us``."""
+        return time_us * 1000 + self._offset_ns
+
+    def write_raw(self, topic: str, time_us: int, data: bytes) -> None:
+        """Records the exact bytes that crossed a wire at ``time_us``.
+
+        Poses (:data:`POSES`) are also written as Foxglove transforms (and the arm's shape when due).
+        """
+        self._add(self._raw_channel(topic), time_us, bytes(data))
+        if topic == POSES:
+            self.write_poses(time_us, *unpack_poses(data))
+
+    def write_poses(self, time_us: int, positions_m: npt.ArrayLike, quats_wxyz: npt.ArrayLike) -> None:
+        """Records body poses (drone first, then the units base to tip) as Foxglove transforms."""
+        self._add_view(time_us, self._view.poses(self.unix_ns(time_us), time_us, positions_m, quats_wxyz))
+
+    def write_json(
+        self, topic: str, time_us: int, obj: Mapping[str, Any], *, schema: Mapping[str, Any] | None = None
+    ) -> None:
+        """Records a decoded object on a JSON channel with its JSON schema: :data:`TELEMETRY` and
+        :data:`BOARD_CONFIG` have theirs, another topic passes ``schema`` (its ``title`` names it).
+        Telemetry also writes an event for each change of state it shows.
+
+        Raises:
+            ValueError: a topic without a JSON schema, or the recording is closed.
+        """
+        if topic == TELEMETRY:
+            self._add_view(time_us, self._view.telemetry(self.unix_ns(time_us), obj))
+            return
+        spec = _JSON_CHANNELS.get(topic)
+        if spec is None and schema is not None:
+            spec = foxglove_log.json_spec(topic, schema)
+        if spec is None:
+            raise ValueError(f"no JSON schema for topic {topic!r} (known: {', '.join(_JSON_CHANNELS)})")
+        self._add(self._spec_channel(spec), time_us, json.dumps(obj, separators=(",", ":")).encode())
+
+    def write_event(self, time_us: int, text: str, *, warning: bool = False) -> None:
+        """Records an event (``foxglove.Log`` on ``/events``)."""
+        level = LogLevel.Warning if warning else LogLevel.Info
+        message = foxglove_log.log_message(self.unix_ns(time_us), level, text)
+        self._add_view(time_us, [(foxglove_log.EVENTS, message)])
 
     def flush(self) -> None:
         """Writes the chunk in progress to disk."""
@@ -288,7 +435,7 @@ def recover(path: str | Path, out: str | Path) -> Recovered:
                     channel = channel_ids[rec.channel_id]
                     writer.add_message(channel, rec.log_time, bytes(rec.data), rec.publish_time, rec.sequence)
                     n += 1
-                    last = rec.log_time // 1000
+                    last = rec.publish_time // 1000
         except (McapError, EOFError, struct.error, ValueError):
             pass  # the truncated tail
         if not started:
@@ -311,22 +458,8 @@ def read_records(path: str | Path, topics: frozenset[str] | set[str] | None = No
                 if isinstance(rec, Message):
                     topic = channels.get(rec.channel_id)
                     if topic is not None and (topics is None or topic in topics):
-                        yield Record(topic, rec.log_time // 1000, bytes(rec.data))
+                        yield Record(topic, rec.publish_time // 1000, bytes(rec.data), rec.log_time)
                 elif isinstance(rec, Channel):
                     channels[rec.id] = rec.topic
         except (McapError, EOFError, struct.error, ValueError):
             return
-
-
-def telemetry_json(msg: Telemetry) -> dict[str, Any]:
-    """A telemetry message as plain JSON numbers (enums as their values, so plotting tools plot them)."""
-    out: dict[str, Any] = {}
-    for f in dataclasses.fields(msg):
-        v = getattr(msg, f.name)
-        if isinstance(v, enum.Enum):
-            out[f.name] = int(v.value)
-        elif isinstance(v, tuple):
-            out[f.name] = list(v)
-        else:
-            out[f.name] = v
-    return out

@@ -26,7 +26,16 @@ from . import recording
 from .board import WireEnd, poses_message
 from .errors import HilError
 from .radio import MemoryUart
-from .recording import KIND_PORT, Record, is_mcap, read_metadata, read_records
+from .recording import (
+    FORMAT,
+    KIND_PORT,
+    Record,
+    is_mcap,
+    package_version,
+    read_metadata,
+    read_records,
+    recording_format,
+)
 
 _INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
 _OUTPUTS = frozenset({recording.CAN_TX, recording.LINK_TX})
@@ -101,11 +110,27 @@ def _firmware_from(meta: dict[str, str]) -> tuple[FirmwareConfig, str]:
     return config, rc
 
 
+def _check_format(meta: dict[str, str]) -> None:
+    """Files of an older format replay as they are (their board time reads the same); a newer one is
+    refused, naming the version that wrote it."""
+    try:
+        fmt = recording_format(meta)
+    except ValueError as exc:
+        raise HilError(f"unreadable recording format {meta.get('format')!r}") from exc
+    if fmt > FORMAT:
+        raise HilError(
+            f"recording format {fmt} (written by spirob-teleop {meta.get('version', '?')}) is newer than "
+            f"this replay reads (format {FORMAT}, spirob-teleop {package_version()}): upgrade spirob-teleop"
+        )
+
+
 def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> ReplayResult:
     """Replay ``path`` through a fresh firmware and compare its outputs.
 
+    Recordings of every format up to :data:`hil.recording.FORMAT` replay (format 1 files included).
+
     Raises:
-        HilError: the file is not a lockstep recording of a virtual board.
+        HilError: the file is not a lockstep recording of a virtual board, or a newer format.
     """
     if not is_mcap(path):
         raise HilError("not an MCAP file")
@@ -117,6 +142,7 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
             "this records a run against a port (the link as the host saw it): only a lockstep "
             "recording can be replayed (spirob-hil run ... --record without --port)"
         )
+    _check_format(meta)
     config, rc_kind = _firmware_from(meta)
     bus = ReplayBus(config.motor.current_limit_raw)
     link = WireEnd()

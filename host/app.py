@@ -65,6 +65,7 @@ class HostApp:
         self.guard: PanelGuard | None = None
         self.panel: Any = None
         self.recording: LinkRecording | None = None
+        self.foxglove: Any = None
         self.shadow: ShadowPlant | None = None
         self.recorder: RecordingSwitch | None = None
         """Recordings started from the panel (None in replay)."""
@@ -120,10 +121,15 @@ class HostApp:
                 self.shadow = ShadowPlant(self.model.on_shadow_poses)
                 self.client.add_listener(self.shadow.on_board_message)
                 self.shadow.start()
+            meta = {"source": "spirob-host", "port": self.board_url}
+            if self.board is not None:  # the virtual board's design and firmware parameters
+                meta.update(self.board_config.describe())
             if o.record is not None:
-                self.recording = LinkRecording(o.record, {"source": "spirob-host", "port": self.board_url})
+                tlog = o.record.with_suffix(".tlog") if o.mavlink is not None else None
+                self.recording = LinkRecording(o.record, meta, tlog=tlog)
                 self.client.add_tap(self.recording.tap)
                 self.client.add_listener(self.recording.on_board_message)
+                self.client.add_state_listener(self.recording.on_link_state)
             # Always on the link (it forwards nothing until the panel starts a recording).
             self.recorder = RecordingSwitch(
                 (o.record.parent if o.record is not None else Path("recordings")).resolve(),
@@ -131,6 +137,8 @@ class HostApp:
             )
             self.client.add_tap(self.recorder.tap)
             self.client.add_listener(self.recorder.on_board_message)
+            if o.foxglove_port is not None:
+                self._start_foxglove(meta)
             if o.mavlink is not None:
                 self._start_drone_link()
             try:
@@ -140,6 +148,10 @@ class HostApp:
         else:
             self.model.source_label = f"replay {o.replay}"
             self.model.link_state = LinkState.CONNECTED
+            if o.foxglove_port is not None:
+                from hil.recording import read_metadata  # type: ignore[import-not-found,unused-ignore]
+
+                self._start_foxglove(read_metadata(o.replay))
         if o.ui:
             self._start_ui()
         if o.replay is not None:
@@ -167,6 +179,7 @@ class HostApp:
         config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
         if self.options.objects:
             config = _with_objects(config, self.options.objects)
+        self.board_config = config
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
             url = str(self.board.start(timeout_s=load_scaled_s(30.0)))
@@ -185,6 +198,17 @@ class HostApp:
         except OSError as exc:
             raise HostError(f"--gamepad {path}: {exc.strerror or exc}") from exc
         self.gamepad = pad
+
+    def _start_foxglove(self, metadata: dict[str, str]) -> None:
+        from host.foxglove_live import FoxgloveLive
+
+        assert self.options.foxglove_port is not None
+        live = FoxgloveLive(self.options.foxglove_port, metadata)
+        live.start()
+        self.foxglove = live
+        if self.client is not None:
+            self.client.add_listener(live.on_board_message)
+            self.client.add_state_listener(live.on_link_state)
 
     def _start_drone_link(self) -> None:
         o = self.options
@@ -324,6 +348,8 @@ class HostApp:
                     break
                 self.model.on_board_message(msg)
                 self.summary.on_board_message(msg)
+                if self.foxglove is not None:
+                    self.foxglove.on_board_message(msg)
         if messages:
             _log.info("replay finished: %d messages", len(messages))
         else:
@@ -413,6 +439,9 @@ class HostApp:
         if self.recorder is not None:
             self.recorder.stop()
             self.recorder = None
+        if self.foxglove is not None:
+            self.foxglove.close()
+            self.foxglove = None
         if self.board is not None:
             with contextlib.suppress(Exception):
                 self.board.stop()

@@ -75,6 +75,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                     )
             if options.record is not None:
                 print(f"{PROG}: recording to {options.record}", flush=True)
+            if app.foxglove is not None:
+                print(f"{PROG}: Foxglove live at {app.foxglove.url}", flush=True)
             status = app.run(options.duration_s, stop)
             report = app.report
             if report is not None:

@@ -14,6 +14,7 @@ import socket
 import stat
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Final
 
 from controller.cli_kit import Parser, port_number, positive_duration
 from host.errors import HostError
@@ -23,6 +24,7 @@ from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_
 from protocol.dbus import Lever
 
 __all__ = [
+    "FOXGLOVE_PORT",
     "PROG",
     "VIRTUAL_RC_LEVERS",
     "HostOptions",
@@ -39,6 +41,9 @@ PROG = "spirob-host"
 
 VIRTUAL_RC_LEVERS = {"safe": Lever.DOWN, "manual": Lever.MIDDLE, "grasp": Lever.UP}
 """``--virtual-rc`` choices: the right lever position each one ends in (DOWN first, always)."""
+
+FOXGLOVE_PORT: Final = 8765
+"""Foxglove's default WebSocket port (``--foxglove`` without a port)."""
 
 
 def _mav_id(text: str) -> int:
@@ -124,6 +129,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--replay-speed", type=positive_duration, metavar="X", help="with --replay: speed factor (default 1)"
     )
+    run.add_argument(
+        "--foxglove",
+        type=port_number,
+        nargs="?",
+        const=FOXGLOVE_PORT,
+        metavar="PORT",
+        help=f"serve the run live to Foxglove on ws://127.0.0.1:PORT (default {FOXGLOVE_PORT}; 0 = any)",
+    )
     mav = p.add_argument_group("drone link (MAVLink)")
     mav.add_argument(
         "--mavlink", metavar="URL", help="pymavlink connection string, e.g. udpout:127.0.0.1:14550"
@@ -160,6 +173,7 @@ class HostOptions:
         record: MCAP file to write.
         replay: MCAP file to replay instead of a board.
         replay_speed: replay speed factor.
+        foxglove_port: serve the Foxglove channels live on 127.0.0.1 at this port (None = not).
         virtual_rc: right lever the command line drives the virtual radio to (None = it does not).
         mavlink: MAVLink connection string.
         mav_sysid: drone system id.
@@ -183,6 +197,7 @@ class HostOptions:
     record: Path | None = None
     replay: Path | None = None
     replay_speed: float = 1.0
+    foxglove_port: int | None = None
     virtual_rc: Lever | None = None
     mavlink: str | None = None
     mav_sysid: int = 1
@@ -253,6 +268,7 @@ class HostOptions:
             record=ns.record,
             replay=ns.replay,
             replay_speed=1.0 if ns.replay_speed is None else ns.replay_speed,
+            foxglove_port=ns.foxglove,
             virtual_rc=VIRTUAL_RC_LEVERS[ns.virtual_rc] if ns.virtual_rc else None,
             mavlink=ns.mavlink,
             mav_sysid=ns.mav_sysid,

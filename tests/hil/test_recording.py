@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -21,13 +22,29 @@ def test_round_trip_raw_and_json(tmp_path: Path) -> None:
         rec.write_raw(recording.CAN_TX, 1000, recording.pack_can(0x200, bytes(8)))
         rec.write_json(recording.TELEMETRY, 2000, {"mode": 1, "tension_n": [1.0, 2.0, 3.0]})
     records = list(read_records(path))
-    assert [r.topic for r in records] == [recording.DBUS_RX, recording.CAN_TX, recording.TELEMETRY]
-    assert [r.time_us for r in records] == [10, 1000, 2000]
+    # The first telemetry also writes the event of its mode (none before it: "-").
+    assert [r.topic for r in records] == [recording.DBUS_RX, recording.CAN_TX, recording.TELEMETRY, "/events"]
+    assert [r.time_us for r in records] == [10, 1000, 2000, 2000]
     assert recording.unpack_can(records[1].data) == (0x200, bytes(8))
     assert records[2].json() == {"mode": 1, "tension_n": [1.0, 2.0, 3.0]}
-    assert read_metadata(path) == {"scenario": "rc-loss", "seed": "3"}
+    meta = read_metadata(path)
+    assert (meta["scenario"], meta["seed"], meta["format"]) == ("rc-loss", "3", str(recording.FORMAT))
     only_can = list(read_records(path, topics={recording.CAN_TX}))
     assert len(only_can) == 1
+
+
+def test_a_port_recording_logs_unix_time(tmp_path: Path) -> None:
+    # A run against a port is on the host's monotonic clock: log_time becomes Unix time.
+    path = tmp_path / "port.mcap"
+    before_ns = time.time_ns()
+    mono_us = time.monotonic_ns() // 1000
+    with Recorder(path, metadata={"kind": recording.KIND_PORT}) as rec:
+        rec.write_raw(recording.LINK_TX, mono_us, b"x")
+    after_ns = time.time_ns()
+    (record,) = read_records(path)
+    assert record.time_us == mono_us
+    assert before_ns - 1000 <= record.log_time_ns <= after_ns
+    assert read_metadata(path)["clock_offset_ns"] == str(record.log_time_ns - mono_us * 1000)
 
 
 def test_close_twice_and_write_after_close(tmp_path: Path) -> None:

@@ -6,6 +6,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from mcap.writer import Writer
 
 from hil import recording
 from hil import replay as replay_module
@@ -68,8 +69,12 @@ def test_replay_refuses_a_foreign_file(tmp_path: Path) -> None:
     with pytest.raises(HilError, match="not a lockstep board recording"):
         replay(other)
     bare = tmp_path / "bare.mcap"
-    with Recorder(bare) as rec:  # an MCAP file without our metadata
-        rec.write_raw(recording.LINK_TX, 0, b"x")
+    with open(bare, "wb") as f:  # an MCAP file without our metadata
+        writer = Writer(f)
+        writer.start()
+        channel = writer.register_channel(recording.LINK_TX, recording.RAW_ENCODING, schema_id=0)
+        writer.add_message(channel, log_time=0, data=b"x", publish_time=0)
+        writer.finish()
     with pytest.raises(HilError, match="no spirob metadata"):
         replay(bare)
     text = tmp_path / "notes.mcap"
@@ -167,3 +172,39 @@ def test_a_killed_recording_is_recovered_and_replayed(
     assert read_metadata(out) == {**read_metadata(path), "truncated": "true"}
     again = replay(out)
     assert again.truncated and again.matched and again.ticks == result.ticks
+
+
+def _downgrade(src: Path, dst: Path, meta: dict[str, str]) -> None:
+    """Copy a recording in the layout of format 1: log_time on the board's clock, no format key."""
+    with open(dst, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile=recording.PROFILE, library="spirob-teleop")
+        writer.add_metadata(recording.PROFILE, meta)
+        channels: dict[str, int] = {}
+        for rec in read_records(src):
+            if rec.topic not in channels:
+                channels[rec.topic] = writer.register_channel(rec.topic, recording.RAW_ENCODING, schema_id=0)
+            t_ns = rec.time_us * 1000
+            writer.add_message(channels[rec.topic], log_time=t_ns, data=rec.data, publish_time=t_ns)
+        writer.finish()
+
+
+def test_a_format_1_recording_still_replays(rc_loss_recording: Path, tmp_path: Path) -> None:
+    meta = {k: v for k, v in read_metadata(rc_loss_recording).items() if k not in ("format", "version")}
+    old = tmp_path / "old.mcap"
+    _downgrade(rc_loss_recording, old, meta)
+    assert recording.recording_format(read_metadata(old)) == 1
+    result = replay(old)
+    assert result.matched, result.first_mismatch
+    assert result.ticks == 4000
+
+
+def test_a_newer_format_is_refused_in_one_line(rc_loss_recording: Path, tmp_path: Path) -> None:
+    meta = {**read_metadata(rc_loss_recording), "format": "7", "version": "9.9.9"}
+    newer = tmp_path / "newer.mcap"
+    _downgrade(rc_loss_recording, newer, meta)
+    with pytest.raises(HilError) as info:
+        replay(newer)
+    message = str(info.value)
+    assert "\n" not in message
+    assert "format 7" in message and "9.9.9" in message and f"format {recording.FORMAT}" in message

@@ -1,0 +1,145 @@
+"""`spirob-host --foxglove`: a Foxglove WebSocket client subscribes and decodes a transform."""
+
+from __future__ import annotations
+
+import base64
+import json
+import socket
+import struct
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import numpy as np
+import pytest
+from foxglove_check import decode_protobuf, poses_array, protobuf_class
+from link_peer import LinkPeer
+from websockets.sync.client import ClientConnection, connect
+
+from hil import foxglove_log
+from host.app import HostApp
+from host.cli import main
+from host.options import HostOptions
+from protocol.messages import Message, SimPoses
+
+SUBPROTOCOL = "foxglove.sdk.v1"
+"""Foxglove's WebSocket protocol as the SDK's server (0.30) names it: the wire format of
+``foxglove.websocket.v1`` under a new name; the old name is refused at the handshake."""
+MESSAGE_DATA = 0x01
+"""Binary opcode of a message on a subscription (Foxglove WebSocket protocol v1)."""
+
+
+@pytest.fixture
+def peer() -> Iterator[LinkPeer]:
+    with LinkPeer("pty") as p:
+        yield p
+
+
+def _json_until(ws: ClientConnection, op: str, deadline: float) -> dict[str, Any]:
+    while time.monotonic() < deadline:
+        frame = ws.recv(timeout=max(0.05, deadline - time.monotonic()))
+        if isinstance(frame, str):
+            obj: dict[str, Any] = json.loads(frame)
+            if obj.get("op") == op:
+                return obj
+    raise AssertionError(f"no {op!r} from the server")
+
+
+def _binary_until(ws: ClientConnection, sub_id: int, deadline: float) -> tuple[int, bytes]:
+    while time.monotonic() < deadline:
+        frame = ws.recv(timeout=max(0.05, deadline - time.monotonic()))
+        if isinstance(frame, bytes) and frame[0] == MESSAGE_DATA:
+            got_id, stamp_ns = struct.unpack_from("<IQ", frame, 1)
+            if got_id == sub_id:
+                return stamp_ns, frame[13:]
+    raise AssertionError("no message on the subscription")
+
+
+def test_a_client_subscribes_and_decodes_the_arms_transforms(peer: LinkPeer) -> None:
+    received: list[SimPoses] = []
+    lock = threading.Lock()
+
+    def collect(msg: Message) -> None:
+        if isinstance(msg, SimPoses):
+            with lock:
+                received.append(msg)
+
+    with HostApp(HostOptions(port=peer.url, ui=False, foxglove_port=0)) as app:
+        app.start()
+        assert app.foxglove is not None and app.client is not None
+        app.client.add_listener(collect)
+        url = app.foxglove.url
+        assert url.startswith("ws://127.0.0.1:") and app.foxglove.port > 0
+        deadline = time.monotonic() + 20.0
+        before_ns = time.time_ns()
+        with connect(url, subprotocols=[SUBPROTOCOL], open_timeout=10) as ws:
+            assert ws.subprotocol == SUBPROTOCOL
+            _json_until(ws, "serverInfo", deadline)
+            channels = {c["topic"]: c for c in _json_until(ws, "advertise", deadline)["channels"]}
+            assert set(channels) == set(foxglove_log.CHANNELS)
+            tf = channels[foxglove_log.TF]
+            assert (tf["encoding"], tf["schemaName"], tf["schemaEncoding"]) == (
+                "protobuf",
+                "foxglove.FrameTransforms",
+                "protobuf",
+            )
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 7, "channelId": tf["id"]}]}))
+            stamp_ns, payload = _binary_until(ws, 7, deadline)
+        # Decoded with the schema the server advertised (base64 FileDescriptorSet), nothing of ours.
+        cls = protobuf_class("foxglove.FrameTransforms", base64.b64decode(tf["schema"]))
+        msg: Any = decode_protobuf(cls, payload)
+        assert before_ns - 10**9 <= stamp_ns <= time.time_ns()
+        with lock:
+            sent = list(received)
+    units = len(sent[0].positions_m) - 1
+    positions, quats = poses_array(msg, units)
+    # The transforms are the poses of one SimPoses the board sent, number for number.
+    assert any(
+        np.array_equal(positions, np.asarray(p.positions_m, dtype=np.float64))
+        and np.array_equal(quats, np.asarray(p.quats_wxyz, dtype=np.float64))
+        for p in sent
+    )
+
+
+def test_a_taken_port_is_one_error_line(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    s.listen(1)
+    try:
+        port = s.getsockname()[1]
+        assert main(["--port", peer.url, "--headless", "--duration", "1", "--foxglove", str(port)]) == 2
+    finally:
+        s.close()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--foxglove" in err[0] and str(port) in err[0], err
+    assert "Traceback" not in err[0]
+
+
+def test_flag_default_is_foxglove_port() -> None:
+    from host.options import build_parser
+
+    opts = HostOptions.from_args(build_parser().parse_args(["--foxglove"]))
+    assert opts.foxglove_port == 8765
+    assert HostOptions.from_args(build_parser().parse_args([])).foxglove_port is None
+    assert HostOptions.from_args(build_parser().parse_args(["--foxglove", "9001"])).foxglove_port == 9001
+
+
+def test_a_replay_is_served_live_too(peer: LinkPeer, tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    assert main(["--port", peer.url, "--headless", "--duration", "1", "--record", str(path)]) == 0
+    with HostApp(HostOptions(replay=path, ui=False, foxglove_port=0, replay_speed=0.5)) as app:
+        app.start()
+        assert app.foxglove is not None
+        deadline = time.monotonic() + 20.0
+        with connect(app.foxglove.url, subprotocols=[SUBPROTOCOL], open_timeout=10) as ws:
+            channels = {c["topic"]: c for c in _json_until(ws, "advertise", deadline)["channels"]}
+            tel = channels[foxglove_log.TELEMETRY]
+            assert (tel["encoding"], tel["schemaEncoding"]) == ("json", "jsonschema")
+            ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 3, "channelId": tel["id"]}]}))
+            _, payload = _binary_until(ws, 3, deadline)
+    obj = json.loads(payload)
+    jsonschema.validate(obj, json.loads(tel["schema"]))  # the schema the server advertised
+    assert obj["time_us"] > 0
