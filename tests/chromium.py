@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
+from typing import Any
 
 from realtime_guard import scaled_s, starved_timeouts
 
@@ -41,3 +42,12 @@ def page_load(what: str) -> Iterator[None]:
 
     with starved_timeouts(PlaywrightTimeout, what=what):
         yield
+
+
+def lever_button(page: Any, lever: str, position: str) -> Any:
+    """The panel's ``position`` button of the ``lever`` ("Right lever", "Left lever"), marked as selected
+    (``● DOWN``) or not."""
+    return page.locator(
+        f"xpath=//*[normalize-space()='{lever}']/ancestor::div[contains(@class,'mantine-Flex-root')][1]"
+        f"//button[normalize-space()='{position}' or normalize-space()='● {position}']"
+    ).first

@@ -33,3 +33,12 @@ def ctrl_c(proc: subprocess.Popen[str], timeout_s: float = 60.0) -> tuple[str, s
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=10)
     return out or "", err or ""
+
+
+def children(proc: subprocess.Popen[str]) -> list[int]:
+    """The pids of ``proc``'s child processes (Linux's ``/proc/PID/task/PID/children``)."""
+    try:
+        text = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text()
+    except OSError:
+        return []
+    return [int(p) for p in text.split()]

@@ -33,7 +33,14 @@ def parallel_map(
     # multiprocessing's pool, not concurrent.futures': on Ctrl-C or a failed item it can *terminate* the
     # workers, where an executor's shutdown leaves running items to finish (minutes for a long drive)
     # before the interpreter may exit.
-    pool = multiprocessing.Pool(processes=jobs, initializer=_ignore_ctrl_c)
+    # SIGINT is blocked while the workers start, so none can take a Ctrl-C before it ignores it: a worker
+    # interrupted while it holds the task queue's lock would hang the pool's terminate() below. A Ctrl-C
+    # in that window stays pending and reaches the parent once the pool exists.
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        pool = multiprocessing.Pool(processes=jobs, initializer=_ignore_ctrl_c)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     try:
         for i, r in enumerate(pool.imap(fn, items)):
             out.append(r)
@@ -49,5 +56,7 @@ def parallel_map(
 
 
 def _ignore_ctrl_c() -> None:
-    """Pool workers leave Ctrl-C to the parent (a terminal sends it to the whole process group)."""
+    """Pool workers leave Ctrl-C to the parent (a terminal sends it to the whole process group); they
+    start with SIGINT blocked (:func:`parallel_map`) and unblock it once it is ignored."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})

@@ -9,8 +9,8 @@ import time
 from pathlib import Path
 
 import pytest
-from realtime_guard import scaled_s
-from terminal import ctrl_c, start_in_own_group
+from realtime_guard import scaled_s, timed_out
+from terminal import children, ctrl_c, start_in_own_group
 
 from hil.cli import main
 from hil.scenarios import SCENARIOS
@@ -116,17 +116,37 @@ def test_board_command_serves_and_stops(tmp_path: Path) -> None:
     assert "zero current sent" in proc.stdout
 
 
+def _working(proc: subprocess.Popen[str], argv: list[str]) -> None:
+    """Wait (bounded, scaled with the load) until ``proc`` is past its start-up and into the work: the
+    scenario suite has reported a scenario; the experiment has started its worker processes."""
+    deadline = time.monotonic() + scaled_s(60.0)
+    if argv[0] == "run":
+        assert proc.stderr is not None
+        while time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            assert line, "the scenario suite ended before reporting a scenario"
+            if line.rstrip().endswith(": passed"):
+                return
+    else:
+        while time.monotonic() < deadline:
+            if len(children(proc)) >= 2:
+                time.sleep(0.5)  # the workers are in their first runs
+                return
+            assert proc.poll() is None
+            time.sleep(0.05)
+    timed_out(f"{argv[0]} to start its work")
+
+
 @pytest.mark.parametrize(
     "argv",
     [["run", "--all"], ["experiment", "workspace", "--jobs", "2"]],
     ids=["scenarios", "experiment-with-workers"],
 )
 def test_ctrl_c_stops_with_one_line_and_no_traceback(argv: list[str]) -> None:
-    """A terminal's Ctrl-C reaches the whole process group (the CLI and any pool workers)."""
+    """A terminal's Ctrl-C reaches the whole process group (the CLI and any pool workers), in the middle
+    of the work (the scenario suite's first report comes with a dozen scenarios still to run)."""
     proc = start_in_own_group("hil.cli", *argv)
-    # Well into the work (the scenario suite and the experiment both take far longer), past the imports
-    # even on a loaded machine, where starting the interpreter and MuJoCo takes longer too.
-    time.sleep(scaled_s(4.0))
+    _working(proc, argv)
     assert proc.poll() is None
     _, err = ctrl_c(proc)
     assert proc.returncode == 130

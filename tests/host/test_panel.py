@@ -28,7 +28,7 @@ from typing import Any
 
 import pytest
 import viser
-from chromium import CHROMIUM, CHROMIUM_ARGS, page_load, page_load_ms
+from chromium import CHROMIUM, CHROMIUM_ARGS, lever_button, page_load, page_load_ms
 from playwright import sync_api
 from realtime_guard import scaled_s, timed_out
 
@@ -119,14 +119,6 @@ def client_of(app: HostApp, before: set[int]) -> int:
 def stick_input(page: Any, label: str) -> Any:
     return page.locator(
         f"xpath=//label[normalize-space()='{label}']/ancestor::div[contains(@class,'mantine-Flex-root')][1]//input[not(@type='hidden')]"
-    ).first
-
-
-def lever_button(page: Any, lever: str, position: str) -> Any:
-    """The ``position`` button of the ``lever`` ("Right lever", "Left lever"), marked or not."""
-    return page.locator(
-        f"xpath=//*[normalize-space()='{lever}']/ancestor::div[contains(@class,'mantine-Flex-root')][1]"
-        f"//button[normalize-space()='{position}' or normalize-space()='● {position}']"
     ).first
 
 

@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
-from chromium import CHROMIUM, CHROMIUM_ARGS, page_load, page_load_ms
+from chromium import CHROMIUM, CHROMIUM_ARGS, lever_button, page_load, page_load_ms
 from playwright import sync_api
 from realtime_guard import scaled_s, timed_out
 
@@ -86,9 +86,9 @@ def test_the_default_scenes_object_is_grasped_from_the_panel(app: HostApp, page:
 
     page.get_by_role("button", exact=True, name="Take control").click()
     assert wait_for(lambda: m.holder is not None)
-    page.get_by_role("button", exact=True, name="DOWN").first.click()  # the right lever
+    lever_button(page, "Right lever", "DOWN").click()
     assert wait_for(lambda: telemetry().phase == Phase.OK), telemetry()
-    page.get_by_role("button", exact=True, name="UP").first.click()
+    lever_button(page, "Right lever", "UP").click()
     assert wait_for(lambda: telemetry().mode == Mode.GRASP), telemetry()
     # GRASP mode packs the arm (12 N/s up to 18 N): give it 3 s of board time, as the lockstep test does.
     packed_us = telemetry().time_us + 3_000_000
