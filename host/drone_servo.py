@@ -86,6 +86,13 @@ class ServoFollowConfig:
         return (self.output_n - 1) % mav.SERVO_OUTPUTS_PER_PORT
 
 
+def _int(text: str, what: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError(f"{what} must be an integer, got {text!r}") from None
+
+
 def parse_follow_servo(text: str) -> ServoFollowConfig:
     """Parse ``--follow-servo N[,grab=PWM][,release=PWM][,stale_ms=MS]``.
 
@@ -100,17 +107,17 @@ def parse_follow_servo(text: str) -> ServoFollowConfig:
     """
     head, *rest = text.split(",")
     try:
-        kwargs: dict[str, int] = {"output_n": int(head)}
+        kwargs: dict[str, int] = {"output_n": _int(head, "output")}
         for item in rest:
             key, sep, value = item.partition("=")
             if not sep:
                 raise ValueError(f"expected key=value, got {item!r}")
             if key == "grab":
-                kwargs["grab_pwm_us"] = int(value)
+                kwargs["grab_pwm_us"] = _int(value, "grab")
             elif key == "release":
-                kwargs["release_pwm_us"] = int(value)
+                kwargs["release_pwm_us"] = _int(value, "release")
             elif key == "stale_ms":
-                kwargs["stale_us"] = int(value) * 1000
+                kwargs["stale_us"] = _int(value, "stale_ms") * 1000
             else:
                 raise ValueError(f"unknown key {key!r} (grab, release, stale_ms)")
         return ServoFollowConfig(**kwargs)
