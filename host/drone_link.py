@@ -317,6 +317,18 @@ class DroneLink:
             return self._pose
 
     @property
+    def params_bytewise(self) -> bool:
+        """Integer parameters are encoded bytewise (else by C cast, with an ArduPilot autopilot)."""
+        with self._lock:
+            return self._params.bytewise
+
+    @property
+    def servo_reading(self) -> mav.GripperAction | None:
+        """The followed autopilot output's reading (None: no follower, no report yet, or stale)."""
+        with self._lock:
+            return self._follower.reading if self._follower is not None else None
+
+    @property
     def signing_timestamp(self) -> int:
         """Current outgoing signing timestamp (10 µs units since 2015; 0 without signing)."""
         with self._lock:

@@ -90,12 +90,23 @@ class Rig:
 
 
 def rig_factory(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
+    """The body of a ``make_rig`` fixture: ``make(**DroneLinkConfig fields)`` builds a started rig.
+
+    ``board_params`` adds parameters to the fake board before the link first asks for them.
+    """
     made: list[Rig] = []
 
-    def make(*, start_board: bool = True, peer_key: bytes | None = None, **cfg: Any) -> Rig:
+    def make(
+        *,
+        start_board: bool = True,
+        peer_key: bytes | None = None,
+        board_params: dict[str, float] | None = None,
+        **cfg: Any,
+    ) -> Rig:
         port = free_udp_port()
         peer = Peer(f"udpin:127.0.0.1:{port}", key=peer_key)
         board = FakeBoard()
+        board.params.update(board_params or {})
         cfg.setdefault("tlog_path", tmp_path / f"link{len(made)}.tlog")
         link = DroneLink(DroneLinkConfig(url=f"udpout:127.0.0.1:{port}", **cfg), board)
         board.attach(link.on_board_message)
