@@ -289,3 +289,18 @@ def test_stale_output_reports_are_safe(make_rig: Callable[..., Rig]) -> None:
         wait_until(lambda: rig.board.grasp_state == bm.GraspState.IDLE, "the board to release")
     finally:
         back.stop()
+
+
+def test_a_change_while_the_gripper_is_busy_waits_for_the_job_to_end(make_rig: Callable[..., Rig]) -> None:
+    rig, autopilot = follower_rig(make_rig)
+    try:
+        rig.board.set(ticks_per_phase=30)  # REACH and WRAP take about 0.3 s each
+        autopilot.pwm_us = GRAB_PWM
+        rig.peer.statustext("grab started (autopilot servo)")
+        autopilot.pwm_us = RELEASE_PWM  # while the grab runs
+        rig.peer.statustext("grab done, HOLD")
+        rig.peer.statustext("release started (autopilot servo)")
+        wait_until(lambda: rig.board.grasp_state == bm.GraspState.IDLE, "the board to release")
+        assert [c.code for c in rig.board.commands()] == [bm.CommandCode.GRASP, bm.CommandCode.RELEASE]
+    finally:
+        autopilot.stop()
