@@ -216,7 +216,9 @@ class HostApp:
         from host import drone_link
 
         try:
-            cfg = drone_link.DroneLinkConfig(url=o.mavlink, sysid=o.mav_sysid, compid=o.mav_compid)
+            cfg = drone_link.DroneLinkConfig(
+                url=o.mavlink, sysid=o.mav_sysid, compid=o.mav_compid, servo_follow=o.follow_servo
+            )
             ts_path = signing_timestamp_path(o)
             if o.mav_signing_key is not None and ts_path is not None:
                 check_signing_timestamp_writable(ts_path)

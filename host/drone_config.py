@@ -6,6 +6,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Final
 
+from host.drone_servo import ServoFollowConfig
 from protocol import mavlink as mav
 
 __all__ = ["DroneLinkConfig", "DroneLinkError", "load_signing_key"]
@@ -25,7 +26,7 @@ class DroneLinkConfig:
         url: pymavlink connection string (``udpout:127.0.0.1:14550``, ``udpin:...``, ``tcp:...``,
             ``/dev/ttyUSB0``).
         sysid: Our system id: the drone's (1..255, default 1).
-        compid: Our component id (2..255; never 0 = broadcast or 1 = autopilot; default 25).
+        compid: Our component id (7..255: MAVLink reserves 0..6; default 25).
         autopilot_compid: Component whose ``ATTITUDE`` / ``LOCAL_POSITION_NED`` pose the drone.
         baud: Serial baud rate (serial devices only).
         heartbeat_period_us: ``HEARTBEAT`` period (1 Hz).
@@ -41,6 +42,9 @@ class DroneLinkConfig:
         signing_timestamp_path: File persisting the signing timestamp across restarts (None = not
             persisted; see :meth:`with_signing_key_file`).
         tlog_path: ``.tlog`` of every packet in and out (None = no log).
+        servo_follow: Follow this autopilot output as the gripper (None = off; ``host.drone_servo``).
+        early_command_wait_us: A ``DO_GRIPPER`` that arrives before the first board telemetry waits
+            this long for it, then is answered ``TEMPORARILY_REJECTED``.
     """
 
     url: str
@@ -59,14 +63,18 @@ class DroneLinkConfig:
     signing_link_id: int = 0
     signing_timestamp_path: Path | None = None
     tlog_path: Path | None = None
+    servo_follow: ServoFollowConfig | None = None
+    early_command_wait_us: int = 3_000_000
 
     def __post_init__(self) -> None:
         if not self.url:
             raise ValueError("url is empty")
         if not 1 <= self.sysid <= 255:
             raise ValueError(f"sysid out of range 1..255: {self.sysid}")
-        if not 2 <= self.compid <= 255:
-            raise ValueError(f"compid must be 2..255 (0 is broadcast, 1 the autopilot): {self.compid}")
+        if not mav.MIN_COMPONENT_ID <= self.compid <= 255:
+            raise ValueError(
+                f"component id must be {mav.MIN_COMPONENT_ID}..255 (MAVLink reserves 0..6): {self.compid}"
+            )
         if not 1 <= self.autopilot_compid <= 255:
             raise ValueError(f"autopilot_compid out of range 1..255: {self.autopilot_compid}")
         if not 0.1 <= self.telemetry_rate_hz <= 100.0:
@@ -78,6 +86,7 @@ class DroneLinkConfig:
             "param_confirm_timeout_us",
             "peer_timeout_us",
             "poll_period_us",
+            "early_command_wait_us",
         ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")

@@ -2,8 +2,10 @@
 
 The command protocol of docs/mavlink.md: ``IN_PROGRESS`` then ``ACCEPTED`` / ``FAILED``;
 ``TEMPORARILY_REJECTED`` while busy; ``DENIED`` for bad params or when the radio does not allow it;
-``UNSUPPORTED`` for other commands addressed to us. A retransmitted command is answered again, never
-carried out twice. Runs on the link thread, under the link's lock.
+``UNSUPPORTED`` for other commands addressed to us; the final ACK carries no progress. A retransmitted
+command is answered again, never carried out twice. The servo follower (``host.drone_servo``) takes
+the same path through :meth:`GripperServer.request`, without ACKs.
+Runs on the link thread, under the link's lock.
 """
 
 from __future__ import annotations
@@ -75,7 +77,8 @@ class _GripperJob:
     action: mav.GripperAction
     code: bm.CommandCode
     target: bm.GraspState
-    requester: tuple[int, int]
+    requester: tuple[int, int] | None
+    """The commander to answer (None for the servo follower, which gets no ACKs)."""
     start_state: bm.GraspState
     deadline_us: int
     progressed: bool = False
@@ -182,39 +185,68 @@ class GripperServer:
             # Our final ACK was lost and the commander retransmits: repeat it, do not act twice.
             self._ack(requester, cmd.command, last[2], int(action), now, "repeated")
             return
+        self._start(action, requester, now, telemetry, telemetry_at_us)
+
+    def request(
+        self, action: mav.GripperAction, now: int, telemetry: bm.Telemetry | None, telemetry_at_us: int
+    ) -> mav.MavResult:
+        """Carry out an action the servo follower asks for: the DO_GRIPPER path without MAVLink ACKs.
+
+        The same radio gate and board commands as a ``DO_GRIPPER``; refusals and results are told in
+        ``STATUSTEXT`` only.
+
+        Args:
+            action: Grab or release.
+            now: Link-clock time in µs.
+            telemetry: Latest board telemetry (None before any).
+            telemetry_at_us: Link-clock time it arrived.
+
+        Returns:
+            ``TEMPORARILY_REJECTED`` while busy (the caller may ask again), else the first answer
+            (``IN_PROGRESS``, ``ACCEPTED`` when nothing was to do, ``DENIED``).
+        """
+        if self._job is not None:
+            return mav.MavResult.TEMPORARILY_REJECTED
+        return self._start(action, None, now, telemetry, telemetry_at_us)
+
+    def _start(
+        self,
+        action: mav.GripperAction,
+        requester: tuple[int, int] | None,
+        now: int,
+        telemetry: bm.Telemetry | None,
+        telemetry_at_us: int,
+    ) -> mav.MavResult:
+        cmd_id = mav.MAV_CMD_DO_GRIPPER
         tel = telemetry
         denial = gripper_denial(tel, now - telemetry_at_us, self.config.board_stale_us)
         if denial is not None or tel is None:
             reason = denial or "gripper denied: no board telemetry"
-            self._ack(requester, cmd.command, mav.MavResult.DENIED, int(action), now, reason)
+            self._ack(requester, cmd_id, mav.MavResult.DENIED, int(action), now, reason)
             self._text(mav.Severity.WARNING, reason)
-            return
+            return mav.MavResult.DENIED
         state = bm.GraspState(tel.grasp_state)
         if state in _BUSY_STATES:
-            self._ack(
-                requester,
-                cmd.command,
-                mav.MavResult.TEMPORARILY_REJECTED,
-                int(action),
-                now,
-                f"busy: grasp {state.name}",
-            )
-            return
+            result = mav.MavResult.TEMPORARILY_REJECTED
+            self._ack(requester, cmd_id, result, int(action), now, f"busy: grasp {state.name}")
+            return result
         code, target = _ACTION_TO_BOARD[action]
         if state == target:
             # Nothing to do (already holding, already released): done.
             self._final(requester, int(action), mav.MavResult.ACCEPTED, now, f"gripper: already {state.name}")
-            return
+            return mav.MavResult.ACCEPTED
         self._board(bm.Command(code))
         self._job = _GripperJob(
             action, code, target, requester, state, now + self.config.grasp_timeout_us, last_state=state
         )
-        self._ack(requester, cmd.command, mav.MavResult.IN_PROGRESS, int(action), now, "", progress=0)
-        self._text(mav.Severity.INFO, f"gripper: {action.name.lower()} started")
+        self._ack(requester, cmd_id, mav.MavResult.IN_PROGRESS, int(action), now, "", progress=0)
+        by = "" if requester is not None else " (autopilot servo)"
+        self._text(mav.Severity.INFO, f"gripper: {action.name.lower()} started{by}")
+        return mav.MavResult.IN_PROGRESS
 
     def _ack(
         self,
-        requester: tuple[int, int],
+        requester: tuple[int, int] | None,
         command: int,
         result: int,
         action: int,
@@ -224,15 +256,19 @@ class GripperServer:
         progress: int = 0,
     ) -> None:
         # Target = the commander, so a GCS recognises the reply as its own (MAVProxy only prints ACKs
-        # targeted at its own ids or at 0).
-        self._send(mav.CommandAck(command, int(result), progress, 0, requester[0], requester[1]))
-        self._last_command = GripperCommand(
-            now, requester[0], requester[1], command, action, int(result), text
-        )
+        # targeted at its own ids or at 0). The servo follower (no requester) gets no ACK.
+        src = requester or (0, 0)
+        if requester is not None:
+            self._send(mav.CommandAck(command, int(result), progress, 0, src[0], src[1]))
+        self._last_command = GripperCommand(now, src[0], src[1], command, action, int(result), text)
 
-    def _final(self, requester: tuple[int, int], action: int, result: int, now: int, text: str) -> None:
-        self._ack(requester, mav.MAV_CMD_DO_GRIPPER, result, action, now, text, progress=100)
-        self._last_final = (requester, action, int(result), now)
+    def _final(
+        self, requester: tuple[int, int] | None, action: int, result: int, now: int, text: str
+    ) -> None:
+        # MAVLink's command protocol: progress belongs to IN_PROGRESS only; a final ACK carries 0.
+        self._ack(requester, mav.MAV_CMD_DO_GRIPPER, result, action, now, text)
+        if requester is not None:
+            self._last_final = (requester, action, int(result), now)
         severity = mav.Severity.INFO if result == mav.MavResult.ACCEPTED else mav.Severity.WARNING
         self._text(severity, text)
 

@@ -7,11 +7,16 @@ It speaks as component ``compid`` (default 25) of the drone's system ``sysid`` (
 - out: ``HEARTBEAT`` at 1 Hz (``MAV_TYPE_GRIPPER``, ``MAV_AUTOPILOT_INVALID``); ``NAMED_VALUE_FLOAT``
   tensions, mode, failsafe phase and grasp state, and ``ACTUATOR_OUTPUT_STATUS`` motor currents, at
   ``telemetry_rate_hz`` (10 Hz); ``STATUSTEXT`` for board events, refusals and grasp results;
-- in: ``COMMAND_LONG`` ``MAV_CMD_DO_GRIPPER`` (grab / release / hold) with the ACK sequence of
-  docs/mavlink.md (``IN_PROGRESS`` then ``ACCEPTED`` / ``FAILED``; ``TEMPORARILY_REJECTED`` while busy;
-  ``DENIED`` for bad params or when the radio does not allow it; ``UNSUPPORTED`` for other commands);
+- in: ``COMMAND_LONG`` or ``COMMAND_INT`` ``MAV_CMD_DO_GRIPPER`` (grab / release / hold) with the ACK
+  sequence of docs/mavlink.md (``IN_PROGRESS`` then ``ACCEPTED`` / ``FAILED``; ``TEMPORARILY_REJECTED``
+  while busy; ``DENIED`` for bad params or when the radio does not allow it; ``UNSUPPORTED`` for other
+  commands); ``MAV_CMD_REQUEST_MESSAGE`` / ``REQUEST_PROTOCOL_VERSION`` (``host.drone_requests``);
   the parameter protocol mirroring the firmware's parameters; the drone's ``ATTITUDE`` and
-  ``LOCAL_POSITION_NED`` for the panel;
+  ``LOCAL_POSITION_NED`` for the panel; optionally the autopilot's gripper output in
+  ``SERVO_OUTPUT_RAW`` (``host.drone_servo``), followed with grab / release on the board;
+- start-up: until the first board telemetry the heartbeat says ``MAV_STATE_BOOT``; a parameter list
+  asked for meanwhile is sent once the board has answered, a ``DO_GRIPPER`` waits for its telemetry
+  (``early_command_wait_us``), and the first telemetry announces the arm with an immediate heartbeat;
 - optional MAVLink 2 signing (unsigned or wrongly signed packets refused and counted, the signing
   timestamp persisted across restarts) and a ``.tlog`` of every packet in and out.
 
@@ -46,6 +51,8 @@ from typing import Any, Final
 from host.drone_config import DroneLinkConfig, DroneLinkError, load_signing_key
 from host.drone_gripper import GripperServer, gripper_denial
 from host.drone_params import ParamMirror
+from host.drone_requests import IDENTITY_COMMANDS, answer_identity
+from host.drone_servo import ServoFollower
 from host.drone_state import DroneLinkCounters, DroneLinkState, DronePose, GripperCommand, PeerInfo
 from host.drone_telemetry import event_statustext, heartbeat, send_telemetry
 from host.drone_tlog import TLOG_LINK_IN, TLOG_LINK_OUT, TlogWriter
@@ -74,6 +81,7 @@ _BOARD_QUEUE_LEN: Final[int] = 4096
 _BOARD_MSGS_PER_CYCLE: Final[int] = 512
 _READS_PER_CYCLE: Final[int] = 64
 _STATUSTEXT_PER_S: Final[int] = 10
+_EARLY_COMMANDS_MAX: Final[int] = 4
 _SIGNING_PERSIST_PERIOD_US: Final[int] = 10 * _US_PER_S
 _SIGNING_RESTART_MARGIN: Final[int] = 2 * _SIGNING_PERSIST_PERIOD_US // 10
 """Added to a persisted signing timestamp on start (10 µs units): 2 persist periods' worth, far more
@@ -151,6 +159,10 @@ class DroneLink:
         self._params = ParamMirror(
             config.param_confirm_timeout_us, self._send, self._board, self._text, self._count, clock_us
         )
+        self._follower = ServoFollower(config.servo_follow) if config.servo_follow is not None else None
+        self._follow_pending: mav.GripperAction | None = None
+        self._early: list[tuple[mav.CommandLong, tuple[int, int], int]] = []  # before any telemetry
+        self._announce = False
         self._text_id = 0
         self._text_budget = _STATUSTEXT_PER_S
         self._rx_rate_hz = 0.0
@@ -305,6 +317,18 @@ class DroneLink:
             return self._pose
 
     @property
+    def params_bytewise(self) -> bool:
+        """Integer parameters are encoded bytewise (else by C cast, with an ArduPilot autopilot)."""
+        with self._lock:
+            return self._params.bytewise
+
+    @property
+    def servo_reading(self) -> mav.GripperAction | None:
+        """The followed autopilot output's reading (None: no follower, no report yet, or stale)."""
+        with self._lock:
+            return self._follower.reading if self._follower is not None else None
+
+    @property
     def signing_timestamp(self) -> int:
         """Current outgoing signing timestamp (10 µs units since 2015; 0 without signing)."""
         with self._lock:
@@ -349,6 +373,9 @@ class DroneLink:
                         self._on_bytes(chunk)
                     self._drain_texts()
                     now = self._clock()
+                    if self._announce:  # the board has answered: tell the drone at once
+                        self._announce = False
+                        next_hb = now
                     if now >= next_hb:
                         next_hb = _next_deadline(next_hb, cfg.heartbeat_period_us, now)
                         self._send(
@@ -475,9 +502,18 @@ class DroneLink:
             return
         self._note_peer(key, pkt, now)
         msg = pkt.msg
+        if isinstance(msg, mav.CommandInt):
+            # COMMAND_INT carries the same commands (x, y as integers): handled as COMMAND_LONG.
+            msg = msg.as_long()
         if isinstance(msg, mav.CommandLong):
             if self._for_us(msg.target_system, msg.target_component):
-                self._gripper.on_command(msg, key, now, self._telemetry, self._telemetry_at_us)
+                self._on_command(msg, key, now)
+        elif isinstance(msg, mav.ServoOutputRaw) and self._from_autopilot(key):
+            self._on_servo_output(msg, now)
+        elif isinstance(msg, mav.Heartbeat) and self._from_autopilot(key):
+            # Integer parameters are encoded as the drone's autopilot does, the way ground stations
+            # decode that system's parameters (C cast for ArduPilot, bytewise otherwise).
+            self._params.bytewise = msg.autopilot != mav.MAV_AUTOPILOT_ARDUPILOTMEGA
         elif isinstance(msg, mav.ParamRequestList):
             if self._for_us(msg.target_system, msg.target_component):
                 self._params.on_request_list(now)
@@ -493,6 +529,52 @@ class DroneLink:
             self._pose = replace(self._pose, position=msg, position_time_us=now)
         elif not isinstance(msg, mav.Heartbeat):
             self._c["unexpected"] += 1
+
+    def _on_command(self, cmd: mav.CommandLong, key: tuple[int, int], now: int) -> None:
+        if cmd.command in IDENTITY_COMMANDS:
+            hb = heartbeat(self._telemetry, now - self._telemetry_at_us, self.config.board_stale_us)
+            result, reply = answer_identity(cmd, hb, bytewise=self._params.bytewise)
+            self._send(mav.CommandAck(cmd.command, int(result), 0, 0, key[0], key[1]))
+            if reply is not None:
+                self._send(reply)
+            return
+        if cmd.command == mav.MAV_CMD_DO_GRIPPER and self._telemetry is None:
+            # The board has not answered yet (start-up): the command waits for its first telemetry.
+            self._early = [e for e in self._early if e[1] != key][-(_EARLY_COMMANDS_MAX - 1) :]
+            self._early.append((cmd, key, now + self.config.early_command_wait_us))
+            return
+        self._gripper.on_command(cmd, key, now, self._telemetry, self._telemetry_at_us)
+
+    def _serve_early(self, now: int) -> None:
+        """Answer the commands that arrived before the board: served now, or rejected when too old."""
+        early, self._early = self._early, []
+        for cmd, key, deadline in early:
+            if self._telemetry is not None and now <= deadline:
+                self._gripper.on_command(cmd, key, now, self._telemetry, self._telemetry_at_us)
+            elif now > deadline:
+                result = mav.MavResult.TEMPORARILY_REJECTED
+                self._send(mav.CommandAck(cmd.command, int(result), 0, 0, key[0], key[1]))
+            else:
+                self._early.append((cmd, key, deadline))
+
+    def _on_servo_output(self, msg: mav.ServoOutputRaw, now: int) -> None:
+        if self._follower is None:
+            self._c["unexpected"] += 1
+            return
+        action = self._follower.on_servo_output(msg, now)
+        if action is not None:
+            self._follow_pending = action
+            self._follow(now)
+
+    def _follow(self, now: int) -> None:
+        """Ask the gripper for the follower's latest change; kept only while the gripper is busy."""
+        action = self._follow_pending
+        if action is None:
+            return
+        result = self._gripper.request(action, now, self._telemetry, self._telemetry_at_us)
+        if result != mav.MavResult.TEMPORARILY_REJECTED:
+            # Done, started or refused by the radio: a refusal is never carried out later.
+            self._follow_pending = None
 
     def _note_peer(self, key: tuple[int, int], pkt: mav.MavPacket, now: int) -> None:
         peer = self._peers.get(key)
@@ -527,6 +609,8 @@ class DroneLink:
             except queue.Empty:
                 return
             if isinstance(msg, bm.Telemetry):
+                if self._telemetry is None:
+                    self._announce = True
                 self._telemetry = msg
                 self._telemetry_at_us = now
                 self._gripper.on_telemetry(msg, now)
@@ -550,6 +634,15 @@ class DroneLink:
     def _check_timeouts(self, now: int) -> None:
         self._gripper.check_timeout(now)
         self._params.check_timeouts(now)
+        if self._early and (self._telemetry is not None or now > min(e[2] for e in self._early)):
+            self._serve_early(now)
+        follower = self._follower
+        if follower is not None:
+            if follower.check_stale(now):
+                self._follow_pending = None
+                out = follower.config.output_n
+                self._text(mav.Severity.WARNING, f"servo follower: output {out} not reported, no command")
+            self._follow(now)
 
     def _every_second(self, now: int) -> None:
         self._text_budget = _STATUSTEXT_PER_S

@@ -2,8 +2,12 @@
 
 ``PARAM_REQUEST_LIST`` / ``PARAM_REQUEST_READ`` are answered from the mirror (the board is asked
 when it is not complete); a ``PARAM_SET`` goes to the board and is answered with the value the board
-confirms, or with the value in force when it does not confirm in time. Runs on the link thread,
-under the link's lock.
+confirms, or with the value in force when it does not confirm in time. A list requested before the
+board has answered is sent once the mirror is complete (the board is asked again until it answers).
+
+Values are typed as the firmware's configuration types them: booleans ``UINT8``, integers ``INT32``,
+the rest ``REAL32``; integers are encoded bytewise or by C cast as the drone's autopilot does
+(:mod:`protocol.mavlink.param_encoding`). Runs on the link thread, under the link's lock.
 """
 
 from __future__ import annotations
@@ -15,12 +19,33 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
+from controller.config import PARAM_FIELDS, FirmwareConfig
 from protocol import mavlink as mav
 from protocol import messages as bm
 
 __all__ = ["ParamMirror"]
 
 _PARAMS_PER_CYCLE: Final[int] = 10
+
+
+def _param_types() -> dict[str, mav.ParamType]:
+    """Wire name -> MAVLink type, from the types of the firmware configuration's fields."""
+    kinds = {flat: type(value) for flat, value in FirmwareConfig().to_dict().items()}
+    types: dict[str, mav.ParamType] = {}
+    for name, flat in PARAM_FIELDS.items():
+        kind = kinds.get(flat)
+        # bool before int: bool is an int subclass.
+        if kind is bool:
+            types[name] = mav.ParamType.UINT8
+        elif kind is int:
+            types[name] = mav.ParamType.INT32
+        else:
+            types[name] = mav.ParamType.REAL32
+    return types
+
+
+PARAM_TYPES: Final[dict[str, mav.ParamType]] = _param_types()
+"""The MAVLink type of each firmware parameter (by upper-case wire name); others are ``REAL32``."""
 
 
 @dataclass
@@ -64,6 +89,9 @@ class ParamMirror:
         self._tx: deque[str] = deque()
         self._pending: dict[str, _PendingParamSet] = {}
         self._list_asked_us: int | None = None
+        self._list_wanted = False
+        self.bytewise = True
+        """Integer parameters encoded bytewise (MAVLink's default, PX4), else by C cast (ArduPilot)."""
 
     @property
     def count(self) -> int | None:
@@ -87,7 +115,9 @@ class ParamMirror:
                 n for n, _ in sorted(self._values.items(), key=lambda kv: kv[1][0]) if n not in queued
             )
             return
-        # Not all parameters mirrored yet: ask the board; its ParamValues are forwarded as they come.
+        # Not all parameters mirrored yet: ask the board (again until it answers); its ParamValues are
+        # forwarded as they come and the whole list is sent once the mirror is complete.
+        self._list_wanted = True
         self.ask_board_for_all(now)
 
     def ask_board_for_all(self, now: int) -> None:
@@ -133,11 +163,12 @@ class ParamMirror:
             self._count_event("unexpected")
             self._text(mav.Severity.WARNING, f"param {req.param_id} unknown")
             return
-        if not math.isfinite(req.param_value):
+        value = mav.decode_param_value(req.param_value, req.param_type, bytewise=self.bytewise)
+        if not math.isfinite(value):
             self._tx.append(name)  # answer with the value in force
             return
         self._pending[name] = _PendingParamSet(name, now + self._confirm_timeout_us)
-        self._board(bm.ParamSet(name, float(req.param_value)))
+        self._board(bm.ParamSet(name, value))
 
     @property
     def complete(self) -> bool:
@@ -158,7 +189,9 @@ class ParamMirror:
             return
         index, value = entry
         count = self._count if self._count is not None else len(self._values)
-        self._send(mav.ParamValue(name.upper(), value, mav.ParamType.REAL32, count, index))
+        ptype = PARAM_TYPES.get(name.upper(), mav.ParamType.REAL32)
+        wire = mav.encode_param_value(value, ptype, bytewise=self.bytewise)
+        self._send(mav.ParamValue(name.upper(), wire, ptype, count, index))
 
     def on_board_param(self, pv: bm.ParamValue) -> None:
         """Mirror a value the board confirmed and tell the drone.
@@ -179,6 +212,10 @@ class ParamMirror:
         with contextlib.suppress(ValueError):
             self._tx.remove(name)
         self._send_value(name)
+        if self._list_wanted and self.complete:
+            # A list asked for before the board had answered: send all of it now.
+            self._list_wanted = False
+            self.on_request_list(self._clock())
 
     def check_timeouts(self, now: int) -> None:
         """Answer each ``PARAM_SET`` the board did not confirm in time with the value in force.
@@ -186,6 +223,8 @@ class ParamMirror:
         Args:
             now: Link-clock time in µs.
         """
+        if self._list_wanted and not self.complete:
+            self.ask_board_for_all(now)
         if self._pending:
             for name, pending in list(self._pending.items()):
                 if now >= pending.deadline_us:

@@ -13,9 +13,6 @@ from protocol import messages as bm
 
 __all__ = ["FAILSAFE_PHASES", "enum_name", "event_statustext", "heartbeat", "send_telemetry"]
 
-_MAV_MODE_FLAG_CUSTOM_MODE_ENABLED: Final[int] = 1
-_MAV_MODE_FLAG_SAFETY_ARMED: Final[int] = 128
-
 FAILSAFE_PHASES: Final = frozenset({bm.Phase.RC_LOST, bm.Phase.MOTOR_FAULT, bm.Phase.HOST_LOST})
 """Failsafe phases reported as ``CRITICAL`` (E-stop is ``EMERGENCY``; the start-up gate is not a failsafe)."""
 
@@ -51,7 +48,7 @@ def heartbeat(telemetry: bm.Telemetry | None, age_us: int, stale_us: int) -> mav
     if tel is None:
         return mav.Heartbeat(mav.MAV_TYPE_ARM, mav.MAV_AUTOPILOT_INVALID, 0, 0, mav.MavState.BOOT)
     armed = bool(tel.flags & bm.TelemetryFlags.ARMED)
-    base_mode = _MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (_MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
+    base_mode = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if armed else 0)
     # custom_mode: byte 0 = Mode, byte 1 = Phase, byte 2 = GraspState (see docs/mavlink.md).
     custom_mode = int(tel.mode) | int(tel.phase) << 8 | int(tel.grasp_state) << 16
     if age_us > stale_us:

@@ -14,7 +14,7 @@ import socket
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 from controller.cli_kit import Parser, port_number, positive_duration
 from host.errors import HostError
@@ -22,6 +22,9 @@ from host.gamepad import DEFAULT_MAPPING, GamepadMapping, format_mapping, parse_
 from host.model import new_token
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
 from protocol.dbus import Lever
+
+if TYPE_CHECKING:
+    from host.drone_servo import ServoFollowConfig
 
 __all__ = [
     "FOXGLOVE_PORT",
@@ -54,6 +57,20 @@ def _mav_id(text: str) -> int:
     if not 1 <= v <= 255:
         raise argparse.ArgumentTypeError(f"MAVLink ids are 1..255: {text!r}")
     return v
+
+
+def _mav_compid(text: str) -> int:
+    v = _mav_id(text)
+    if v < 7:  # MAVLink reserves 0..6 (broadcast, the autopilot, payload slots)
+        raise argparse.ArgumentTypeError(f"component ids 0..6 are reserved by MAVLink; use 7..255: {text!r}")
+    return v
+
+
+def _follow_servo(text: str) -> ServoFollowConfig:
+    # Imported here: host.drone_servo loads pymavlink, which a run without --mavlink never needs.
+    from host.drone_servo import parse_follow_servo
+
+    return parse_follow_servo(text)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -142,7 +159,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--mavlink", metavar="URL", help="pymavlink connection string, e.g. udpout:127.0.0.1:14550"
     )
     mav.add_argument("--mav-sysid", type=_mav_id, default=1, help="the drone's system id (default 1)")
-    mav.add_argument("--mav-compid", type=_mav_id, default=25, help="the arm's component id (default 25)")
+    mav.add_argument(
+        "--mav-compid", type=_mav_compid, default=25, help="the arm's component id, 7..255 (default 25)"
+    )
+    mav.add_argument(
+        "--follow-servo",
+        type=_follow_servo,
+        metavar="N[,grab=PWM][,release=PWM][,stale_ms=MS]",
+        help="follow the autopilot's gripper output N (SERVO_OUTPUT_RAW) with grab/release on the board "
+        "(default PWM grab=1900 release=1100, stale after 1000 ms)",
+    )
     mav.add_argument("--mav-signing-key", type=Path, metavar="FILE", help="MAVLink 2 signing key file")
     mav.add_argument(
         "--mav-signing-timestamp",
@@ -181,6 +207,7 @@ class HostOptions:
         mav_signing_key: signing key file.
         mav_signing_timestamp: file persisting the signing timestamp (None with a key:
             ``<key file>.timestamp``).
+        follow_servo: the autopilot output followed as the gripper (None = off).
         shadow: with ``port``, run the shadow plant when the board sends no poses.
         objects: fixed objects added to the virtual board's scene (the command line's default:
             ``host.object_spec.DEFAULT_OBJECT``; ``--no-object``: none).
@@ -204,6 +231,7 @@ class HostOptions:
     mav_compid: int = 25
     mav_signing_key: Path | None = None
     mav_signing_timestamp: Path | None = None
+    follow_servo: ServoFollowConfig | None = None
     shadow: bool = True
     objects: tuple[ObjectSpec, ...] = ()
     gamepad: str | None = None
@@ -245,6 +273,8 @@ class HostOptions:
             raise HostError("--mav-signing-key needs --mavlink")
         if ns.mav_signing_key is not None and not ns.mav_signing_key.is_file():
             raise HostError(f"no such signing key file: {ns.mav_signing_key}")
+        if ns.follow_servo is not None and ns.mavlink is None:
+            raise HostError("--follow-servo needs --mavlink")
         if ns.mav_signing_timestamp is not None and ns.mav_signing_key is None:
             raise HostError("--mav-signing-timestamp needs --mav-signing-key")
         token: str | None = None
@@ -275,6 +305,7 @@ class HostOptions:
             mav_compid=ns.mav_compid,
             mav_signing_key=ns.mav_signing_key,
             mav_signing_timestamp=ns.mav_signing_timestamp,
+            follow_servo=ns.follow_servo,
             shadow=not ns.no_shadow,
             objects=objects,
             gamepad=ns.gamepad,

@@ -5,11 +5,20 @@ from __future__ import annotations
 
 from typing import Any
 
-from protocol.mavlink.dialect import ACTUATOR_SLOTS, NAMED_VALUE_NAME_MAX, PARAM_ID_MAX, STATUSTEXT_CHUNK_LEN
+from protocol.mavlink.dialect import (
+    ACTUATOR_SLOTS,
+    NAMED_VALUE_NAME_MAX,
+    PARAM_ID_MAX,
+    SERVO_OUTPUTS_PER_PORT,
+    STATUSTEXT_CHUNK_LEN,
+    ProtocolVersionMessage,
+)
 from protocol.mavlink.messages import (
     ActuatorOutputStatus,
     Attitude,
+    AutopilotVersion,
     CommandAck,
+    CommandInt,
     CommandLong,
     Heartbeat,
     LocalPositionNed,
@@ -19,6 +28,8 @@ from protocol.mavlink.messages import (
     ParamRequestRead,
     ParamSet,
     ParamValue,
+    ProtocolVersion,
+    ServoOutputRaw,
     StatusText,
     Unhandled,
 )
@@ -61,6 +72,16 @@ def from_pymavlink(m: Any) -> MavMessage:
     if t == "COMMAND_LONG":
         params = (m.param1, m.param2, m.param3, m.param4, m.param5, m.param6, m.param7)
         return CommandLong(m.target_system, m.target_component, m.command, params, m.confirmation)
+    if t == "COMMAND_INT":
+        params4 = (m.param1, m.param2, m.param3, m.param4)
+        return CommandInt(m.target_system, m.target_component, m.command, params4, m.x, m.y, m.z, m.frame)
+    if t == "SERVO_OUTPUT_RAW":
+        servos = tuple(int(getattr(m, f"servo{i}_raw", 0)) for i in range(1, SERVO_OUTPUTS_PER_PORT + 1))
+        return ServoOutputRaw(m.time_usec, m.port, servos)
+    if t == "AUTOPILOT_VERSION":
+        return AutopilotVersion(m.capabilities, m.flight_sw_version, m.vendor_id, m.product_id)
+    if t == "PROTOCOL_VERSION":
+        return ProtocolVersion(m.version, m.min_version, m.max_version)
     if t == "COMMAND_ACK":
         return CommandAck(
             m.command, m.result, m.progress, m.result_param2, m.target_system, m.target_component
@@ -170,4 +191,38 @@ def to_pymavlink(d: Any, msg: MavMessage) -> Any:
         return d.MAVLink_local_position_ned_message(
             msg.time_boot_ms, msg.x_m, msg.y_m, msg.z_m, msg.vx_m_s, msg.vy_m_s, msg.vz_m_s
         )
+    if isinstance(msg, CommandInt):
+        return d.MAVLink_command_int_message(
+            _u8(msg.target_system, "target_system"),
+            _u8(msg.target_component, "target_component"),
+            _u8(msg.frame, "frame"),
+            msg.command,
+            0,
+            0,
+            *(float(p) for p in msg.params),
+            msg.x,
+            msg.y,
+            float(msg.z),
+        )
+    if isinstance(msg, ServoOutputRaw):
+        if len(msg.servo_raw_us) > SERVO_OUTPUTS_PER_PORT:
+            raise ValueError(f"SERVO_OUTPUT_RAW has at most {SERVO_OUTPUTS_PER_PORT} outputs")
+        pwm = [int(v) for v in msg.servo_raw_us] + [0] * (SERVO_OUTPUTS_PER_PORT - len(msg.servo_raw_us))
+        return d.MAVLink_servo_output_raw_message(msg.time_usec & 0xFFFFFFFF, _u8(msg.port, "port"), *pwm)
+    if isinstance(msg, AutopilotVersion):
+        return d.MAVLink_autopilot_version_message(
+            msg.capabilities,
+            msg.flight_sw_version,
+            0,
+            0,
+            0,
+            [0] * 8,
+            [0] * 8,
+            [0] * 8,
+            msg.vendor_id,
+            msg.product_id,
+            0,
+        )
+    if isinstance(msg, ProtocolVersion):
+        return ProtocolVersionMessage(msg.version, msg.min_version, msg.max_version)
     raise TypeError(f"cannot encode {type(msg).__name__}")

@@ -31,6 +31,34 @@ class CommandLong:
 
 
 @dataclass(frozen=True)
+class CommandInt:
+    """``COMMAND_INT`` (75): a command with four float and three integer parameters (x, y scaled)."""
+
+    target_system: int
+    target_component: int
+    command: int
+    params: tuple[float, float, float, float] = (0.0,) * 4
+    x: int = 0
+    y: int = 0
+    z: float = 0.0
+    frame: int = 0
+
+    def as_long(self) -> CommandLong:
+        """The same command as a ``COMMAND_LONG`` (x, y as plain numbers; the frame dropped).
+
+        Returns:
+            The equivalent ``COMMAND_LONG`` (confirmation 0: ``COMMAND_INT`` has none).
+        """
+        p = self.params
+        return CommandLong(
+            self.target_system,
+            self.target_component,
+            self.command,
+            (p[0], p[1], p[2], p[3], float(self.x), float(self.y), self.z),
+        )
+
+
+@dataclass(frozen=True)
 class CommandAck:
     """``COMMAND_ACK`` (77). ``target_*`` name the commander so a GCS knows the reply is for it."""
 
@@ -137,6 +165,34 @@ class LocalPositionNed:
 
 
 @dataclass(frozen=True)
+class ServoOutputRaw:
+    """``SERVO_OUTPUT_RAW`` (36): an autopilot's output PWM in µs, outputs ``16 * port + 1`` onwards."""
+
+    time_usec: int
+    port: int
+    servo_raw_us: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class AutopilotVersion:
+    """``AUTOPILOT_VERSION`` (148): capabilities and software version (the rest zero)."""
+
+    capabilities: int
+    flight_sw_version: int = 0
+    vendor_id: int = 0
+    product_id: int = 0
+
+
+@dataclass(frozen=True)
+class ProtocolVersion:
+    """``PROTOCOL_VERSION`` (300): MAVLink versions spoken (times 100)."""
+
+    version: int
+    min_version: int
+    max_version: int
+
+
+@dataclass(frozen=True)
 class Unhandled:
     """A well-formed packet of the dialect that is outside our message set."""
 
@@ -147,6 +203,7 @@ class Unhandled:
 MavMessage = (
     Heartbeat
     | CommandLong
+    | CommandInt
     | CommandAck
     | NamedValueFloat
     | ActuatorOutputStatus
@@ -157,6 +214,9 @@ MavMessage = (
     | ParamSet
     | Attitude
     | LocalPositionNed
+    | ServoOutputRaw
+    | AutopilotVersion
+    | ProtocolVersion
     | Unhandled
 )
 """Every message type this module decodes (``Unhandled`` is decode-only)."""

@@ -12,11 +12,11 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
+from drone_peer import WAIT_S, Peer, Rig, free_udp_port, rig_factory
 from fake_board import PARAMS, FakeBoard
 from pymavlink import mavutil
 
@@ -39,99 +39,11 @@ GRAB, RELEASE, HOLD = (
 )
 R = mav.MavResult
 KEY = mav.signing_key_from_passphrase("spirob")
-WAIT_S = 5.0
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-class Peer:
-    """A ground station on udpin (pymavlink), with bounded waits."""
-
-    def __init__(self, url: str, sysid: int = 255, compid: int = 190, key: bytes | None = None) -> None:
-        self.conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=compid)
-        if key is not None:
-            self.conn.setup_signing(key, sign_outgoing=True, link_id=2)
-        self.seen: list[Any] = []
-
-    def recv(self, pred: Callable[[Any], bool], timeout: float = WAIT_S) -> Any:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            m = self.conn.recv_match(blocking=True, timeout=0.05)
-            if m is None or m.get_type() == "BAD_DATA":
-                continue
-            self.seen.append(m)
-            if pred(m):
-                return m
-        types = sorted({m.get_type() for m in self.seen[-50:]})
-        raise AssertionError(f"peer timed out; recent types: {types}")
-
-    def recv_type(self, mtype: str, pred: Callable[[Any], bool] = lambda m: True) -> Any:
-        return self.recv(lambda m: m.get_type() == mtype and pred(m))
-
-    def command(
-        self, command: int, p1: float = 0.0, p2: float = 0.0, *, comp: int = 25, sys_: int = 1, conf: int = 0
-    ) -> None:
-        self.conn.mav.command_long_send(sys_, comp, command, conf, p1, p2, 0, 0, 0, 0, 0)
-
-    def gripper(self, action: float, *, instance: float = 25.0, comp: int = 25, conf: int = 0) -> None:
-        self.command(mav.MAV_CMD_DO_GRIPPER, instance, action, comp=comp, conf=conf)
-
-    def acks_until_final(self) -> list[Any]:
-        acks = [self.recv_type("COMMAND_ACK")]
-        while acks[-1].result == R.IN_PROGRESS:
-            acks.append(self.recv_type("COMMAND_ACK"))
-        return acks
-
-    def statustext(self, contains: str) -> Any:
-        return self.recv_type("STATUSTEXT", lambda m: contains in m.text)
-
-    def send_raw(self, data: bytes) -> None:
-        self.conn.write(data)
-
-    def close(self) -> None:
-        self.conn.close()
-
-
-@dataclass
-class Rig:
-    link: DroneLink
-    board: FakeBoard
-    peer: Peer
-
-    def ready(self) -> None:
-        """The peer has heard the link, and the link has fresh board telemetry."""
-        self.peer.recv_type("HEARTBEAT", lambda m: m.get_srcComponent() == 25)
-        self.peer.recv_type("NAMED_VALUE_FLOAT")
 
 
 @pytest.fixture
 def make_rig(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
-    made: list[Rig] = []
-
-    def make(*, start_board: bool = True, peer_key: bytes | None = None, **cfg: Any) -> Rig:
-        port = free_udp_port()
-        peer = Peer(f"udpin:127.0.0.1:{port}", key=peer_key)
-        board = FakeBoard()
-        cfg.setdefault("tlog_path", tmp_path / f"link{len(made)}.tlog")
-        link = DroneLink(DroneLinkConfig(url=f"udpout:127.0.0.1:{port}", **cfg), board)
-        board.attach(link.on_board_message)
-        rig = Rig(link, board, peer)
-        made.append(rig)
-        if start_board:
-            board.start()
-        link.start()
-        return rig
-
-    yield make
-    for rig in made:
-        rig.link.close()
-        rig.board.stop()
-        rig.peer.close()
-    assert [r.link.counters.internal_errors for r in made] == [0] * len(made)
+    yield from rig_factory(tmp_path)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -191,6 +103,7 @@ def test_grab_in_progress_then_accepted(make_rig: Callable[..., Rig]) -> None:
     acks = rig.peer.acks_until_final()
     assert acks[0].result == R.IN_PROGRESS
     assert acks[-1].result == R.ACCEPTED
+    assert acks[-1].progress == 0  # progress belongs to IN_PROGRESS only
     assert {(a.command, a.target_system, a.target_component) for a in acks} == {(211, 255, 190)}
     assert [a.progress for a in acks if a.result == R.IN_PROGRESS] == sorted(
         a.progress for a in acks if a.result == R.IN_PROGRESS
@@ -293,9 +206,21 @@ def test_denied_unless_armed_ok_and_lever_up(
     assert rig.board.commands() == []
 
 
-def test_denied_without_board_telemetry(make_rig: Callable[..., Rig]) -> None:
-    rig = make_rig(start_board=False)
+def test_a_gripper_command_before_any_board_telemetry_waits_then_is_rejected_temporarily(
+    make_rig: Callable[..., Rig],
+) -> None:
+    rig = make_rig(start_board=False, early_command_wait_us=200_000)
     rig.peer.recv_type("HEARTBEAT")
+    rig.peer.gripper(GRAB)
+    assert rig.peer.recv_type("COMMAND_ACK").result == R.TEMPORARILY_REJECTED
+    assert rig.board.commands() == []
+
+
+def test_denied_when_board_telemetry_stops(make_rig: Callable[..., Rig]) -> None:
+    rig = make_rig(board_stale_us=100_000)
+    rig.ready()
+    rig.board.stop()
+    rig.peer.recv_type("HEARTBEAT", lambda m: m.system_status == mav.MavState.CRITICAL)
     rig.peer.gripper(GRAB)
     assert rig.peer.recv_type("COMMAND_ACK").result == R.DENIED
     rig.peer.statustext("no board telemetry")
@@ -541,6 +466,8 @@ def test_signing_key_file_and_config_helpers(tmp_path: Path) -> None:
     [
         {"compid": 0},
         {"compid": 1},
+        {"compid": 6},
+        {"early_command_wait_us": 0},
         {"sysid": 0},
         {"telemetry_rate_hz": 0.0},
         {"signing_key": b"short"},
