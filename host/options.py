@@ -12,7 +12,7 @@ import ipaddress
 import os
 import socket
 import stat
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
@@ -194,7 +194,9 @@ class HostOptions:
         ui: serve the panel.
         ui_host: panel bind address.
         ui_port: panel port (0 = any free port).
-        token: access token of the panel (None: headless, or ``--no-token`` on loopback).
+        token: access token of the panel: by default a fresh random one, as on the command line (a panel
+            built in code is as closed as one started from it); None: no token (headless, or
+            ``--no-token`` on loopback).
         duration_s: stop after this long (None = until interrupted).
         record: MCAP file to write.
         replay: MCAP file to replay instead of a board.
@@ -219,7 +221,7 @@ class HostOptions:
     ui: bool = True
     ui_host: str = "127.0.0.1"
     ui_port: int = 8080
-    token: str | None = None
+    token: str | None = field(default_factory=new_token)
     duration_s: float | None = None
     record: Path | None = None
     replay: Path | None = None

@@ -463,3 +463,10 @@ def test_ctrl_c_in_a_terminal_stops_everything_without_a_traceback() -> None:
     assert any("board link" in line for line in lines), lines
     assert proc.returncode == 0, out
     assert "Traceback" not in out and "KeyboardInterrupt" not in out, out
+
+
+def test_options_built_in_code_have_a_token_unless_told_otherwise() -> None:
+    """Safety: a panel started from code is as closed as one started from the command line."""
+    a, b = HostOptions(), HostOptions()
+    assert a.token and b.token and a.token != b.token
+    assert HostOptions(token=None).token is None  # only when asked for
