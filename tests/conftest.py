@@ -2,6 +2,8 @@
 
 - A run in which no test passed fails (pytest itself only fails on "nothing collected").
 - A test that leaves a thread or a child process running fails.
+- Hypothesis has no deadline: tests never assert wall-clock times, and a loaded machine makes one example
+  slow without making it wrong.
 - Real-time tests (``@pytest.mark.realtime``) the machine starved are skipped as ``starved:``
   (``tests/realtime_guard.py``), and so are MAVProxy and browser tests (``mavproxy``, ``browser``) whose
   waits timed out on a starved machine; the end of the run counts them, warns about a file whose every
@@ -17,7 +19,11 @@ from collections import defaultdict
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import settings
 from realtime_guard import STARVED_PREFIX
+
+settings.register_profile("spirob", deadline=None)
+settings.load_profile("spirob")
 
 _REALTIME: defaultdict[str, dict[str, int]] = defaultdict(lambda: {"passed": 0, "failed": 0, "starved": 0})
 """Per test file of this run: how many real-time tests passed, failed and were skipped as starved."""
