@@ -20,7 +20,14 @@ def start_in_own_group(module: str, *args: str, merge_stderr: bool = False) -> s
         stderr=subprocess.STDOUT if merge_stderr else subprocess.PIPE,
         text=True,
         start_new_session=True,
+        # A terminal's foreground job takes Ctrl-C; a shell's background job (a CI runner's, `cmd &`)
+        # starts with SIGINT ignored, and a child would inherit that.
+        preexec_fn=_default_sigint,
     )
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def ctrl_c(proc: subprocess.Popen[str], timeout_s: float = 60.0) -> tuple[str, str]:
