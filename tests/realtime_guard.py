@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import os
+import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, NoReturn, TypeVar
 
@@ -43,6 +44,7 @@ __all__ = [
     "starved_timeouts",
     "timed_out",
     "void_reason",
+    "wait_for",
 ]
 
 ATTEMPTS_N = 3
@@ -147,3 +149,14 @@ def retry_void(run: Callable[[], T], void: Callable[[T], str | None], attempts: 
 def largest_gap_s(times_s: Sequence[float]) -> float:
     """The largest interval between consecutive instants (0 for fewer than two)."""
     return max((b - a for a, b in itertools.pairwise(times_s)), default=0.0)
+
+
+def wait_for(cond: Callable[[], bool], timeout_s: float = 10.0, poll_s: float = 0.02) -> bool:
+    """Poll ``cond`` until it holds or ``timeout_s`` (scaled with the load, :func:`scaled_s`) ran out; its
+    last value. A wait, never a timing assertion: the caller asserts what it waited for."""
+    deadline = time.monotonic() + scaled_s(timeout_s)
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(poll_s)
+    return cond()

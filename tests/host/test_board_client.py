@@ -8,6 +8,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 from link_peer import LinkPeer
+from realtime_guard import wait_for
 
 from host.board_client import BoardClient, BoardClientConfig, BoardLinkError, LinkState, open_port
 from protocol.dbus import Lever, RcFrame
@@ -23,16 +24,6 @@ from protocol.messages import (
 )
 
 
-def wait_for(cond: Callable[[], bool], timeout_s: float = 5.0) -> bool:
-    """Poll ``cond`` until true or the (generous) timeout; never a timing assertion."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.01)
-    return cond()
-
-
 @pytest.fixture(params=["pty", "socket"])
 def peer(request: pytest.FixtureRequest) -> Iterator[LinkPeer]:
     with LinkPeer(request.param) as p:
@@ -44,8 +35,8 @@ def test_receives_and_fans_out_messages(peer: LinkPeer) -> None:
     with BoardClient(peer.url) as client:
         client.add_listener(got.append)
         client.start()
-        assert wait_for(lambda: any(isinstance(m, SimPoses) for m in got))
-        assert wait_for(lambda: sum(isinstance(m, Telemetry) for m in got) >= 20)
+        assert _wait(lambda: any(isinstance(m, SimPoses) for m in got))
+        assert _wait(lambda: sum(isinstance(m, Telemetry) for m in got) >= 20)
         stats = client.stats()
         assert stats.state is LinkState.CONNECTED
         assert stats.rx_counts["Telemetry"] >= 20
@@ -59,7 +50,7 @@ def test_heartbeat_and_virtual_rc_only_while_a_source_gives_frames(peer: LinkPee
     frame: list[RcFrame | None] = [None]
     with BoardClient(peer.url, rc_source=lambda: frame[0]) as client:
         client.start()
-        assert wait_for(lambda: len(peer.messages(Heartbeat)) >= 2)
+        assert _wait(lambda: len(peer.messages(Heartbeat)) >= 2)
         # On connect: neutral frames with the right lever DOWN, then nothing while the source says None.
         first = [m.frame for m in peer.messages(VirtualRc)]  # type: ignore[attr-defined]
         assert first and all(f.right_lever == Lever.DOWN and f.channels == (0, 0, 0, 0) for f in first)
@@ -67,7 +58,7 @@ def test_heartbeat_and_virtual_rc_only_while_a_source_gives_frames(peer: LinkPee
         time.sleep(0.1)
         assert len(peer.messages(VirtualRc)) == n0
         frame[0] = RcFrame((0, 0, 0, 300), Lever.MIDDLE, Lever.DOWN)
-        assert wait_for(lambda: len(peer.messages(VirtualRc)) >= n0 + 5)
+        assert _wait(lambda: len(peer.messages(VirtualRc)) >= n0 + 5)
         last = peer.messages(VirtualRc)[-1].frame  # type: ignore[attr-defined]
         assert last.channels[3] == 300 and last.right_lever == Lever.MIDDLE
         counters = [m.counter for m in peer.messages(Heartbeat)]  # type: ignore[attr-defined]
@@ -80,7 +71,7 @@ def test_command_round_trip_gives_rtt(peer: LinkPeer) -> None:
         client.add_listener(lambda m: acks.append(m) if isinstance(m, CommandAck) else None)
         client.start()
         assert client.send(Command(CommandCode.ESTOP))
-        assert wait_for(lambda: bool(acks))
+        assert _wait(lambda: bool(acks))
         assert client.stats().rtt_us is not None
         assert any(isinstance(m, Command) and m.code == CommandCode.ESTOP for m in peer.received)
 
@@ -95,7 +86,7 @@ def test_listener_errors_are_counted_not_fatal(peer: LinkPeer) -> None:
         client.add_listener(bad)
         client.add_listener(seen.append)
         client.start()
-        assert wait_for(lambda: len(seen) >= 10)
+        assert _wait(lambda: len(seen) >= 10)
         assert client.stats().listener_errors >= 10
 
 
@@ -104,10 +95,10 @@ def test_garbage_is_counted_and_good_frames_still_arrive(peer: LinkPeer) -> None
     with BoardClient(peer.url) as client:
         client.add_listener(seen.append)
         client.start()
-        assert wait_for(lambda: len(seen) >= 5)
+        assert _wait(lambda: len(seen) >= 5)
         peer.inject(b"\xa5\x10\x00\x01\x00garbage\xa5\xff" * 20)
         n = len(seen)
-        assert wait_for(lambda: len(seen) >= n + 20)
+        assert _wait(lambda: len(seen) >= n + 20)
         assert client.stats().parser["bytes_skipped"] > 0
 
 
@@ -120,16 +111,16 @@ def test_reconnects_after_the_device_vanishes_and_starts_safe() -> None:
     ):
         client.add_state_listener(states.append)
         client.start()
-        assert wait_for(lambda: len(peer.messages(VirtualRc)) > 5)
+        assert _wait(lambda: len(peer.messages(VirtualRc)) > 5)
         peer.drop_connection()
-        assert wait_for(lambda: LinkState.DISCONNECTED in states)
+        assert _wait(lambda: LinkState.DISCONNECTED in states)
         assert not client.send(Heartbeat(0, 0))  # link down: refused, counted
         assert client.stats().tx_dropped >= 1
         with peer.lock:
             peer.received.clear()
         peer.resume()
-        assert wait_for(lambda: client.stats().reconnects == 1 and states[-1] is LinkState.CONNECTED)
-        assert wait_for(lambda: len(peer.messages(VirtualRc)) >= 3)
+        assert _wait(lambda: client.stats().reconnects == 1 and states[-1] is LinkState.CONNECTED)
+        assert _wait(lambda: len(peer.messages(VirtualRc)) >= 3)
         # The first frames after the reconnect are SAFE (right lever DOWN), whatever the source says.
         first = peer.messages(VirtualRc)[0].frame  # type: ignore[attr-defined]
         assert first.right_lever == Lever.DOWN
@@ -191,9 +182,9 @@ def test_a_stalled_host_stops_rc_and_heartbeat() -> None:
         BoardClient(peer.url, cfg, rc_source=lambda: RcFrame.neutral(Lever.MIDDLE)) as client,
     ):
         client.start()
-        assert wait_for(lambda: len(peer.messages(VirtualRc)) > 5)
+        assert _wait(lambda: len(peer.messages(VirtualRc)) > 5)
         client.add_listener(stall)
-        assert wait_for(stalled.is_set)
+        assert _wait(stalled.is_set)
         time.sleep(0.5)
         n_rc = len(peer.messages(VirtualRc))
         n_hb = len(peer.messages(Heartbeat))
@@ -201,5 +192,9 @@ def test_a_stalled_host_stops_rc_and_heartbeat() -> None:
         assert len(peer.messages(VirtualRc)) == n_rc
         assert len(peer.messages(Heartbeat)) == n_hb
         release.set()
-        assert wait_for(lambda: len(peer.messages(VirtualRc)) > n_rc + 5)
+        assert _wait(lambda: len(peer.messages(VirtualRc)) > n_rc + 5)
         assert client.stats().lease_expired >= 1
+
+
+def _wait(cond: Callable[[], bool], timeout_s: float = 5.0) -> bool:
+    return wait_for(cond, timeout_s, 0.01)

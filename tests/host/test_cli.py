@@ -9,26 +9,18 @@ from __future__ import annotations
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from link_peer import LinkPeer
+from realtime_guard import wait_for
 from terminal import ctrl_c, start_in_own_group
 
 from host.cli import HostApp, HostOptions, build_parser, main
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec
 from protocol.dbus import Lever
 from protocol.messages import Mode, Phase
-
-
-def wait_for(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.02)
-    return cond()
 
 
 def one_error_line(err: str) -> str:

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from link_peer import LinkPeer
+from realtime_guard import wait_for
 
 from host.app import HostApp
 from host.gamepad import (
@@ -187,15 +187,6 @@ def test_format_then_parse_is_the_identity(
 
 
 # ---------------------------------------------------------------------- through a running host
-
-
-def wait_for(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.02)
-    return cond()
 
 
 def frames(peer: LinkPeer) -> list[RcFrame]:

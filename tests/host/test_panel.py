@@ -30,7 +30,7 @@ import pytest
 import viser
 from chromium import CHROMIUM, CHROMIUM_ARGS, lever_button, page_load, page_load_ms
 from playwright import sync_api
-from realtime_guard import scaled_s, timed_out
+from realtime_guard import timed_out, wait_for
 
 from host.cli import HostApp, HostOptions
 from host.panel import PanelConfig
@@ -52,16 +52,6 @@ if shutil.which(CHROMIUM) is None:
     )
 
 
-def wait_for(cond: Callable[[], bool], timeout_s: float = 20.0) -> bool:
-    """Poll ``cond`` for ``timeout_s`` scaled with the load (``realtime_guard.scaled_s``)."""
-    deadline = time.monotonic() + scaled_s(timeout_s)
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return cond()
-
-
 @pytest.fixture
 def app() -> Iterator[HostApp]:
     with contextlib.ExitStack() as stack:
@@ -76,7 +66,7 @@ def app() -> Iterator[HostApp]:
             opts = HostOptions(ui_port=0, token=TOKEN)
         host = stack.enter_context(HostApp(opts, panel_config=PANEL))
         host.start()
-        if not wait_for(lambda: host.model.telemetry is not None, 60.0):
+        if not _wait(lambda: host.model.telemetry is not None, 60.0):
             timed_out("the first telemetry from the board")  # start-up: skipped if the machine starved it
         yield host
 
@@ -111,7 +101,7 @@ def open_panel(browser: Any, app: HostApp) -> Any:
 
 def client_of(app: HostApp, before: set[int]) -> int:
     assert app.panel is not None
-    assert wait_for(lambda: len(set(app.panel.controls()) - before) == 1)
+    assert _wait(lambda: len(set(app.panel.controls()) - before) == 1)
     (cid,) = set(app.panel.controls()) - before
     return cid
 
@@ -128,7 +118,7 @@ def state_bar(page: Any) -> str:
 
 def wait_bar(page: Any, *texts: str) -> str:
     """Wait until the state bar shows every one of ``texts``; returns its text."""
-    ok = wait_for(lambda: all(t in state_bar(page) for t in texts), 20.0)
+    ok = _wait(lambda: all(t in state_bar(page) for t in texts), 20.0)
     text = state_bar(page)
     assert ok, f"state bar {text!r} lacks {texts}"
     return text
@@ -144,7 +134,7 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     assert m.is_authorised(a)
 
     # The canvas renders the scene: after the poses arrive, the screenshot is not blank and shows arm blue.
-    assert wait_for(lambda: app.panel is not None and app.panel.scene.updates > 10)
+    assert _wait(lambda: app.panel is not None and app.panel.scene.updates > 10)
     time.sleep(1.0)
     # A page screenshot cropped to the scene (a locator screenshot waits ~10 s for "stability" here).
     box = page_a.locator("canvas").first.bounding_box()
@@ -165,13 +155,13 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
 
     # Take control, pass the gate (right lever DOWN), MANUAL (MIDDLE), arm.
     page_a.get_by_role("button", exact=True, name="Take control").click()
-    assert wait_for(lambda: m.holder == a)
+    assert _wait(lambda: m.holder == a)
     page_a.get_by_text("You hold control.").wait_for(timeout=10_000)
     lever_button(page_a, "Right lever", "DOWN").click()
-    assert wait_for(lambda: m.telemetry is not None and m.telemetry.phase == Phase.OK)
+    assert _wait(lambda: m.telemetry is not None and m.telemetry.phase == Phase.OK)
     lever_button(page_a, "Right lever", "MIDDLE").click()
     page_a.get_by_role("button", exact=True, name="Arm").click()
-    assert wait_for(lambda: m.telemetry is not None and m.telemetry.mode.name == "MANUAL")
+    assert _wait(lambda: m.telemetry is not None and m.telemetry.mode.name == "MANUAL")
     base = m.telemetry
     assert base is not None
 
@@ -179,13 +169,13 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     curl = stick_input(page_a, "Left ↕ tighten all cables")
     curl.fill("500")
     curl.press("Enter")
-    assert wait_for(lambda: m.operator_input()[0][3] == 500, 10.0)
+    assert _wait(lambda: m.operator_input()[0][3] == 500, 10.0)
 
     def tensions_up() -> bool:
         t = m.telemetry
         return t is not None and min(t.tension_target_n) > max(base.tension_target_n) + 1.0
 
-    assert wait_for(tensions_up), f"tensions did not rise: {m.telemetry}"
+    assert _wait(tensions_up), f"tensions did not rise: {m.telemetry}"
     t = m.telemetry
     assert t is not None and any(c > 0 for c in t.commanded_current)
 
@@ -197,19 +187,19 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     page_a.get_by_text("Direct mode", exact=True).first.click()
     hold_box = stick_input(page_a, "Cable 1 hold length")
     hold_box.click()
-    assert wait_for(held), f"cable 1 not held: {m.telemetry}"
+    assert _wait(held), f"cable 1 not held: {m.telemetry}"
 
     # A second (authorised) tab watches; asking for control does not take it.
     page_b = open_panel(browser, app)
     b = client_of(app, {a})
     page_b.get_by_role("button", exact=True, name="Take control").click()
-    assert wait_for(lambda: m.pending == b)
+    assert _wait(lambda: m.pending == b)
     time.sleep(0.5)
     assert m.holder == a, "a second tab took control silently"
     page_b.get_by_text("Request sent; waiting for the holder.").wait_for(timeout=10_000)
     # The holder hands it over explicitly; the new holder starts from SAFE.
     page_a.get_by_role("button", exact=True, name="Hand control over").click(timeout=10_000)
-    assert wait_for(lambda: m.holder == b)
+    assert _wait(lambda: m.holder == b)
     frame = m.virtual_rc_frame()
     assert frame is not None and frame.right_lever == 2 and frame.channels == (0, 0, 0, 0)
 
@@ -221,13 +211,13 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
         t = m.telemetry
         return t is not None and t.phase == Phase.ESTOP and all(c == 0 for c in t.commanded_current)
 
-    assert wait_for(stopped), f"E-stop did not zero the currents: {m.telemetry}"
+    assert _wait(stopped), f"E-stop did not zero the currents: {m.telemetry}"
     assert not held()  # SAFE dropped the hold, and the toggle follows the board
-    assert wait_for(lambda: not hold_box.is_checked(), 10.0)
+    assert _wait(lambda: not hold_box.is_checked(), 10.0)
     page_b.get_by_text("E-STOP pressed").first.wait_for(timeout=10_000)
     page_a.close()
     page_b.close()
-    assert wait_for(lambda: m.holder is None)
+    assert _wait(lambda: m.holder is None)
 
 
 def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> None:
@@ -241,7 +231,7 @@ def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> No
     text = wait_bar(page_a, "Take control")
     assert text.split(" · ")[0] in ("RC_LOST", "GATE"), text
     page_a.get_by_role("button", exact=True, name="Take control").click()
-    assert wait_for(lambda: m.holder == a)
+    assert _wait(lambda: m.holder == a)
     # The new holder sends the right lever DOWN: the gate opens, SAFE; the lever button shows it.
     wait_bar(page_a, "OK · SAFE", "ARMED", "move the right lever to MIDDLE to drive")
     assert lever_button(page_a, "Right lever", "DOWN").inner_text().strip() == "● DOWN"
@@ -264,7 +254,7 @@ def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> No
     page_b.get_by_role("button", exact=True, name="Take control").click()
     page_a.get_by_text(f"Tab {b} asks for control").first.wait_for(timeout=15_000)
     page_a.get_by_role("button", exact=True, name="Keep control").click()
-    assert wait_for(lambda: m.pending is None) and m.holder == a
+    assert _wait(lambda: m.pending is None) and m.holder == a
     page_b.close()
 
     # The parameter editor: set STICK_DEADBAND, the board reads it back, the page shows it confirmed.
@@ -278,14 +268,14 @@ def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> No
     box.fill(str(new))
     box.press("Enter")
     page_a.get_by_role("button", exact=True, name="Set on board").click()
-    assert wait_for(lambda: m.params.get("STICK_DEADBAND") == new), m.params.get("STICK_DEADBAND")
+    assert _wait(lambda: m.params.get("STICK_DEADBAND") == new), m.params.get("STICK_DEADBAND")
     page_a.get_by_text(f"Set to {new}: confirmed by the board").first.wait_for(timeout=10_000)
 
     # Space with the focus in that number box: E-stop, the banner and the way out.
     box.focus()
     assert page_a.evaluate("document.activeElement.tagName") == "INPUT"
     page_a.keyboard.press("Space")
-    assert wait_for(lambda: m.telemetry is not None and m.telemetry.phase == Phase.ESTOP), m.telemetry
+    assert _wait(lambda: m.telemetry is not None and m.telemetry.phase == Phase.ESTOP), m.telemetry
     page_a.get_by_text("E-STOP LATCHED").first.wait_for(timeout=10_000)
     wait_bar(page_a, "ESTOP", "E-stop latched: clear it (Clear E-stop), then re-arm through SAFE")
     page_a.close()
@@ -366,3 +356,7 @@ def test_panel_refuses_other_origins_and_missing_tokens() -> None:
             browser.close()
             other.shutdown()
             other.server_close()
+
+
+def _wait(cond: Callable[[], bool], timeout_s: float = 20.0) -> bool:
+    return wait_for(cond, timeout_s, 0.05)

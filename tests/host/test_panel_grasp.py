@@ -10,14 +10,13 @@ from __future__ import annotations
 
 import contextlib
 import shutil
-import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
 from chromium import CHROMIUM, CHROMIUM_ARGS, lever_button, page_load, page_load_ms
 from playwright import sync_api
-from realtime_guard import scaled_s, timed_out
+from realtime_guard import timed_out, wait_for
 
 from host.cli import HostApp, HostOptions, build_parser
 from host.object_spec import DEFAULT_OBJECT
@@ -33,23 +32,13 @@ if shutil.which(CHROMIUM) is None:
     pytest.fail(f"{CHROMIUM} is not installed: the browser tests need it", pytrace=False)
 
 
-def wait_for(cond: Callable[[], bool], timeout_s: float = 20.0) -> bool:
-    """Poll ``cond`` for ``timeout_s`` scaled with the load (``realtime_guard.scaled_s``)."""
-    deadline = time.monotonic() + scaled_s(timeout_s)
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return cond()
-
-
 @pytest.fixture
 def app() -> Iterator[HostApp]:
     opts = HostOptions.from_args(build_parser().parse_args(["--ui-port", "0", "--token", TOKEN]))
     assert opts.objects == (DEFAULT_OBJECT,)  # the default scene, as `spirob-host` builds it
     with HostApp(opts, panel_config=PANEL) as host:
         host.start()
-        if not wait_for(lambda: host.model.telemetry is not None, 60.0):
+        if not _wait(lambda: host.model.telemetry is not None, 60.0):
             timed_out("the first telemetry from the board")
         yield host
 
@@ -85,25 +74,27 @@ def test_the_default_scenes_object_is_grasped_from_the_panel(app: HostApp, page:
         return m.telemetry
 
     page.get_by_role("button", exact=True, name="Take control").click()
-    assert wait_for(lambda: m.holder is not None)
+    assert _wait(lambda: m.holder is not None)
     lever_button(page, "Right lever", "DOWN").click()
-    assert wait_for(lambda: telemetry().phase == Phase.OK), telemetry()
+    assert _wait(lambda: telemetry().phase == Phase.OK), telemetry()
     lever_button(page, "Right lever", "UP").click()
-    assert wait_for(lambda: telemetry().mode == Mode.GRASP), telemetry()
+    assert _wait(lambda: telemetry().mode == Mode.GRASP), telemetry()
     # GRASP mode packs the arm (12 N/s up to 18 N): give it 3 s of board time, as the lockstep test does.
     packed_us = telemetry().time_us + 3_000_000
-    assert wait_for(lambda: telemetry().time_us >= packed_us, 10.0)
+    assert _wait(lambda: telemetry().time_us >= packed_us, 10.0)
     assert telemetry().grasp_state == GraspState.IDLE
 
     page.get_by_role("button", exact=True, name="Grasp").click()
-    assert wait_for(lambda: telemetry().grasp_state != GraspState.IDLE, 10.0), telemetry()
+    assert _wait(lambda: telemetry().grasp_state != GraspState.IDLE, 10.0), telemetry()
     # Reach, contact, wrap, HOLD: about 4 s of board time in lockstep.
-    assert wait_for(lambda: telemetry().grasp_state in (GraspState.HOLD, GraspState.FAILED), 30.0), (
-        telemetry()
-    )
+    assert _wait(lambda: telemetry().grasp_state in (GraspState.HOLD, GraspState.FAILED), 30.0), telemetry()
     t = telemetry()
     assert t.grasp_state == GraspState.HOLD, f"the grasp ended {t.grasp_state.name}: {t}"
     assert t.phase == Phase.OK and m.last_ack is not None
 
     page.get_by_role("button", exact=True, name="Release").click()
-    assert wait_for(lambda: telemetry().grasp_state != GraspState.HOLD, 10.0), telemetry()
+    assert _wait(lambda: telemetry().grasp_state != GraspState.HOLD, 10.0), telemetry()
+
+
+def _wait(cond: Callable[[], bool], timeout_s: float = 20.0) -> bool:
+    return wait_for(cond, timeout_s, 0.05)

@@ -4,26 +4,16 @@
 from __future__ import annotations
 
 import logging
-import time
-from collections.abc import Callable
 
 import pytest
 from link_peer import LinkPeer
+from realtime_guard import wait_for
 
 from host.cli import HostApp, HostOptions, main
 from host.model import CLI_CLIENT
 from host.run_summary import RunSummary
 from protocol.dbus import Lever
 from protocol.messages import Event, EventKind, Mode, Phase, Telemetry
-
-
-def wait_for(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.02)
-    return cond()
 
 
 def feed(summary: RunSummary, script: list[tuple[int, Mode, Phase]], step_us: int = 10_000) -> None:

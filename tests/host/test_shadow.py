@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 from link_peer import LinkPeer
+from realtime_guard import wait_for
 
 from host.cli import HostApp, HostOptions
 from host.model import PoseSource, UiModel
@@ -22,15 +23,6 @@ from host.shadow import ShadowConfig, ShadowPlant, ShadowState, reel_in_currents
 from protocol.messages import Message, SimPoses, Telemetry, TelemetryFlags
 
 FRAME_US = 10_000  # the board's telemetry period (100 Hz)
-
-
-def wait_for(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.002)
-    return cond()
 
 
 def telemetry(
@@ -62,9 +54,7 @@ def feed(shadow: ShadowPlant, frames: list[Telemetry]) -> None:
     for frame in frames:
         before = shadow.stats().updates
         shadow.on_board_message(frame)
-        assert wait_for(lambda n=before: shadow.stats().updates > n), (
-            f"frame at {frame.time_us} us not applied"
-        )
+        assert _wait(lambda n=before: shadow.stats().updates > n), f"frame at {frame.time_us} us not applied"
 
 
 @pytest.fixture
@@ -187,7 +177,7 @@ def test_sim_poses_switch_the_shadow_off() -> None:
         board_poses = SimPoses(60_000, ((0.0, 0.0, 1.0), (0.0, 0.0, 0.98)), ((1.0, 0.0, 0.0, 0.0),) * 2)
         for listener in (model.on_board_message, shadow.on_board_message):
             listener(board_poses)
-        assert wait_for(lambda: shadow.state is ShadowState.OFF_SIM_POSES)
+        assert _wait(lambda: shadow.state is ShadowState.OFF_SIM_POSES)
         n = shadow.stats().updates
         shadow.on_board_message(telemetry(70_000, (500, 0, 0)))
         time.sleep(0.05)
@@ -210,7 +200,7 @@ def test_a_simulating_board_gets_time_to_send_its_poses_before_a_plant_is_built(
             s.on_board_message(telemetry(k * FRAME_US, (0, 0, 0), sim=True))
         time.sleep(0.05)
         s.on_board_message(SimPoses(200_000, ((0.0, 0.0, 1.0),), ((1.0, 0.0, 0.0, 0.0),)))
-        assert wait_for(lambda: s.state is ShadowState.OFF_SIM_POSES)
+        assert _wait(lambda: s.state is ShadowState.OFF_SIM_POSES)
     assert built == []
 
 
@@ -220,7 +210,7 @@ def test_a_plant_that_cannot_be_built_fails_in_one_line() -> None:
 
     with ShadowPlant(Published(), plant_factory=broken) as s:
         s.on_board_message(telemetry(0, (0, 0, 0)))
-        assert wait_for(lambda: s.state is ShadowState.FAILED)
+        assert _wait(lambda: s.state is ShadowState.FAILED)
         assert "no MuJoCo here" in s.stats().describe()
 
 
@@ -242,7 +232,7 @@ def test_host_poses_a_hardware_board_from_the_shadow_plant() -> None:
     with HardwarePeer("socket") as peer, HostApp(HostOptions(port=peer.url, ui=False)) as app:
         app.start()
         assert app.shadow is not None
-        assert wait_for(lambda: app.model.pose_source is PoseSource.SHADOW, 20.0)
+        assert _wait(lambda: app.model.pose_source is PoseSource.SHADOW, 20.0)
         assert app.model.poses is not None and len(app.model.poses.positions_m) >= 10
         assert "real time" in app._shadow_status()
     assert app.shadow is None  # stopped and released by close()
@@ -253,7 +243,7 @@ def test_host_switches_the_shadow_off_for_a_board_with_sim_poses() -> None:
         app.start()
         shadow = app.shadow
         assert shadow is not None
-        assert wait_for(lambda: shadow.state is ShadowState.OFF_SIM_POSES, 20.0)
+        assert _wait(lambda: shadow.state is ShadowState.OFF_SIM_POSES, 20.0)
         assert app.model.pose_source is PoseSource.SIMULATION
 
 
@@ -261,3 +251,7 @@ def test_no_shadow_flag() -> None:
     with LinkPeer("socket") as peer, HostApp(HostOptions(port=peer.url, ui=False, shadow=False)) as app:
         app.start()
         assert app.shadow is None
+
+
+def _wait(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
+    return wait_for(cond, timeout_s, 0.002)
