@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 from realtime_guard import scaled_s, starved_timeouts
@@ -51,3 +52,23 @@ def lever_button(page: Any, lever: str, position: str) -> Any:
         f"xpath=//*[normalize-space()='{lever}']/ancestor::div[contains(@class,'mantine-Flex-root')][1]"
         f"//button[normalize-space()='{position}' or normalize-space()='● {position}']"
     ).first
+
+
+@contextlib.contextmanager
+def chromium_context(user_dir: Path) -> Iterator[Any]:
+    """A headless Chromium with its profile in ``user_dir``, a small window (every tab renders the 3D
+    scene in software, SwiftShader, on this 2-core machine); closed on exit."""
+    from playwright import sync_api
+
+    with sync_api.sync_playwright() as p:
+        ctx = p.chromium.launch_persistent_context(
+            str(user_dir),
+            executable_path=CHROMIUM,
+            headless=True,
+            args=CHROMIUM_ARGS,
+            viewport={"width": 960, "height": 680},
+        )
+        try:
+            yield ctx
+        finally:
+            ctx.close()

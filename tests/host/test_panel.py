@@ -28,7 +28,7 @@ from typing import Any
 
 import pytest
 import viser
-from chromium import CHROMIUM, CHROMIUM_ARGS, lever_button, page_load, page_load_ms
+from chromium import CHROMIUM, CHROMIUM_ARGS, chromium_context, lever_button, page_load, page_load_ms
 from playwright import sync_api
 from realtime_guard import timed_out, wait_for
 
@@ -73,19 +73,8 @@ def app() -> Iterator[HostApp]:
 
 @pytest.fixture
 def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
-    with sync_api.sync_playwright() as p:
-        ctx = p.chromium.launch_persistent_context(
-            str(tmp_path_factory.mktemp("chromium")),
-            executable_path=CHROMIUM,
-            headless=True,
-            args=CHROMIUM_ARGS,
-            # Small: every tab renders the 3D scene in software (SwiftShader) on this 2-core machine.
-            viewport={"width": 960, "height": 680},
-        )
-        try:
-            yield ctx
-        finally:
-            ctx.close()
+    with chromium_context(tmp_path_factory.mktemp("chromium")) as ctx:
+        yield ctx
 
 
 def open_panel(browser: Any, app: HostApp) -> Any:

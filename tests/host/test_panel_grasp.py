@@ -14,8 +14,7 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
-from chromium import CHROMIUM, CHROMIUM_ARGS, lever_button, page_load, page_load_ms
-from playwright import sync_api
+from chromium import CHROMIUM, chromium_context, lever_button, page_load, page_load_ms
 from realtime_guard import timed_out, wait_for
 
 from host.cli import HostApp, HostOptions, build_parser
@@ -45,24 +44,14 @@ def app() -> Iterator[HostApp]:
 
 @pytest.fixture
 def page(tmp_path_factory: pytest.TempPathFactory, app: HostApp) -> Iterator[Any]:
-    with sync_api.sync_playwright() as p:
-        ctx = p.chromium.launch_persistent_context(
-            str(tmp_path_factory.mktemp("chromium")),
-            executable_path=CHROMIUM,
-            headless=True,
-            args=CHROMIUM_ARGS,
-            viewport={"width": 960, "height": 680},
-        )
-        try:
-            pg = ctx.new_page()
-            with page_load("the panel page"):
-                pg.goto(app.url + "&fixedDpr=1", timeout=page_load_ms())
-                pg.get_by_role("button", exact=True, name="Grasp").wait_for(timeout=page_load_ms())
-            with contextlib.suppress(Exception):  # the software-WebGL toast covers the scene
-                pg.locator(".mantine-Notification-closeButton").first.click(timeout=3_000)
-            yield pg
-        finally:
-            ctx.close()
+    with chromium_context(tmp_path_factory.mktemp("chromium")) as ctx:
+        pg = ctx.new_page()
+        with page_load("the panel page"):
+            pg.goto(app.url + "&fixedDpr=1", timeout=page_load_ms())
+            pg.get_by_role("button", exact=True, name="Grasp").wait_for(timeout=page_load_ms())
+        with contextlib.suppress(Exception):  # the software-WebGL toast covers the scene
+            pg.locator(".mantine-Notification-closeButton").first.click(timeout=3_000)
+        yield pg
 
 
 def test_the_default_scenes_object_is_grasped_from_the_panel(app: HostApp, page: Any) -> None:
