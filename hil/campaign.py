@@ -64,6 +64,7 @@ _FLOAT, _INT, _BOOL, _STR = "float", "int", "bool", "str"
 _DESIGN_KEYS = {
     "preset": _STR,
     "physics": _STR,
+    "variant": _STR,
     "length_m": _FLOAT,
     "tip_width_m": _FLOAT,
     "taper_deg": _FLOAT,
@@ -479,6 +480,8 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
         }
         arm = replace(chosen.model.arm, **{k: v for k, v in arm_changes.items() if v is not None})
         model = replace(chosen.model, arm=arm).with_physics(PHYSICS_STEPS_S[physics])
+        if "variant" in d:
+            model = _variant(d["variant"]).apply(model)
         model.validate()
     except CampaignError:
         raise
@@ -486,6 +489,26 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
         given = ", ".join(f"{k}={v}" for k, v in d.items())
         raise CampaignError(f"design {given or name}: {exc}") from None
     return design, model
+
+
+def _variant(text: str) -> Any:
+    """``design.variant``: one of the sensitivity experiment's model variants, ``"PARAMETER xFACTOR"``
+    (``"spool inertia x0.5"``) or ``"baseline"`` (:data:`hil.experiments.sensitivity.PARAMETERS`)."""
+    from .experiments.sensitivity import BASELINE, PARAMETERS, Variant
+
+    name, _, factor = text.strip().rpartition(" x")
+    if text.strip() == BASELINE:
+        return Variant(BASELINE, 1.0)
+    try:
+        value = float(factor)
+    except ValueError:
+        value = math.nan
+    if name not in PARAMETERS or not (math.isfinite(value) and value > 0):
+        raise CampaignError(
+            f"design.variant: {text!r} is not 'baseline' or 'PARAMETER xFACTOR' with PARAMETER one of "
+            f"{', '.join(PARAMETERS)} and FACTOR > 0"
+        )
+    return Variant(name, value)
 
 
 def _physical_design(d: Mapping[str, Any]) -> SpiralDesign:

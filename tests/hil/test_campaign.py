@@ -459,3 +459,23 @@ def test_physics_defaults_fine_for_grasps_board_for_scenarios_and_is_checked() -
     assert (board.solver.timestep_s, board.contact.timeconst_s) == (1e-3, 2e-3)
     with pytest.raises(CampaignError, match=r"design.physics: unknown 'nope'"):
         build_design({"design.physics": "nope"})
+
+
+def test_a_sensitivity_variant_scales_its_parameter_and_a_bad_one_is_one_line() -> None:
+    _, base = build_design({}, physics="fine")
+    _, half = build_design({"design.variant": "spool inertia x0.5"}, physics="fine")
+    assert half.motor.rotor_inertia_kg_m2 == pytest.approx(0.5 * base.motor.rotor_inertia_kg_m2)
+    assert build_design({"design.variant": "baseline"}, physics="fine")[1] == base
+    for bad in ("nope", "spool inertia x0", "spool inertia xhalf"):
+        with pytest.raises(
+            CampaignError, match="design.variant: .* is not 'baseline' or 'PARAMETER xFACTOR'"
+        ):
+            build_design({"design.variant": bad})
+
+
+def test_the_sensitivity_strategy_example_expands_to_its_stated_runs() -> None:
+    path = Path(__file__).resolve().parents[2] / "examples" / "campaign_sensitivity_strategy.toml"
+    runs = load_campaign(path, []).runs()
+    assert len(runs) == 528  # 11 models x 2 arms x 12 placements x 2 seeds, as its comment says
+    for run in runs[:: len(runs) // 11]:
+        build_design(run.inputs, physics="fine")  # every variant builds
