@@ -468,7 +468,7 @@ def test_a_sensitivity_variant_scales_its_parameter_and_a_bad_one_is_one_line() 
     assert build_design({"design.variant": "baseline"}, physics="fine")[1] == base
     for bad in ("nope", "spool inertia x0", "spool inertia xhalf"):
         with pytest.raises(
-            CampaignError, match="design.variant: .* is not 'baseline' or 'PARAMETER xFACTOR'"
+            CampaignError, match=r"design\.variant: .* is not 'baseline' or 'PARAMETER xFACTOR'"
         ):
             build_design({"design.variant": bad})
 
