@@ -83,7 +83,8 @@ def _phases(rig: Rig) -> list[int]:
     return [m.code for m in rig.received if isinstance(m, Event) and m.kind == EventKind.PHASE]
 
 
-def test_long_header_does_not_stall_a_lockstep_board() -> None:
+def _ok_rig() -> tuple[Rig, int]:
+    """A lockstep board past its start-up gate (phase OK) under a scripted host; the host's next ms."""
     rig = link_rc_rig()
     assert rig.host is not None
     ms = 0
@@ -92,6 +93,11 @@ def test_long_header_does_not_stall_a_lockstep_board() -> None:
         ms += 1
         assert ms < 200
     rig.drain()
+    return rig, ms
+
+
+def test_long_header_does_not_stall_a_lockstep_board() -> None:
+    rig, ms = _ok_rig()
     # the header right after a VirtualRc: the next RC frame must still be taken on its own tick
     while ms % RC_PERIOD_MS != 1:
         _host_tick(rig, ms)
@@ -155,14 +161,7 @@ def test_radio_and_heartbeat_pass_the_frame_budget_but_only_two_per_tick() -> No
 
 def test_a_flood_of_other_frames_does_not_latch_rc_loss() -> None:
     """Safety: a host flooding ParamRequests (within the byte budget) keeps its radio: no RC_LOST."""
-    rig = link_rc_rig()
-    assert rig.host is not None
-    ms = 0
-    while rig.fw.phase != Phase.OK:
-        _host_tick(rig, ms)
-        ms += 1
-        assert ms < 200
-    rig.drain()
+    rig, ms = _ok_rig()
     flood = encode(ParamRequest(), 0) * 12  # 12 frames before every tick's own: over the frame budget
     for _ in range(1000):
         rig.host.write(flood)
