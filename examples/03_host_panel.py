@@ -75,8 +75,15 @@ def tour(app: HostApp, ui: bool) -> None:
     print("take control:", result.value)
     if result is not ControlResult.GRANTED:
         raise DemoFailed(f"control not granted: {result.value}")
+    frames0 = telemetry().rc_frames_ok
     m.set_lever(CLI_CLIENT, "right", Lever.DOWN)
-    expect(lambda: telemetry().phase == Phase.OK, "the start-up gate did not open (right lever DOWN)")
+    # Phase OK from our own radio frames, not a stale OK: on connect the link sends three lever-DOWN
+    # frames that pass the gate, and the board latches RC_LOST about 100 ms after them unless a radio
+    # goes on; 10 frames (140 ms) of ours with the lever DOWN re-arm it from that.
+    expect(
+        lambda: telemetry().phase == Phase.OK and telemetry().rc_frames_ok >= frames0 + 10,
+        "the start-up gate did not open (right lever DOWN)",
+    )
     m.command(CLI_CLIENT, CommandCode.ARM)
     m.set_lever(CLI_CLIENT, "right", Lever.MIDDLE)
     expect(lambda: telemetry().mode == Mode.MANUAL, "the board did not enter MANUAL (right lever MIDDLE)")
