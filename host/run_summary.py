@@ -97,8 +97,7 @@ class RunSummary:
     """A board-link listener that accounts for a run (thread-safe; constant work per message).
 
     Time in a mode or phase is board time between consecutive telemetry messages, credited to the
-    earlier one's state. Entering a failsafe phase logs one warning line at once (RC_LOST before the board
-    took any radio frame, the state of a panel nobody has taken control of yet: one info line).
+    earlier one's state. Entering a failsafe phase logs one warning line at once.
     """
 
     def __init__(self) -> None:
@@ -110,7 +109,6 @@ class RunSummary:
         self._board_us = 0
         self._failsafes: list[tuple[float, str]] = []
         self._faults: list[tuple[float, str]] = []
-        self._had_radio = False  # the board has taken a radio frame (real or the panel's virtual radio)
 
     def on_board_message(self, msg: Message) -> None:
         """Listener: telemetry and fault events."""
@@ -136,17 +134,7 @@ class RunSummary:
                     self._board_us += dt
             if entered:
                 self._failsafes.append((t.time_us / 1e6, t.phase.name))
-            no_radio_yet = not self._had_radio
-            self._had_radio = self._had_radio or t.rc_frames_ok > 0
-        if entered and no_radio_yet and t.phase == Phase.RC_LOST:
-            # No radio has ever driven the board (the panel's virtual radio starts when a tab takes
-            # control): the start-up state, not an alarm.
-            _log.info(
-                "no radio yet at board time %.2f s (RC_LOST, zero current): take control in the panel, "
-                "or pass --virtual-rc",
-                t.time_us / 1e6,
-            )
-        elif entered:
+        if entered:
             _log.warning(
                 "failsafe latched at board time %.2f s: %s, zero current until re-armed through SAFE",
                 t.time_us / 1e6,

@@ -16,16 +16,12 @@ from protocol.dbus import Lever
 from protocol.messages import Event, EventKind, Mode, Phase, Telemetry
 
 
-def feed(
-    summary: RunSummary, script: list[tuple[int, Mode, Phase]], step_us: int = 10_000, radio: bool = True
-) -> None:
-    """Telemetry every ``step_us`` of board time: ``(until_us, mode, phase)`` segments; with ``radio`` the
-    board has taken RC frames from the start."""
+def feed(summary: RunSummary, script: list[tuple[int, Mode, Phase]], step_us: int = 10_000) -> None:
+    """Telemetry every ``step_us`` of board time: ``(until_us, mode, phase)`` segments."""
     t = 0
     for until_us, mode, phase in script:
         while t < until_us:
-            frames = 1 + t // 14_000 if radio else 0
-            summary.on_board_message(Telemetry(time_us=t, mode=mode, phase=phase, rc_frames_ok=frames))
+            summary.on_board_message(Telemetry(time_us=t, mode=mode, phase=phase))
             t += step_us
 
 
@@ -98,13 +94,3 @@ def test_an_estop_during_a_virtual_rc_run_fails_it() -> None:
         assert wait_for(lambda: m.telemetry is not None and m.telemetry.phase == Phase.ESTOP)
         assert app.run(0.1) == 1
         assert app.report is not None and app.report.failsafes[-1][1] == "ESTOP"
-
-
-def test_no_radio_yet_at_start_is_not_an_alarm(caplog: pytest.LogCaptureFixture) -> None:
-    s = RunSummary()
-    with caplog.at_level(logging.INFO, logger="spirob-host"):
-        feed(s, [(500_000, Mode.SAFE, Phase.GATE), (1_000_000, Mode.SAFE, Phase.RC_LOST)], radio=False)
-    levels = {rec.levelno for rec in caplog.records}
-    assert logging.WARNING not in levels
-    assert any("no radio yet" in rec.getMessage() for rec in caplog.records)
-    assert s.report().failsafes == ((0.5, "RC_LOST"),)  # still in the summary
