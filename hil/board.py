@@ -45,14 +45,14 @@ from controller.transport import Transport
 from protocol.dbus import RcFrame
 from protocol.messages import SimPoses
 
-from . import recording
-from .drives import SimMotorBus
-from .errors import HilError
-from .faults import Fault, FaultSet
-from .plant import Plant, PlantConfig
-from .radio import RadioScript, VirtualRadio
-from .recording import Recorder
-from .spiral import SpiralDesign
+from hil import recording
+from hil.drives import SimMotorBus
+from hil.errors import HilError
+from hil.faults import Fault, FaultSet
+from hil.plant import Plant, PlantConfig
+from hil.radio import RadioScript, VirtualRadio
+from hil.recording import Recorder
+from hil.spiral import SpiralDesign
 
 _log = logging.getLogger(__name__)
 
@@ -373,7 +373,7 @@ def realtime_board(
         ValueError: ``listen`` is not ``socket://HOST:PORT``, or not loopback without ``listen_any``.
         OSError: the endpoint cannot be opened (port in use, ...).
     """
-    from .transports import PtyTransport, TcpServerTransport
+    from hil.transports import PtyTransport, TcpServerTransport
 
     transport: PtyTransport | TcpServerTransport
     if listen is None:

@@ -27,11 +27,11 @@ import numpy as np
 
 from controller.config import FirmwareConfig
 
-from .errors import HilError
-from .faults import Fault
-from .model_config import PHYSICS_STEPS_S, ModelConfig
-from .model_presets import PRESETS
-from .spiral import SpiralDesign, b_from_taper, taper_from_b
+from hil.errors import HilError
+from hil.faults import Fault
+from hil.model_config import PHYSICS_STEPS_S, ModelConfig
+from hil.model_presets import PRESETS
+from hil.spiral import SpiralDesign, b_from_taper, taper_from_b
 
 __all__ = [
     "KINDS",
@@ -417,7 +417,7 @@ def _check_points(campaign: Campaign) -> None:
                 raise CampaignError(f"the campaign has more than {MAX_RUNS_N} runs")
     if count * len(campaign.seeds) > MAX_RUNS_N:
         raise CampaignError(f"the campaign has more than {MAX_RUNS_N} runs")
-    from .scenarios import SCENARIOS  # the catalogue imports every scenario: only once a campaign is read
+    from hil.scenarios import SCENARIOS  # the catalogue imports every scenario: only once a campaign is read
 
     seen: set[str] = set()
     points = campaign._grid() if campaign.sampling == "grid" else campaign._random()
@@ -494,7 +494,7 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
 def _variant(text: str) -> Any:
     """``design.variant``: one of the sensitivity experiment's model variants, ``"PARAMETER xFACTOR"``
     (``"spool inertia x0.5"``) or ``"baseline"`` (:data:`hil.experiments.sensitivity.PARAMETERS`)."""
-    from .experiments.sensitivity import BASELINE, PARAMETERS, Variant
+    from hil.experiments.sensitivity import BASELINE, PARAMETERS, Variant
 
     name, _, factor = text.strip().rpartition(" x")
     if text.strip() == BASELINE:
@@ -534,7 +534,7 @@ def build_firmware(inputs: Mapping[str, Any]) -> FirmwareConfig:
     Raises:
         CampaignError: a value the firmware refuses.
     """
-    from .experiments.grasp import grasp_firmware
+    from hil.experiments.grasp import grasp_firmware
 
     changes = {
         k.partition(".")[2]: v

@@ -24,7 +24,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import IO, Any
 
-from .campaign import CampaignError, Run, build_design, build_firmware
+from hil.campaign import CampaignError, Run, build_design, build_firmware
 
 __all__ = [
     "MAX_RETRIES_N",
@@ -72,7 +72,7 @@ def run_one(run: Run) -> dict[str, Any]:
 
 
 def _grasp(run: Run) -> dict[str, Any]:
-    from .experiments.grasp import GraspSetup, grasp_trial
+    from hil.experiments.grasp import GraspSetup, grasp_trial
 
     i = run.inputs
     design, model = build_design(i, physics="fine")
@@ -98,8 +98,8 @@ def _grasp(run: Run) -> dict[str, Any]:
 
 
 def _scenario(run: Run) -> dict[str, Any]:
-    from .faults import Fault
-    from .scenarios import run_scenario
+    from hil.faults import Fault
+    from hil.scenarios import run_scenario
 
     i = run.inputs
     design, model = build_design(i)

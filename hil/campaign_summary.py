@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from .experiments.common import pyplot, save_figure
-from .experiments.stats import wilson_interval
+from hil.experiments.common import pyplot, save_figure
+from hil.experiments.stats import wilson_interval
 
 __all__ = ["DesignRate", "design_rates", "success_maps"]
 

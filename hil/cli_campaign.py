@@ -26,15 +26,8 @@ from controller.cli_kit import (
     writable_dir,
 )
 
-from .campaign import Campaign, Run, load_campaign
-from .campaign_run import (
-    MAX_RETRIES_N,
-    RAY_MISSING,
-    ResultsFile,
-    check_ray_address,
-    execute_local,
-    execute_ray,
-)
+from hil.campaign import Campaign, Run, load_campaign
+from hil.campaign_run import MAX_RETRIES_N, RAY_MISSING, ResultsFile, check_ray_address, execute_local, execute_ray
 
 __all__ = ["CAMPAIGN_HELP", "configure_campaign", "run_campaign_command"]
 
@@ -220,7 +213,7 @@ def _summarise(
     skipped_n: int,
     elapsed_s: float,
 ) -> int:
-    from .campaign_summary import design_rates, success_maps  # matplotlib only for the summary
+    from hil.campaign_summary import design_rates, success_maps  # matplotlib only for the summary
 
     designs = design_rates(rows)
     errors_n = sum(r["outcome"] == "error" for r in rows)

@@ -8,9 +8,9 @@ import math
 
 from controller.cli_kit import UsageError, finite_float
 
-from .model_config import ModelConfig
-from .model_presets import PRESETS, preset
-from .spiral import SpiralDesign
+from hil.model_config import ModelConfig
+from hil.model_presets import PRESETS, preset
+from hil.spiral import SpiralDesign
 
 __all__ = ["MAX_UNITS_N", "add_design_arguments", "design_from_args", "model_from_args"]
 

@@ -19,9 +19,9 @@ from rich.table import Table
 from controller.cli_kit import EXIT_OK, finite_float, seed, writable_dir
 from controller.config import CONTROL_PERIOD_US
 
-from .cli_design import add_design_arguments, design_from_args, model_from_args
-from .experiments import EXPERIMENTS, SIZES, run_experiment
-from .experiments.common import PHYSICS
+from hil.cli_design import add_design_arguments, design_from_args, model_from_args
+from hil.experiments import EXPERIMENTS, SIZES, run_experiment
+from hil.experiments.common import PHYSICS
 
 __all__ = ["EXPERIMENT_HELP", "MAX_JOBS_N", "configure_experiment", "run_experiment_command"]
 

@@ -54,9 +54,9 @@ from protocol.c610 import (
     unpack_currents3,
 )
 
-from . import recording
-from .faults import FaultSet
-from .recording import Recorder
+from hil import recording
+from hil.faults import FaultSet
+from hil.recording import Recorder
 
 __all__ = ["Drives", "Motors", "PayloadMotors", "SimMotorBus"]
 

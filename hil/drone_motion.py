@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Final
 
-from .plant import Plant
+from hil.plant import Plant
 
 __all__ = ["AccelSegment", "DroneMotion", "DroneMotionPlayer", "Vector3", "accelerate_and_brake"]
 

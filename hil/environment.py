@@ -25,14 +25,14 @@ from controller.rc import DbusSerialSource
 from protocol.messages import Event, Message, RawRc, Telemetry
 from protocol.stream import MessageStream
 
-from . import recording
-from .board import BoardConfig, VirtualBoard
-from .drone_motion import DroneMotion, DroneMotionPlayer
-from .faults import Fault
-from .harness import ScriptedHost
-from .radio import RadioScript
-from .record import PlantSamples, RunRecord, Samples
-from .recording import Recorder, telemetry_json
+from hil import recording
+from hil.board import BoardConfig, VirtualBoard
+from hil.drone_motion import DroneMotion, DroneMotionPlayer
+from hil.faults import Fault
+from hil.harness import ScriptedHost
+from hil.radio import RadioScript
+from hil.record import PlantSamples, RunRecord, Samples
+from hil.recording import Recorder, telemetry_json
 
 __all__ = ["Environment", "Task"]
 

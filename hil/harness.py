@@ -19,7 +19,7 @@ from protocol.messages import (
 )
 from protocol.session import HostSession
 
-from .faults import FaultSet
+from hil.faults import FaultSet
 
 __all__ = ["ScriptedHost"]
 

@@ -26,10 +26,10 @@ from protocol.messages import Event, Message, RawRc, Telemetry
 from protocol.session import HostSession
 from protocol.stream import MessageStream
 
-from . import recording
-from .errors import HilError
-from .faults import FaultSet
-from .recording import Recorder, telemetry_json
+from hil import recording
+from hil.errors import HilError
+from hil.faults import FaultSet
+from hil.recording import Recorder, telemetry_json
 
 __all__ = ["LOOP_PERIOD_US", "PortHost"]
 

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from controller.rc import Uart
 from protocol.dbus import BYTE_TIME_US, FRAME_PERIOD_US, RcFrame
 
-from .faults import FaultSet
+from hil.faults import FaultSet
 
 
 class MemoryUart(Uart):

@@ -65,14 +65,14 @@ from protocol.messages import (
     Telemetry,
 )
 
-from . import recording
-from .errors import HilError
-from .faults import Fault, FaultKind, FaultSet
-from .port_host import PortHost
-from .radio import RadioScript
-from .record import RunRecord, Samples, ScenarioResult
-from .recording import Recorder
-from .scenarios import SCENARIOS, Plan, judge
+from hil import recording
+from hil.errors import HilError
+from hil.faults import Fault, FaultKind, FaultSet
+from hil.port_host import PortHost
+from hil.radio import RadioScript
+from hil.record import RunRecord, Samples, ScenarioResult
+from hil.recording import Recorder
+from hil.scenarios import SCENARIOS, Plan, judge
 
 __all__ = [
     "BOARD_ONLY_FAULTS",

@@ -33,7 +33,7 @@ from controller.config import FirmwareConfig
 from protocol.dbus import RcFrame
 from protocol.messages import Event, EventKind, Message, Telemetry
 
-from .plant_types import PhysicsExtremes
+from hil.plant_types import PhysicsExtremes
 
 __all__ = ["Check", "PlantSamples", "RunRecord", "Samples", "ScenarioResult"]
 

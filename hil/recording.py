@@ -50,8 +50,8 @@ from mcap.records import Channel, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
-from . import foxglove_log
-from .foxglove_log import TELEMETRY, ChannelSpec, FoxgloveView, telemetry_json
+from hil import foxglove_log
+from hil.foxglove_log import TELEMETRY, ChannelSpec, FoxgloveView, telemetry_json
 
 __all__ = [
     "BOARD_CONFIG",

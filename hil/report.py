@@ -11,7 +11,7 @@ from rich.table import Table
 
 from protocol.messages import Mode, Phase
 
-from .record import RunRecord, ScenarioResult
+from hil.record import RunRecord, ScenarioResult
 
 
 def results_table(results: Sequence[ScenarioResult], clock: str = "simulated time") -> Table:

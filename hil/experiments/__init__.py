@@ -41,17 +41,17 @@ plane (the plane cable 0 bends the arm in).
 
 from __future__ import annotations
 
-from .catalogue import EXPERIMENTS, Experiment, run_experiment
-from .common import SIZES, Progress
-from .dynamic import DynamicParams, DynamicResult
-from .geometry import Envelope, base_first_tip_curve, fit_log_spiral
-from .grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial
-from .grasp_range import GraspRangeParams, GraspRangeResult
-from .load import LoadParams, LoadResult
-from .packing import PackingParams, PackingResult
-from .rig import Rig
-from .strategy import StrategyParams, StrategyResult
-from .workspace import WorkspaceParams, WorkspaceResult
+from hil.experiments.catalogue import EXPERIMENTS, Experiment, run_experiment
+from hil.experiments.common import SIZES, Progress
+from hil.experiments.dynamic import DynamicParams, DynamicResult
+from hil.experiments.geometry import Envelope, base_first_tip_curve, fit_log_spiral
+from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial
+from hil.experiments.grasp_range import GraspRangeParams, GraspRangeResult
+from hil.experiments.load import LoadParams, LoadResult
+from hil.experiments.packing import PackingParams, PackingResult
+from hil.experiments.rig import Rig
+from hil.experiments.strategy import StrategyParams, StrategyResult
+from hil.experiments.workspace import WorkspaceParams, WorkspaceResult
 
 __all__ = [
     "EXPERIMENTS",

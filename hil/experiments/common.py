@@ -7,8 +7,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from ..model_config import PHYSICS_STEPS_S, ModelConfig
-from ..plant_types import PhysicsExtremes
+from hil.model_config import PHYSICS_STEPS_S, ModelConfig
+from hil.plant_types import PhysicsExtremes
 
 Progress = Callable[[int, int], None]
 """``progress(done, total)``: work units done so far (trials or simulated milliseconds)."""

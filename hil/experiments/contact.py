@@ -26,27 +26,16 @@ import numpy as np
 
 from protocol.messages import GraspState
 
-from ..model_config import ModelConfig
-from ..plant_objects import contact_units
-from ..plant_types import PhysicsExtremes
-from ..spiral import SpiralDesign
-from .common import (
-    DEFAULT_MODEL,
-    OBJ,
-    Progress,
-    Row,
-    S,
-    extremes_rows,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from .grasp import GraspSetup, grasp_firmware, grasp_rig
-from .parallel import parallel_map
-from .rig import world_m
-from .stats import bootstrap_interval, wilson_interval
-from .strategy import TINY, StrategyParams, placements
+from hil.model_config import ModelConfig
+from hil.plant_objects import contact_units
+from hil.plant_types import PhysicsExtremes
+from hil.spiral import SpiralDesign
+from hil.experiments.common import DEFAULT_MODEL, OBJ, Progress, Row, S, extremes_rows, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.grasp import GraspSetup, grasp_firmware, grasp_rig
+from hil.experiments.parallel import parallel_map
+from hil.experiments.rig import world_m
+from hil.experiments.stats import bootstrap_interval, wilson_interval
+from hil.experiments.strategy import TINY, StrategyParams, placements
 
 OLD_DETECTOR = {
     "grasp_contact_decel_m_per_s2": 0.0,

@@ -8,10 +8,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from ..model_config import ModelConfig
-from ..plant import Plant, PlantConfig
-from ..spiral import SpiralDesign
-from .common import BASE_Z_M
+from hil.model_config import ModelConfig
+from hil.plant import Plant, PlantConfig
+from hil.spiral import SpiralDesign
+from hil.experiments.common import BASE_Z_M
 
 
 def fit_log_spiral(points: npt.NDArray[np.complex128]) -> tuple[float, complex, float]:

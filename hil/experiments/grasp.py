@@ -14,12 +14,12 @@ from controller.config import FirmwareConfig
 from protocol.dbus import Lever
 from protocol.messages import GraspState
 
-from ..model_config import ModelConfig, ObjectConfig
-from ..plant_objects import contact_units, contact_wrap_deg
-from ..plant_types import PhysicsExtremes
-from ..spiral import SpiralDesign
-from .common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, SUCCESS_WRAP_DEG, S
-from .rig import Rig, rc_frame, world_m
+from hil.model_config import ModelConfig, ObjectConfig
+from hil.plant_objects import contact_units, contact_wrap_deg
+from hil.plant_types import PhysicsExtremes
+from hil.spiral import SpiralDesign
+from hil.experiments.common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, SUCCESS_WRAP_DEG, S
+from hil.experiments.rig import Rig, rc_frame, world_m
 
 
 @dataclass(frozen=True)

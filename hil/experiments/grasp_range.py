@@ -18,24 +18,14 @@ from typing import Any
 
 import numpy as np
 
-from ..model_config import ModelConfig
-from ..plant_types import PhysicsExtremes
-from ..spiral import SpiralDesign
-from .common import (
-    DEFAULT_MODEL,
-    Progress,
-    Row,
-    extremes_rows,
-    mm,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from .geometry import ArmFootprint, jittered_placements
-from .grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
-from .parallel import parallel_map
-from .stats import bootstrap_interval
+from hil.model_config import ModelConfig
+from hil.plant_types import PhysicsExtremes
+from hil.spiral import SpiralDesign
+from hil.experiments.common import DEFAULT_MODEL, Progress, Row, extremes_rows, mm, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.geometry import ArmFootprint, jittered_placements
+from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
+from hil.experiments.parallel import parallel_map
+from hil.experiments.stats import bootstrap_interval
 
 PULL_DIR = (1.0, 0.0, 0.0)
 """The pull-out force's direction: horizontal, away from the arm's axis (+x, the object's side)."""

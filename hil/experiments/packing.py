@@ -12,12 +12,12 @@ import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
 
-from ..model_config import ModelConfig
-from ..plant_types import PhysicsExtremes
-from ..spiral import SpiralDesign
-from .common import BASE_Z_M, DEFAULT_MODEL, Progress, Row, extremes_rows, pyplot, save_figure, sized
-from .geometry import fit_log_spiral, joint_points_xz
-from .rig import direct_rig
+from hil.model_config import ModelConfig
+from hil.plant_types import PhysicsExtremes
+from hil.spiral import SpiralDesign
+from hil.experiments.common import BASE_Z_M, DEFAULT_MODEL, Progress, Row, extremes_rows, pyplot, save_figure, sized
+from hil.experiments.geometry import fit_log_spiral, joint_points_xz
+from hil.experiments.rig import direct_rig
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ import signal
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
-from .common import Progress
+from hil.experiments.common import Progress
 
 T = TypeVar("T")
 R = TypeVar("R")

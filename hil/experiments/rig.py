@@ -11,13 +11,13 @@ from protocol.c610 import MotorFeedback
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, CommandCode, Mode
 
-from ..board import BoardConfig
-from ..environment import Environment
-from ..model_config import ModelConfig, ObjectConfig
-from ..plant import Plant, PlantConfig
-from ..radio import RadioScript
-from ..spiral import SpiralDesign
-from .common import BASE_Z_M, MS
+from hil.board import BoardConfig
+from hil.environment import Environment
+from hil.model_config import ModelConfig, ObjectConfig
+from hil.plant import Plant, PlantConfig
+from hil.radio import RadioScript
+from hil.spiral import SpiralDesign
+from hil.experiments.common import BASE_Z_M, MS
 
 
 def rc_frame(right: int = Lever.DOWN, left: int = Lever.DOWN) -> RcFrame:

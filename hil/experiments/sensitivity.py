@@ -18,24 +18,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..model_config import ModelConfig
-from ..plant_types import PhysicsExtremes
-from ..spiral import SpiralDesign
-from .common import (
-    DEFAULT_MODEL,
-    Progress,
-    Row,
-    extremes_rows,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from .dynamic import TINY, DynamicParams, dynamic
-from .packing import PackingParams, packing
-from .parallel import parallel_map
-from .strategy import TINY as STRATEGY_TINY
-from .strategy import StrategyParams, strategy
+from hil.model_config import ModelConfig
+from hil.plant_types import PhysicsExtremes
+from hil.spiral import SpiralDesign
+from hil.experiments.common import DEFAULT_MODEL, Progress, Row, extremes_rows, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.dynamic import TINY, DynamicParams, dynamic
+from hil.experiments.packing import PackingParams, packing
+from hil.experiments.parallel import parallel_map
+from hil.experiments.strategy import TINY as STRATEGY_TINY
+from hil.experiments.strategy import StrategyParams, strategy
 
 FACTORS = (0.5, 1.5)
 """Each parameter is multiplied by these (±50 %)."""

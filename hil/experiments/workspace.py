@@ -13,24 +13,13 @@ import numpy.typing as npt
 
 from controller.config import FirmwareConfig, MappingConfig, MotorDriveConfig
 
-from ..model_config import ActuatorConfig, ModelConfig
-from ..plant_types import PhysicsExtremes
-from ..spiral import SpiralDesign
-from .common import (
-    BASE_Z_M,
-    DEFAULT_MODEL,
-    Progress,
-    Row,
-    extremes_rows,
-    pct,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from .geometry import Envelope
-from .parallel import parallel_map
-from .rig import direct_rig
+from hil.model_config import ActuatorConfig, ModelConfig
+from hil.plant_types import PhysicsExtremes
+from hil.spiral import SpiralDesign
+from hil.experiments.common import BASE_Z_M, DEFAULT_MODEL, Progress, Row, extremes_rows, pct, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.geometry import Envelope
+from hil.experiments.parallel import parallel_map
+from hil.experiments.rig import direct_rig
 
 
 @dataclass(frozen=True)

@@ -14,28 +14,28 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..board import BoardConfig
-from ..environment import Environment
-from ..faults import Fault
-from ..model_config import ModelConfig
-from ..plant import PlantConfig
-from ..radio import RadioScript
-from ..record import Check, RunRecord, ScenarioResult
-from ..recording import Recorder
-from ..spiral import SpiralDesign
-from .base import MANUAL, MS, RC_GAP_CHECK, SAFE, TICK_US, Plan, Scenario, rc, rc_gap_check
-from .drone_manoeuvre import DroneManoeuvre
-from .grasp import Grasp
-from .host_loss import HostLoss
-from .link_disconnect import LinkDisconnect
-from .link_noise import LinkNoise
-from .manual_teleop import ManualTeleop
-from .motor_silence import MotorSilence
-from .overcurrent import Overcurrent
-from .rc_garbage import RcGarbage
-from .rc_loss import RcLoss
-from .rc_out_of_range import RcOutOfRange
-from .startup_gate import StartupGate
+from hil.board import BoardConfig
+from hil.environment import Environment
+from hil.faults import Fault
+from hil.model_config import ModelConfig
+from hil.plant import PlantConfig
+from hil.radio import RadioScript
+from hil.record import Check, RunRecord, ScenarioResult
+from hil.recording import Recorder
+from hil.spiral import SpiralDesign
+from hil.scenarios.base import MANUAL, MS, RC_GAP_CHECK, SAFE, TICK_US, Plan, Scenario, rc, rc_gap_check
+from hil.scenarios.drone_manoeuvre import DroneManoeuvre
+from hil.scenarios.grasp import Grasp
+from hil.scenarios.host_loss import HostLoss
+from hil.scenarios.link_disconnect import LinkDisconnect
+from hil.scenarios.link_noise import LinkNoise
+from hil.scenarios.manual_teleop import ManualTeleop
+from hil.scenarios.motor_silence import MotorSilence
+from hil.scenarios.overcurrent import Overcurrent
+from hil.scenarios.rc_garbage import RcGarbage
+from hil.scenarios.rc_loss import RcLoss
+from hil.scenarios.rc_out_of_range import RcOutOfRange
+from hil.scenarios.startup_gate import StartupGate
 
 __all__ = [
     "MANUAL",
@@ -157,7 +157,7 @@ def run_scenario(
             run = env.record(scenario.duration_us)
         checks = judge(scenario, run, plan)
         if report_dir is not None:
-            from ..report import plot_run  # matplotlib only when a report is asked for
+            from hil.report import plot_run  # matplotlib only when a report is asked for
 
             plot_run(run, report_dir, name)
     finally:

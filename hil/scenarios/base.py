@@ -28,11 +28,11 @@ from controller.config import FailsafeConfig, FirmwareConfig
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, EventKind, Phase
 
-from ..drone_motion import DroneMotion
-from ..environment import Task
-from ..faults import Fault, FaultKind
-from ..model_config import ObjectConfig
-from ..record import TICK_US, Check, RunRecord
+from hil.drone_motion import DroneMotion
+from hil.environment import Task
+from hil.faults import Fault, FaultKind
+from hil.model_config import ObjectConfig
+from hil.record import TICK_US, Check, RunRecord
 
 __all__ = [
     "MANUAL",

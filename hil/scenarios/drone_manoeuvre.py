@@ -20,12 +20,12 @@ from typing import Final
 
 import numpy as np
 
-from ..drone_motion import AccelSegment, DroneMotion, accelerate_and_brake
-from ..environment import Environment
-from ..plant_objects import contact_units, contact_wrap_deg
-from ..record import Check, RunRecord
-from .base import MS, Plan, S
-from .grasp import CAN, HALF_WRAP_DEG, HELD_US, Grasp
+from hil.drone_motion import AccelSegment, DroneMotion, accelerate_and_brake
+from hil.environment import Environment
+from hil.plant_objects import contact_units, contact_wrap_deg
+from hil.record import Check, RunRecord
+from hil.scenarios.base import MS, Plan, S
+from hil.scenarios.grasp import CAN, HALF_WRAP_DEG, HELD_US, Grasp
 
 LEVELS_M_S2: Final = (2.0, 4.0, 8.0)
 """Horizontal accelerations tried in turn; the first is the required one."""

@@ -8,11 +8,11 @@ from typing import Final
 from protocol.dbus import Lever
 from protocol.messages import GraspState
 
-from ..environment import Environment
-from ..model_config import ObjectConfig
-from ..plant_objects import contact_wrap_deg
-from ..record import Check, RunRecord
-from .base import MS, SAFE, Plan, Scenario, rc
+from hil.environment import Environment
+from hil.model_config import ObjectConfig
+from hil.plant_objects import contact_wrap_deg
+from hil.record import Check, RunRecord
+from hil.scenarios.base import MS, SAFE, Plan, Scenario, rc
 
 CAN: Final = ObjectConfig("can", radius_m=0.010, length_m=0.06, pos_m=(0.6, 0.0, 0.4), mass_kg=0.020)
 CAN_AT: Final = (0.04, 0.0, 0.87)

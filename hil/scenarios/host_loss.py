@@ -7,19 +7,9 @@ import numpy as np
 from protocol.dbus import Lever
 from protocol.messages import EventKind, Heartbeat, Phase
 
-from ..faults import FaultKind
-from ..record import Check, RunRecord
-from .base import (
-    MS,
-    Plan,
-    Scenario,
-    current_before,
-    fault_window,
-    host_acted_us,
-    host_cut_and_latched,
-    host_gone_plan,
-    rearmed,
-)
+from hil.faults import FaultKind
+from hil.record import Check, RunRecord
+from hil.scenarios.base import MS, Plan, Scenario, current_before, fault_window, host_acted_us, host_cut_and_latched, host_gone_plan, rearmed
 
 
 class HostLoss(Scenario):

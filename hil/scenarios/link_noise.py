@@ -9,9 +9,9 @@ import numpy as np
 from controller.config import FailsafeConfig, FirmwareConfig
 from protocol.messages import Command, CommandCode, Mode
 
-from ..faults import Fault, FaultKind
-from ..record import Check, RunRecord
-from .base import FLOAT32_TOLERANCE_N, MS, Plan, Scenario, arm_then
+from hil.faults import Fault, FaultKind
+from hil.record import Check, RunRecord
+from hil.scenarios.base import FLOAT32_TOLERANCE_N, MS, Plan, Scenario, arm_then
 
 _HALF_S = 500 * MS
 

@@ -9,8 +9,8 @@ import numpy as np
 
 from protocol.dbus import CH_LIMIT, Lever, RcFrame
 
-from ..record import Check, RunRecord
-from .base import FLOAT32_TOLERANCE_N, MANUAL, MS, SAFE, Plan, Scenario, rc
+from hil.record import Check, RunRecord
+from hil.scenarios.base import FLOAT32_TOLERANCE_N, MANUAL, MS, SAFE, Plan, Scenario, rc
 
 STEP_TAIL_US: Final = 500 * MS
 """Each stick step is judged over its last half second (the slew limiter has settled by then)."""

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from protocol.dbus import Lever
 
-from ..faults import Fault, FaultKind
-from ..record import TICK_US, Check, RunRecord
-from .base import MS, REQUIRED, SAFE, Plan, Scenario, current_before, fault_window, rc, rearmed
+from hil.faults import Fault, FaultKind
+from hil.record import TICK_US, Check, RunRecord
+from hil.scenarios.base import MS, REQUIRED, SAFE, Plan, Scenario, current_before, fault_window, rc, rearmed
 
 
 class MotorSilence(Scenario):

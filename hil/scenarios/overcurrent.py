@@ -6,8 +6,8 @@ import math
 
 from controller.config import FirmwareConfig, MappingConfig
 
-from ..record import Check, RunRecord
-from .base import MS, Plan, Scenario, arm_then
+from hil.record import Check, RunRecord
+from hil.scenarios.base import MS, Plan, Scenario, arm_then
 
 
 class Overcurrent(Scenario):

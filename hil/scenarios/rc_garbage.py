@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from ..faults import Fault, FaultKind
-from ..record import Check, RunRecord
-from .base import MS, Plan, Scenario, arm_then, fault_window, rc_acted_us, rc_zero_checks
+from hil.faults import Fault, FaultKind
+from hil.record import Check, RunRecord
+from hil.scenarios.base import MS, Plan, Scenario, arm_then, fault_window, rc_acted_us, rc_zero_checks
 
 
 class RcGarbage(Scenario):

@@ -4,20 +4,9 @@ from __future__ import annotations
 
 from protocol.dbus import Lever
 
-from ..faults import Fault, FaultKind
-from ..record import Check, RunRecord
-from .base import (
-    MS,
-    SAFE,
-    Plan,
-    Scenario,
-    current_before,
-    fault_window,
-    rc,
-    rc_acted_us,
-    rc_zero_checks,
-    rearmed,
-)
+from hil.faults import Fault, FaultKind
+from hil.record import Check, RunRecord
+from hil.scenarios.base import MS, SAFE, Plan, Scenario, current_before, fault_window, rc, rc_acted_us, rc_zero_checks, rearmed
 
 
 class RcLoss(Scenario):

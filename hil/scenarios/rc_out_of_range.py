@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import math
 
-from ..faults import Fault, FaultKind
-from ..record import Check, RunRecord
-from .base import MS, Plan, Scenario, arm_then, fault_window, rc_zero_checks
+from hil.faults import Fault, FaultKind
+from hil.record import Check, RunRecord
+from hil.scenarios.base import MS, Plan, Scenario, arm_then, fault_window, rc_zero_checks
 
 
 class RcOutOfRange(Scenario):

@@ -7,8 +7,8 @@ import numpy as np
 from protocol.dbus import Lever
 from protocol.messages import Phase
 
-from ..record import Check, RunRecord
-from .base import AFTER_REARM_US, MANUAL, MS, SAFE, Plan, Scenario, rc
+from hil.record import Check, RunRecord
+from hil.scenarios.base import AFTER_REARM_US, MANUAL, MS, SAFE, Plan, Scenario, rc
 
 
 class StartupGate(Scenario):
