@@ -3,7 +3,7 @@ local Ray of 2 CPUs, so the cost of running on Ray is a measured number.
 
 Run: ``.venv/bin/python bench/campaign.py [--runs N] [--scenario NAME] [--no-ray]``. The campaign is
 ``NAME`` (default ``startup-gate``, 1.5 simulated seconds) over seeds 0..N-1, through the executors of
-``spirob-hil campaign`` (:mod:`hil.campaign_run`). Per executor it prints the wall time (with start-up:
+``spirob-hil campaign`` (:mod:`hil.campaign.runner`). Per executor it prints the wall time (with start-up:
 worker processes, or Ray's node) and the steady rate (from the first finished run to the last, runs per
 minute); then Ray's steady rate over the local pool's at 2 workers. Target (printed, not asserted): Ray
 within 15 % of the local pool at 2 workers on a 2-core machine.
@@ -24,8 +24,8 @@ from typing import Any
 # package: put the repository root in front.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hil.campaign import Run, parse_campaign
-from hil.campaign_run import execute_local, execute_ray
+from hil.campaign.runner import execute_local, execute_ray
+from hil.campaign.spec import Run, parse_campaign
 
 TARGET_RATIO = 0.85
 """Ray's steady rate at 2 CPUs should be at least this share of the local pool's at 2 workers."""

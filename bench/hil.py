@@ -33,9 +33,9 @@ import numpy as np  # noqa: E402
 
 from hil.board import BoardConfig  # noqa: E402
 from hil.environment import Environment  # noqa: E402
-from hil.plant import Plant  # noqa: E402
 from hil.radio import RadioScript  # noqa: E402
 from hil.scenarios import SCENARIOS, rc, run_scenario  # noqa: E402
+from hil.sim.plant import Plant  # noqa: E402
 from protocol.dbus import Lever, RcFrame  # noqa: E402
 
 

@@ -1,4 +1,4 @@
-"""Benchmark of the MuJoCo plant (hil.plant) at a 1 ms control period; prints its figures.
+"""Benchmark of the MuJoCo plant (hil.sim.plant) at a 1 ms control period; prints its figures.
 
 For the default 3-cable prototype and the authors' 24-unit design, with the stiff contacts and
 stretching cable of issue 13 (wedge units, the default, and capsules) and with the old parameters
@@ -31,9 +31,10 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 import numpy as np  # noqa: E402
 
 from hil.errors import PlantDivergedError  # noqa: E402
-from hil.model_config import ArmConfig, ContactConfig, ModelConfig, ObjectConfig  # noqa: E402
-from hil.plant import Plant, PlantConfig  # noqa: E402
-from hil.spiral import SpiralDesign  # noqa: E402
+from hil.sim.config import ArmConfig, ContactConfig, ModelConfig, ObjectConfig  # noqa: E402
+from hil.sim.plant import Plant  # noqa: E402
+from hil.sim.spiral import SpiralDesign  # noqa: E402
+from hil.sim.types import PlantConfig  # noqa: E402
 
 OLD_MODEL = ModelConfig(
     arm=ArmConfig(cable_timeconst_s=0.002, unit_shape="capsule"),
@@ -173,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
     probe = Plant()
     sol = probe.config.model.solver
     m = probe.mj_model
-    print("SpiRob plant benchmark (hil.plant)")
+    print("SpiRob plant benchmark (hil.sim.plant)")
     print(
         f"  solver: integrator={sol.integrator} timestep={sol.timestep_s * 1e3:g} ms "
         f"({probe.substeps} step(s) per {probe.control_period_us} us control period), solver={sol.solver} "

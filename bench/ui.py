@@ -14,8 +14,9 @@ Prints:
 
 Targets (issue 6): >= 30 updates/s, latency p99 <= 100 ms, loop lateness ratio <= 1.2.
 
-Usage: ``.venv/bin/python bench/ui.py [--moves N] [--fake]`` (``--fake``: the scripted fake board of
-tests/link_peer.py, for when ``hil.board`` is not available; then the loop figures are not the firmware's).
+Usage: ``.venv/bin/python bench/ui.py [--moves N] [--fake]`` (``--fake``: the scripted fake board
+of tests/support/link_peer.py, for when ``hil.board`` is not available; then the loop figures are not
+the firmware's).
 Playwright runs in this process, so its own work is counted in the latency (a conservative figure).
 """
 
@@ -36,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from chromium import CHROMIUM, CHROMIUM_ARGS  # noqa: E402  (tests/ holds the shared launch settings)
+from tests.support.chromium import CHROMIUM, CHROMIUM_ARGS  # noqa: E402  (tests/ holds the shared launch settings)
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -118,11 +119,12 @@ def main() -> int:
 
     from playwright.sync_api import sync_playwright
 
-    from host.cli import HostApp, HostOptions
+    from host.app import HostApp
+    from host.options import HostOptions
 
     with contextlib.ExitStack() as stack:
         if args.fake:
-            from link_peer import LinkPeerProcess
+            from tests.support.link_peer import LinkPeerProcess
 
             peer = stack.enter_context(LinkPeerProcess("socket"))
             opts = HostOptions(port=peer.url, ui_port=0)
@@ -179,7 +181,7 @@ def main() -> int:
         # Full speed with a synthetic 40-body arm (drone + 39 units), panel loop paused meanwhile.
         import numpy as np
 
-        from host.scene import ArmGeometry, default_hanging_pose
+        from host.panel.scene import ArmGeometry, default_hanging_pose
 
         app.panel.stop()
         geom = ArmGeometry.default().resized(39)

@@ -49,7 +49,7 @@ from controller.transport import Transport
 from protocol.dbus import RcFrame
 from protocol.messages import ClockKind, EventKind, GraspState, Mode, Phase, TaskStats, Telemetry
 
-__all__ = ["FIRMWARE_VERSION", "Firmware", "PoseProvider"]
+__all__ = ["Firmware"]
 
 _MAX_DT_US = 20_000  # a stalled loop never makes the slew limiter jump further than this
 # Enum members the control tick compares by identity (no class attribute lookup per tick).

@@ -3,10 +3,10 @@
 Run: ``.venv/bin/python examples/01_design.py`` (under 3 s: 1.3 s measured on a loaded 2-core machine; exit
 1 with one line if the demo fails). What it shows:
 
-1. a :class:`~hil.spiral.SpiralDesign` from the physical inputs a designer knows, and the quantities of
+1. a :class:`~hil.sim.spiral.SpiralDesign` from the physical inputs a designer knows, and the quantities of
    the paper's Table S1 / Note S2 it implies;
-2. the self-contained MJCF model of the arm hanging under a drone (``hil.mjcf``);
-3. the :class:`~hil.plant.Plant` the firmware drives: raw current setpoints in, C610 feedback frames out.
+2. the self-contained MJCF model of the arm hanging under a drone (``hil.sim.mjcf``);
+3. the :class:`~hil.sim.plant.Plant` the firmware drives: raw current setpoints in, C610 feedback frames out.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from hil.mjcf import write_mjcf
-from hil.plant import Plant
-from hil.spiral import SpiralDesign
+from hil.sim.mjcf import write_mjcf
+from hil.sim.plant import Plant
+from hil.sim.spiral import SpiralDesign
 from protocol.c610 import RAW_PER_AMP
 
 

@@ -22,9 +22,11 @@ import sys
 import time
 from collections.abc import Callable
 
-from host.board_client import load_scaled_s
-from host.cli import HostApp, HostError, HostOptions
-from host.model import CLI_CLIENT, ControlResult
+from host.app import HostApp
+from host.errors import HostError
+from host.link.client import load_scaled_s
+from host.options import HostOptions
+from host.panel.model import CLI_CLIENT, ControlResult
 from protocol.dbus import Lever
 from protocol.messages import CommandCode, Message, Mode, Phase, Telemetry
 

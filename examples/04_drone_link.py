@@ -29,7 +29,8 @@ import threading
 import time
 from pathlib import Path
 
-from host.drone_link import DroneLink, DroneLinkConfig
+from host.drone.config import DroneLinkConfig
+from host.drone.link import DroneLink
 from protocol import mavlink as mav
 from protocol import messages as bm
 

@@ -42,17 +42,17 @@ from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import Transport
-from protocol.dbus import RcFrame
-from protocol.messages import SimPoses
-
 from hil import recording
-from hil.drives import SimMotorBus
 from hil.errors import HilError
 from hil.faults import Fault, FaultSet
-from hil.plant import Plant, PlantConfig
 from hil.radio import RadioScript, VirtualRadio
 from hil.recording import Recorder
-from hil.spiral import SpiralDesign
+from hil.sim.drives import SimMotorBus
+from hil.sim.plant import Plant
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PlantConfig
+from protocol.dbus import RcFrame
+from protocol.messages import SimPoses
 
 _log = logging.getLogger(__name__)
 

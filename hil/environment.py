@@ -5,7 +5,7 @@ plant, radio, wire) and the scripted host on the board link, and advances them o
 :meth:`Environment.step`, in this order::
 
     task.before_tick   the task acts on the world (moves an object, sends a command)
-    drone              a scripted drone motion sets the acceleration due (:mod:`hil.drone_motion`)
+    drone              a scripted drone motion sets the acceleration due (:mod:`hil.sim.drone_motion`)
     host.before_tick   the host writes what is due (heartbeat, scripted messages)
     board.tick         physics, delivery, the firmware's due tasks, the command to the ESCs
     host.after_tick    the host takes what the board sent
@@ -22,17 +22,17 @@ from collections.abc import Callable, Sequence
 from types import TracebackType
 
 from controller.rc import DbusSerialSource
-from protocol.messages import Event, Message, RawRc, Telemetry
-from protocol.stream import MessageStream
-
-from hil import recording
+from hil import foxglove_log
 from hil.board import BoardConfig, VirtualBoard
-from hil.drone_motion import DroneMotion, DroneMotionPlayer
 from hil.faults import Fault
+from hil.foxglove_log import telemetry_json
 from hil.harness import ScriptedHost
 from hil.radio import RadioScript
-from hil.record import PlantSamples, RunRecord, Samples
-from hil.recording import Recorder, telemetry_json
+from hil.recording import Recorder
+from hil.run_record import PlantSamples, RunRecord, Samples
+from hil.sim.drone_motion import DroneMotion, DroneMotionPlayer
+from protocol.messages import Event, Message, RawRc, Telemetry
+from protocol.stream import MessageStream
 
 __all__ = ["Environment", "Task"]
 
@@ -61,7 +61,7 @@ class Environment:
         host_script: messages the host sends, as (time, message).
         heartbeats: the host sends heartbeats at all.
         recorder: record every byte in and out of the board (and the decoded telemetry) to MCAP.
-        record_ticks: keep a :class:`~hil.record.RunRecord` with room for this many ticks (0: none, the
+        record_ticks: keep a :class:`~hil.run_record.RunRecord` with room for this many ticks (0: none, the
             cheapest loop, for experiments and benchmarks that measure the plant themselves).
         drone: the drone's scripted motion (its acceleration, in the plant's time; the pose is held).
 
@@ -200,7 +200,7 @@ class Environment:
         telemetry = self.host.telemetry
         if len(telemetry) > self._telemetry_written:
             for msg in telemetry[self._telemetry_written :]:
-                recorder.write_json(recording.TELEMETRY, msg.time_us, telemetry_json(msg))
+                recorder.write_json(foxglove_log.TELEMETRY, msg.time_us, telemetry_json(msg))
             self._telemetry_written = len(telemetry)
 
     # --- the result -------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ class HilError(Exception):
 class PlantDivergedError(HilError):
     """The physics produced NaN/Inf or an absurd velocity: the plant's state is no longer meaningful.
 
-    Call :meth:`hil.plant.Plant.reset` before stepping again.
+    Call :meth:`hil.sim.plant.Plant.reset` before stepping again.
 
     Attributes:
         time_us: simulated time of the control period in which the divergence was detected.

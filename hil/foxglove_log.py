@@ -345,7 +345,7 @@ def design_sizes(design_json: str | None) -> tuple[list[tuple[float, float]], li
     metadata (``dataclasses.asdict(SpiralDesign)``); None when absent or unreadable."""
     if not design_json:
         return None
-    from hil.spiral import SpiralDesign
+    from hil.sim.spiral import SpiralDesign
 
     try:
         fields = json.loads(design_json)

@@ -4,12 +4,13 @@
   fault blocks them), messages scheduled at given times, and every board message decoded (in batches,
   when first looked at) and kept.
 The loop that drives it is :class:`hil.environment.Environment`; what a run measured goes into a
-:class:`hil.record.RunRecord`.
+:class:`hil.run_record.RunRecord`.
 """
 
 from __future__ import annotations
 
 from controller.transport import Transport
+from hil.faults import FaultSet
 from protocol.messages import (
     CommandAck,
     Event,
@@ -18,8 +19,6 @@ from protocol.messages import (
     Telemetry,
 )
 from protocol.session import HostSession
-
-from hil.faults import FaultSet
 
 __all__ = ["ScriptedHost"]
 

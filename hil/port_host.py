@@ -21,15 +21,15 @@ from controller.clock import RealTimeClock
 from controller.config import CONTROL_PERIOD_US
 from controller.errors import PortError
 from controller.transport import SerialTransport
+from hil import foxglove_log, recording
+from hil.errors import HilError
+from hil.faults import FaultSet
+from hil.foxglove_log import telemetry_json
+from hil.recording import Recorder
 from protocol.dbus import RcFrame
 from protocol.messages import Event, Message, RawRc, Telemetry
 from protocol.session import HostSession
 from protocol.stream import MessageStream
-
-from hil import recording
-from hil.errors import HilError
-from hil.faults import FaultSet
-from hil.recording import Recorder, telemetry_json
 
 __all__ = ["LOOP_PERIOD_US", "PortHost"]
 
@@ -264,7 +264,7 @@ class PortHost:
             if isinstance(msg, Telemetry):
                 self.telemetry.append(msg)
                 if self.recorder is not None:
-                    self.recorder.write_json(recording.TELEMETRY, now_us, telemetry_json(msg))
+                    self.recorder.write_json(foxglove_log.TELEMETRY, now_us, telemetry_json(msg))
                 lag = now_us - msg.time_us
                 if self.offset_us is None or lag < self.offset_us:
                     self.offset_us = lag

@@ -12,9 +12,8 @@ from bisect import bisect_right
 from collections.abc import Sequence
 
 from controller.rc import Uart
-from protocol.dbus import BYTE_TIME_US, FRAME_PERIOD_US, RcFrame
-
 from hil.faults import FaultSet
+from protocol.dbus import BYTE_TIME_US, FRAME_PERIOD_US, RcFrame
 
 
 class MemoryUart(Uart):

@@ -3,7 +3,7 @@
 :func:`run_scenario_on_port` plays the host's part of a lockstep scenario (:mod:`hil.scenarios`) over a
 real port (``/dev/ttyACM0``, a pty path, ``socket://...``, any pyserial URL) against a real C-board or
 ``spirob-hil board``, and judges the board with the scenario's own checks, the ones a lockstep run uses:
-the :class:`~hil.record.RunRecord` they read is filled here from what the board reports, its ``Telemetry``
+the :class:`~hil.run_record.RunRecord` they read is filled here from what the board reports, its ``Telemetry``
 (100 Hz: board time, commanded currents, phase, mode, tension targets, counters), ``RawRc`` (every RC frame
 it received, with its board time) and ``Event`` messages. There is no plant to look at (a real board has
 none), so the checks that need one are left out, and every time is measured on the board's clock. The
@@ -57,6 +57,14 @@ import numpy as np
 from controller.clock import RealTimeClock
 from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig
 from controller.errors import ConfigError
+from hil import recording
+from hil.errors import HilError
+from hil.faults import Fault, FaultKind, FaultSet
+from hil.port_host import PortHost
+from hil.radio import RadioScript
+from hil.recording import Recorder
+from hil.run_record import RunRecord, Samples, ScenarioResult
+from hil.scenarios import SCENARIOS, Plan, judge
 from protocol.dbus import FRAME_LEN, Lever, RcFrame
 from protocol.messages import (
     AckResult,
@@ -64,15 +72,6 @@ from protocol.messages import (
     Phase,
     Telemetry,
 )
-
-from hil import recording
-from hil.errors import HilError
-from hil.faults import Fault, FaultKind, FaultSet
-from hil.port_host import PortHost
-from hil.radio import RadioScript
-from hil.record import RunRecord, Samples, ScenarioResult
-from hil.recording import Recorder
-from hil.scenarios import SCENARIOS, Plan, judge
 
 __all__ = [
     "BOARD_ONLY_FAULTS",

@@ -51,7 +51,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from hil import foxglove_log
-from hil.foxglove_log import TELEMETRY, ChannelSpec, FoxgloveView, telemetry_json
+from hil.foxglove_log import TELEMETRY, ChannelSpec, FoxgloveView
 
 __all__ = [
     "BOARD_CONFIG",
@@ -64,7 +64,6 @@ __all__ = [
     "LINK_TX",
     "POSES",
     "RAW_TOPICS",
-    "TELEMETRY",
     "TICK",
     "Record",
     "Recorder",
@@ -79,7 +78,6 @@ __all__ = [
     "read_records",
     "recording_format",
     "recover",
-    "telemetry_json",
     "unpack_can",
     "unpack_poses",
 ]

@@ -20,13 +20,21 @@ from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.motorbus import MotorBus
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
-from protocol.c610 import CURRENT_RAW_MAX
-
 from hil import recording
 from hil.board import WireEnd, poses_message
 from hil.errors import HilError
 from hil.radio import MemoryUart
-from hil.recording import FORMAT, KIND_PORT, Record, is_mcap, package_version, read_metadata, read_records, recording_format
+from hil.recording import (
+    FORMAT,
+    KIND_PORT,
+    Record,
+    is_mcap,
+    package_version,
+    read_metadata,
+    read_records,
+    recording_format,
+)
+from protocol.c610 import CURRENT_RAW_MAX
 
 _INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
 _OUTPUTS = frozenset({recording.CAN_TX, recording.LINK_TX})

@@ -9,9 +9,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from hil.run_record import RunRecord, ScenarioResult
 from protocol.messages import Mode, Phase
-
-from hil.record import RunRecord, ScenarioResult
 
 
 def results_table(results: Sequence[ScenarioResult], clock: str = "simulated time") -> Table:

@@ -14,9 +14,10 @@ from pathlib import Path
 from typing import Any
 
 from controller.cli_kit import EXIT_FAILURE, EXIT_OK
-from host.board_client import BoardClient, BoardLinkError, LinkState, load_scaled_s
 from host.errors import HostError
-from host.model import CLI_CLIENT, UiModel
+from host.link.client import BoardClient, LinkState, load_scaled_s
+from host.link.process import BoardLinkError
+from host.link.recording import LinkRecording, replay_messages
 from host.object_spec import ObjectSpec, plant_objects
 from host.options import (
     HostOptions,
@@ -25,11 +26,11 @@ from host.options import (
     is_loopback,
     signing_timestamp_path,
 )
-from host.panel_guard import PanelGuard, start_guarded_server
-from host.panel_record import RecordingSwitch
-from host.recording import LinkRecording, replay_messages
+from host.panel.guard import PanelGuard, start_guarded_server
+from host.panel.model import CLI_CLIENT, UiModel
+from host.panel.record import RecordingSwitch
+from host.panel.scene import DronePose, SceneObject, scene_objects
 from host.run_summary import RunSummary, SummaryReport
-from host.scene import DronePose, SceneObject, scene_objects
 from host.shadow import ShadowPlant
 from protocol.dbus import Lever
 from protocol.messages import Message
@@ -51,7 +52,7 @@ class HostApp:
 
         Args:
             options: the run's options.
-            panel_config: ``host.panel.PanelConfig`` (rates); default rates when None.
+            panel_config: ``host.panel.teleop.PanelConfig`` (rates); default rates when None.
             board_config: ``hil.board.BoardConfig`` of the virtual board started without ``--port``
                 (default: the prototype arm, RC over the link); its objects are drawn in the scene.
         """
@@ -213,10 +214,11 @@ class HostApp:
     def _start_drone_link(self) -> None:
         o = self.options
         assert o.mavlink is not None and self.client is not None
-        from host import drone_link
+        from host.drone import config as drone_config
+        from host.drone import link as drone_link
 
         try:
-            cfg = drone_link.DroneLinkConfig(
+            cfg = drone_config.DroneLinkConfig(
                 url=o.mavlink, sysid=o.mav_sysid, compid=o.mav_compid, servo_follow=o.follow_servo
             )
             ts_path = signing_timestamp_path(o)
@@ -235,13 +237,13 @@ class HostApp:
 
             link = drone_link.DroneLink(cfg, send_to_board=to_board)
             link.start()
-        except (drone_link.DroneLinkError, ValueError, OSError) as exc:
+        except (drone_config.DroneLinkError, ValueError, OSError) as exc:
             raise HostError(f"--mavlink: {exc}") from exc
         self.drone_link = link
         self.client.add_listener(link.on_board_message)
 
     def _start_ui(self) -> None:
-        from host.panel import TeleopPanel
+        from host.panel.teleop import TeleopPanel
 
         o = self.options
         # viser prints its own banner (with a URL lacking the token): ours replaces it.
@@ -470,7 +472,7 @@ def ned_to_scene(position: Any, attitude: Any) -> DronePose:
     if position is not None:
         pos = (float(position.y_m), float(position.x_m), -float(position.z_m))
     else:
-        from host.scene import DRONE_HEIGHT_M
+        from host.panel.scene import DRONE_HEIGHT_M
 
         pos = (0.0, 0.0, DRONE_HEIGHT_M)
     if attitude is None:

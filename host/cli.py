@@ -30,7 +30,7 @@ from host.errors import HostError
 from host.object_spec import describe_object
 from host.options import PROG, HostOptions, build_parser
 
-__all__ = ["HostApp", "HostError", "HostOptions", "build_parser", "main"]
+__all__ = ["main"]
 
 _log = logging.getLogger("spirob-host")
 

@@ -18,8 +18,8 @@ from typing import Any, Final
 import foxglove
 from foxglove.messages import LogLevel
 
-from host.board_client import LinkState
 from host.errors import HostError
+from host.link.client import LinkState
 from protocol.messages import Message, SimPoses, Telemetry
 
 __all__ = ["LIVE_HOST", "FoxgloveLive"]

@@ -6,7 +6,7 @@ delivers 8-byte ``struct js_event`` records: ``__u32 time`` (ms), ``__s16 value`
 reported right after opening), ``__u8 number``. Axes read -32767..32767 (sticks: right / down positive);
 buttons 0 / 1. No extra package is needed.
 
-What the pad sets goes where the panel's sliders go: :meth:`host.model.UiModel.set_stick` and
+What the pad sets goes where the panel's sliders go: :meth:`host.panel.model.UiModel.set_stick` and
 ``set_lever`` as the command line's client, so the board receives it as the same DBUS frames
 (``VirtualRc`` every 14 ms). The DT7's levers have three positions; a pad has none, so each lever is two
 inputs that step it up or down (DOWN -> MIDDLE -> UP).
@@ -335,7 +335,7 @@ class Gamepad:
 
     Args:
         path: the device (``/dev/input/js0``), or anything that delivers ``js_event`` records (a FIFO).
-        model: the ``host.model.UiModel`` whose virtual radio it drives.
+        model: the ``host.panel.model.UiModel`` whose virtual radio it drives.
         client: the client id it drives as (the command line's).
         mapping: which inputs drive what.
         reopen_period_s: pause between attempts to reopen a device that went away.

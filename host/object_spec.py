@@ -40,7 +40,7 @@ __all__ = [
 ]
 
 SHAPES = ("cylinder", "capsule")
-"""The shapes the plant models (``hil.model_config.ObjectConfig.shape``)."""
+"""The shapes the plant models (``hil.sim.config.ObjectConfig.shape``)."""
 AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 """``axis=`` choices and their directions."""
 MAX_DIAMETER_M = 0.5
@@ -176,16 +176,16 @@ def describe_object(spec: ObjectSpec) -> str:
 
 
 def plant_objects(specs: tuple[ObjectSpec, ...] | list[ObjectSpec], model: Any) -> tuple[Any, ...]:
-    """The plant's objects (``hil.model_config.ObjectConfig``) for ``specs``, named ``object1``, ...
+    """The plant's objects (``hil.sim.config.ObjectConfig``) for ``specs``, named ``object1``, ...
 
     Args:
         specs: the objects, placed relative to the arm's base.
-        model: the plant's ``hil.model_config.ModelConfig``; its drone gives where the base is.
+        model: the plant's ``hil.sim.config.ModelConfig``; its drone gives where the base is.
 
     Returns:
         Fixed objects in the plant's world frame.
     """
-    from hil.model_config import ObjectConfig  # type: ignore[import-not-found,unused-ignore]
+    from hil.sim.config import ObjectConfig  # type: ignore[import-not-found,unused-ignore]
 
     drone = model.drone
     w, qx, qy, qz = (float(v) for v in drone.quat_wxyz)

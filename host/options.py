@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING, Final
 from controller.cli_kit import Parser, port_number, positive_duration
 from host.errors import HostError
 from host.gamepad import DEFAULT_MAPPING, GamepadMapping, format_mapping, parse_mapping
-from host.model import new_token
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
+from host.panel.model import new_token
 from protocol.dbus import Lever
 
 if TYPE_CHECKING:
-    from host.drone_servo import ServoFollowConfig
+    from host.drone.servo import ServoFollowConfig
 
 __all__ = [
     "FOXGLOVE_PORT",
@@ -67,8 +67,8 @@ def _mav_compid(text: str) -> int:
 
 
 def _follow_servo(text: str) -> ServoFollowConfig:
-    # Imported here: host.drone_servo loads pymavlink, which a run without --mavlink never needs.
-    from host.drone_servo import parse_follow_servo
+    # Imported here: host.drone.servo loads pymavlink, which a run without --mavlink never needs.
+    from host.drone.servo import parse_follow_servo
 
     return parse_follow_servo(text)
 
@@ -383,7 +383,7 @@ def signing_timestamp_path(options: HostOptions) -> Path | None:
     """Where the MAVLink signing timestamp persists (None without a signing key).
 
     ``--mav-signing-timestamp`` if given, else ``<key file>.timestamp``, the default of
-    ``host.drone_link.DroneLinkConfig.with_signing_key_file``; passed explicitly so the check at start
+    ``host.drone.link.DroneLinkConfig.with_signing_key_file``; passed explicitly so the check at start
     and the drone link agree on one file.
     """
     if options.mav_signing_key is None:

@@ -1,10 +1,10 @@
 """The shadow plant: the arm's shape on hardware, from a local plant driven by the measured motor currents.
 
 A real C-board sends no ``SimPoses`` (it has no plant to read them from). So that the panel still shows
-the arm's shape, the host runs its own :class:`hil.plant.Plant` (the default design) and drives it with
+the arm's shape, the host runs its own :class:`hil.sim.plant.Plant` (the default design) and drives it with
 what the board measures: every ``Telemetry`` frame carries the three motors' measured currents
 (``motor_current``, raw C610 units, 1000 per amp). Those are applied with
-:meth:`hil.plant.Plant.apply_currents` and the plant is stepped by the *board* time elapsed since the
+:meth:`hil.sim.plant.Plant.apply_currents` and the plant is stepped by the *board* time elapsed since the
 previous frame, so the shadow follows the board's clock, not the host's.
 
 Why measured current and not the commanded current or the tension targets: the measured current is
@@ -138,7 +138,7 @@ def reel_in_currents(t: Telemetry) -> tuple[int, int, int]:
 
 
 def _default_plant() -> Any:
-    from hil.plant import Plant  # type: ignore[import-not-found,unused-ignore]
+    from hil.sim.plant import Plant  # type: ignore[import-not-found,unused-ignore]
 
     return Plant()
 
@@ -150,7 +150,7 @@ class ShadowPlant:
         on_poses: called from the shadow thread with each new pose set (drone first, then the units,
             like ``SimPoses``; ``time_us`` is the board time), e.g. ``UiModel.on_shadow_poses``.
         config: step bounds.
-        plant_factory: builds the plant (in the shadow thread); default ``hil.plant.Plant()``, the
+        plant_factory: builds the plant (in the shadow thread); default ``hil.sim.plant.Plant()``, the
             default design.
 
     Use as a context manager, or :meth:`start` and :meth:`stop` (safe twice).

@@ -50,15 +50,7 @@ from protocol.messages import (
 )
 from protocol.stream import MessageStream
 
-__all__ = [
-    "ACKS_KEPT",
-    "HEARTBEAT_PERIOD_US",
-    "CommandToken",
-    "HeartbeatAllowed",
-    "HostSession",
-    "RcSlotSource",
-    "next_slot",
-]
+__all__ = ["ACKS_KEPT", "CommandToken", "HeartbeatAllowed", "HostSession", "RcSlotSource", "next_slot"]
 
 ACKS_KEPT = 1024
 """Commands whose acks are remembered; older tokens are forgotten (``ack`` then returns None)."""

@@ -60,7 +60,7 @@ def take(out: Path) -> None:
 
     from host.app import HostApp
     from host.options import HostOptions
-    from host.panel import PanelConfig
+    from host.panel.teleop import PanelConfig
     from protocol.messages import Mode, Phase
 
     out.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,8 @@
 - Hypothesis has no deadline: tests never assert wall-clock times, and a loaded machine makes one example
   slow without making it wrong.
 - Real-time tests (``@pytest.mark.realtime``) the machine starved are skipped as ``starved:``
-  (``tests/realtime_guard.py``), and so are MAVProxy and browser tests (``mavproxy``, ``browser``) whose
+  (``tests/support/realtime_guard.py``), and so
+  are MAVProxy and browser tests (``mavproxy``, ``browser``) whose
   waits timed out on a starved machine; the end of the run counts them, warns about a file whose every
   such test was skipped, and with ``CI`` set fails the run for it: CI never passes on an all-skipped file.
 """
@@ -20,7 +21,8 @@ from collections.abc import Iterator
 
 import pytest
 from hypothesis import settings
-from realtime_guard import STARVED_PREFIX
+
+from tests.support.realtime_guard import STARVED_PREFIX
 
 settings.register_profile("spirob", deadline=None)
 settings.load_profile("spirob")

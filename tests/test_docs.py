@@ -7,9 +7,9 @@ import re
 from pathlib import Path
 
 from controller.config import PARAMS
-from hil.cli import build_parser as hil_parser
+from hil.cli.main import build_parser as hil_parser
 from hil.scenarios import SCENARIOS
-from host.cli import build_parser as host_parser
+from host.options import build_parser as host_parser
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")

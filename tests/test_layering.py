@@ -41,7 +41,7 @@ def test_package_imports_only_downward(package: str) -> None:
 
 def test_checker_sees_a_violation(tmp_path: Path) -> None:
     bad = tmp_path / "bad.py"
-    bad.write_text("import os\nfrom host.cli import main\nimport hil.plant as p\n", encoding="utf-8")
+    bad.write_text("import os\nfrom host.cli import main\nimport hil.sim.plant as p\n", encoding="utf-8")
     assert imported_top_levels(bad) == {"os", "host", "hil"}
 
 

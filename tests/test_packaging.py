@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 
 from controller.cli import main as firmware_main
-from hil.cli import main as hil_main
+from hil.cli.main import main as hil_main
 from host.cli import main as host_main
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,7 +5,8 @@ from __future__ import annotations
 import os
 
 import pytest
-import realtime_guard as guard
+
+from tests.support import realtime_guard as guard
 
 
 def _load(monkeypatch: pytest.MonkeyPatch, per_core: float) -> None:

@@ -1,11 +1,11 @@
 """Experiments that reproduce the paper's simulation results with the plant and the firmware (issue 8).
 
 Each experiment is a pure function of ``(design, params, seed, model)`` (``model``: the plant's
-:class:`~hil.model_config.ModelConfig`, a preset or a variant) that runs the virtual board in
+:class:`~hil.sim.config.ModelConfig`, a preset or a variant) that runs the virtual board in
 lockstep (firmware + plant, :class:`hil.board.VirtualBoard`) and returns a frozen, picklable result with
 ``as_dict()``; a ``progress(done, total)`` callback reports how far it is. Each experiment is one module
 (its parameters, its run, its table rows and its figure); the rig, the grasp trial, the geometry and the
-parallel map they share have their own. ``spirob-hil experiment NAME`` (:mod:`hil.cli_experiments`)
+parallel map they share have their own. ``spirob-hil experiment NAME`` (:mod:`hil.cli.experiment`)
 prints each number next to the paper's prediction and, with ``--report DIR``, writes a PNG.
 
 =============  ==========================================  =============================================

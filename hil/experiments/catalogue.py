@@ -7,10 +7,20 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hil.model_config import ModelConfig
-from hil.spiral import SpiralDesign
-from hil.experiments import contact, convergence, dynamic, grasp_range, load, packing, sensitivity, strategy, workspace
+from hil.experiments import (
+    contact,
+    convergence,
+    dynamic,
+    grasp_range,
+    load,
+    packing,
+    sensitivity,
+    strategy,
+    workspace,
+)
 from hil.experiments.common import BOARD_MODEL, DEFAULT_MODEL, Progress, Row, sized
+from hil.sim.config import ModelConfig
+from hil.sim.spiral import SpiralDesign
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,8 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from hil.model_config import PHYSICS_STEPS_S, ModelConfig
-from hil.plant_types import PhysicsExtremes
+from hil.sim.config import PHYSICS_STEPS_S, ModelConfig
+from hil.sim.types import PhysicsExtremes
 
 Progress = Callable[[int, int], None]
 """``progress(done, total)``: work units done so far (trials or simulated milliseconds)."""
@@ -81,7 +81,7 @@ NO_EXTREMES = PhysicsExtremes(0.0, 0.0, 0.0, 0.0)
 
 
 def worst_extremes(extremes: Iterable[PhysicsExtremes]) -> PhysicsExtremes:
-    """The field-wise largest of several trials' :meth:`hil.plant.Plant.extremes`."""
+    """The field-wise largest of several trials' :meth:`hil.sim.plant.Plant.extremes`."""
     out = NO_EXTREMES
     for e in extremes:
         out = PhysicsExtremes(

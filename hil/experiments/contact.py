@@ -24,18 +24,28 @@ from typing import Any
 
 import numpy as np
 
-from protocol.messages import GraspState
-
-from hil.model_config import ModelConfig
-from hil.plant_objects import contact_units
-from hil.plant_types import PhysicsExtremes
-from hil.spiral import SpiralDesign
-from hil.experiments.common import DEFAULT_MODEL, OBJ, Progress, Row, S, extremes_rows, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.common import (
+    DEFAULT_MODEL,
+    OBJ,
+    Progress,
+    Row,
+    S,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from hil.experiments.grasp import GraspSetup, grasp_firmware, grasp_rig
 from hil.experiments.parallel import parallel_map
 from hil.experiments.rig import world_m
 from hil.experiments.stats import bootstrap_interval, wilson_interval
 from hil.experiments.strategy import TINY, StrategyParams, placements
+from hil.sim.config import ModelConfig
+from hil.sim.objects import contact_units
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PhysicsExtremes
+from protocol.messages import GraspState
 
 OLD_DETECTOR = {
     "grasp_contact_decel_m_per_s2": 0.0,

@@ -22,14 +22,26 @@ from typing import Any
 
 import numpy as np
 
-from hil.model_config import ModelConfig, ObjectConfig
-from hil.plant import Plant, PlantConfig
-from hil.plant_objects import contact_units, contact_wrap_deg
-from hil.plant_types import PhysicsExtremes
-from hil.spiral import SpiralDesign
-from hil.experiments.common import BOARD_MODEL, FAR_M, MS, OBJ, Progress, Row, extremes_rows, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.common import (
+    BOARD_MODEL,
+    FAR_M,
+    MS,
+    OBJ,
+    Progress,
+    Row,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from hil.experiments.parallel import parallel_map
 from hil.experiments.rig import world_m
+from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.objects import contact_units, contact_wrap_deg
+from hil.sim.plant import Plant
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PhysicsExtremes, PlantConfig
 
 
 @dataclass(frozen=True)

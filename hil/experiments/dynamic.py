@@ -30,18 +30,29 @@ import mujoco
 import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
-from protocol.messages import CommandCode
-
-from hil.model_config import ModelConfig, ObjectConfig
-from hil.plant import Plant
-from hil.plant_objects import contact_units, contact_wrap_deg
-from hil.plant_types import PhysicsExtremes
-from hil.spiral import SpiralDesign
-from hil.experiments.common import DEFAULT_MODEL, FAR_M, MS, OBJ, G, Progress, Row, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.common import (
+    DEFAULT_MODEL,
+    FAR_M,
+    MS,
+    OBJ,
+    G,
+    Progress,
+    Row,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from hil.experiments.dynamic_rig import paper_arm_45cm, scaled_model, with_contact_timeconst, with_timestep
 from hil.experiments.parallel import parallel_map
 from hil.experiments.rig import direct_rig, world_m
 from hil.experiments.stats import wilson_interval
+from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.objects import contact_units, contact_wrap_deg
+from hil.sim.plant import Plant
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PhysicsExtremes
+from protocol.messages import CommandCode
 
 CAPTURE_MS = 120.0
 """A throw is captured if the half wrap comes this soon after the first contact (Fig. S11B: 120 ms)."""

@@ -8,8 +8,8 @@ from __future__ import annotations
 import dataclasses
 import math
 
-from hil.model_config import ModelConfig
-from hil.spiral import SpiralDesign
+from hil.sim.config import ModelConfig
+from hil.sim.spiral import SpiralDesign
 
 PAPER_ARM_LENGTH_M = 0.45
 """Length of the 2-cable arm of Note S5 and Fig. S11 (the supplement: "a 2-cable SpiRob (45cm in length)")."""

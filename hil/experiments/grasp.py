@@ -11,15 +11,14 @@ from typing import Any
 import numpy as np
 
 from controller.config import FirmwareConfig
-from protocol.dbus import Lever
-from protocol.messages import GraspState
-
-from hil.model_config import ModelConfig, ObjectConfig
-from hil.plant_objects import contact_units, contact_wrap_deg
-from hil.plant_types import PhysicsExtremes
-from hil.spiral import SpiralDesign
 from hil.experiments.common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, SUCCESS_WRAP_DEG, S
 from hil.experiments.rig import Rig, rc_frame, world_m
+from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.objects import contact_units, contact_wrap_deg
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PhysicsExtremes
+from protocol.dbus import Lever
+from protocol.messages import GraspState
 
 
 @dataclass(frozen=True)
@@ -90,7 +89,7 @@ class GraspOutcome:
         success: the grasp criterion fixed before the experiments ran: ``held`` and ``wrap_deg`` at
             least :data:`~hil.experiments.common.SUCCESS_WRAP_DEG` (half the circumference).
         max_current_raw: largest |current| sent to an ESC.
-        extremes: the worst physics of the whole trial (:meth:`hil.plant.Plant.extremes`).
+        extremes: the worst physics of the whole trial (:meth:`hil.sim.plant.Plant.extremes`).
         load_n: with a load ramp, the force at which the object came out (moved more than
             :data:`HELD_DROP_MM` along the force from where the ramp started, or no contact); the cap if
             it never did; NaN without a ramp or if it was not held.

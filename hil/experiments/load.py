@@ -19,14 +19,24 @@ from typing import Any
 
 import numpy as np
 
-from hil.model_config import ModelConfig
-from hil.plant_types import PhysicsExtremes
-from hil.spiral import SpiralDesign
-from hil.experiments.common import DEFAULT_MODEL, G, Progress, Row, extremes_rows, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.common import (
+    DEFAULT_MODEL,
+    G,
+    Progress,
+    Row,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from hil.experiments.geometry import ArmFootprint, jittered_placements
 from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
 from hil.experiments.parallel import parallel_map
 from hil.experiments.stats import Slope, ols_slope
+from hil.sim.config import ModelConfig
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PhysicsExtremes
 
 
 @dataclass(frozen=True)

@@ -11,13 +11,21 @@ from typing import Any
 import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
-
-from hil.model_config import ModelConfig
-from hil.plant_types import PhysicsExtremes
-from hil.spiral import SpiralDesign
-from hil.experiments.common import BASE_Z_M, DEFAULT_MODEL, Progress, Row, extremes_rows, pyplot, save_figure, sized
+from hil.experiments.common import (
+    BASE_Z_M,
+    DEFAULT_MODEL,
+    Progress,
+    Row,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+)
 from hil.experiments.geometry import fit_log_spiral, joint_points_xz
 from hil.experiments.rig import direct_rig
+from hil.sim.config import ModelConfig
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PhysicsExtremes
 
 
 @dataclass(frozen=True)

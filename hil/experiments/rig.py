@@ -7,17 +7,17 @@ import dataclasses
 from collections.abc import Sequence
 
 from controller.config import FirmwareConfig
+from hil.board import BoardConfig
+from hil.environment import Environment
+from hil.experiments.common import BASE_Z_M, MS
+from hil.radio import RadioScript
+from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.plant import Plant
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PlantConfig
 from protocol.c610 import MotorFeedback
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, CommandCode, Mode
-
-from hil.board import BoardConfig
-from hil.environment import Environment
-from hil.model_config import ModelConfig, ObjectConfig
-from hil.plant import Plant, PlantConfig
-from hil.radio import RadioScript
-from hil.spiral import SpiralDesign
-from hil.experiments.common import BASE_Z_M, MS
 
 
 def rc_frame(right: int = Lever.DOWN, left: int = Lever.DOWN) -> RcFrame:

@@ -18,15 +18,24 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hil.model_config import ModelConfig
-from hil.plant_types import PhysicsExtremes
-from hil.spiral import SpiralDesign
-from hil.experiments.common import DEFAULT_MODEL, Progress, Row, extremes_rows, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.common import (
+    DEFAULT_MODEL,
+    Progress,
+    Row,
+    extremes_rows,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from hil.experiments.dynamic import TINY, DynamicParams, dynamic
 from hil.experiments.packing import PackingParams, packing
 from hil.experiments.parallel import parallel_map
 from hil.experiments.strategy import TINY as STRATEGY_TINY
 from hil.experiments.strategy import StrategyParams, strategy
+from hil.sim.config import ModelConfig
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PhysicsExtremes
 
 FACTORS = (0.5, 1.5)
 """Each parameter is multiplied by these (±50 %)."""
@@ -109,7 +118,7 @@ class Conclusion:
 
 Measure = Callable[[SpiralDesign, ModelConfig, str, int, int], dict[str, Any]]
 """``measure(design, model, size, seed, jobs) -> dict`` of JSON-ready numbers, with the worst physics of
-its trials as ``extremes`` (:meth:`~hil.plant_types.PhysicsExtremes.as_dict`)."""
+its trials as ``extremes`` (:meth:`~hil.sim.types.PhysicsExtremes.as_dict`)."""
 
 
 def packing_measure(

@@ -12,14 +12,24 @@ import numpy as np
 import numpy.typing as npt
 
 from controller.config import FirmwareConfig, MappingConfig, MotorDriveConfig
-
-from hil.model_config import ActuatorConfig, ModelConfig
-from hil.plant_types import PhysicsExtremes
-from hil.spiral import SpiralDesign
-from hil.experiments.common import BASE_Z_M, DEFAULT_MODEL, Progress, Row, extremes_rows, pct, pyplot, save_figure, sized, worst_extremes
+from hil.experiments.common import (
+    BASE_Z_M,
+    DEFAULT_MODEL,
+    Progress,
+    Row,
+    extremes_rows,
+    pct,
+    pyplot,
+    save_figure,
+    sized,
+    worst_extremes,
+)
 from hil.experiments.geometry import Envelope
 from hil.experiments.parallel import parallel_map
 from hil.experiments.rig import direct_rig
+from hil.sim.config import ActuatorConfig, ModelConfig
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PhysicsExtremes
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 A scenario (:class:`~hil.scenarios.base.Scenario`) is a task with a plan and checks. :func:`run_scenario`
 runs it in lockstep through the one loop (:class:`~hil.environment.Environment`) and is a pure function of
 (scenario name, design, seed, extra faults): picklable inputs, a picklable
-:class:`~hil.record.ScenarioResult` out, no global state, so campaigns can fan out over a process pool or
+:class:`~hil.run_record.ScenarioResult` out, no global state, so campaigns can fan out over a process pool or
 a distributed engine unchanged. :func:`hil.realtime.run_scenario_on_port` plays the same plan against a
 board link in real time and judges it with the same checks.
 """
@@ -17,13 +17,10 @@ from pathlib import Path
 from hil.board import BoardConfig
 from hil.environment import Environment
 from hil.faults import Fault
-from hil.model_config import ModelConfig
-from hil.plant import PlantConfig
 from hil.radio import RadioScript
-from hil.record import Check, RunRecord, ScenarioResult
 from hil.recording import Recorder
-from hil.spiral import SpiralDesign
-from hil.scenarios.base import MANUAL, MS, RC_GAP_CHECK, SAFE, TICK_US, Plan, Scenario, rc, rc_gap_check
+from hil.run_record import TICK_US, Check, RunRecord, ScenarioResult
+from hil.scenarios.base import MANUAL, MS, RC_GAP_CHECK, SAFE, Plan, Scenario, rc, rc_gap_check
 from hil.scenarios.drone_manoeuvre import DroneManoeuvre
 from hil.scenarios.grasp import Grasp
 from hil.scenarios.host_loss import HostLoss
@@ -36,6 +33,9 @@ from hil.scenarios.rc_garbage import RcGarbage
 from hil.scenarios.rc_loss import RcLoss
 from hil.scenarios.rc_out_of_range import RcOutOfRange
 from hil.scenarios.startup_gate import StartupGate
+from hil.sim.config import ModelConfig
+from hil.sim.spiral import SpiralDesign
+from hil.sim.types import PlantConfig
 
 __all__ = [
     "MANUAL",
@@ -84,7 +84,7 @@ def board_config(
     plan: Plan, seed: int, design: SpiralDesign | None = None, model: ModelConfig | None = None
 ) -> BoardConfig:
     """The virtual board a plan runs on (objects added to the scene, the plan's firmware settings);
-    ``model`` is the plant model (default: the prototype's, ``hil.model_presets``)."""
+    ``model`` is the plant model (default: the prototype's, ``hil.sim.presets``)."""
     plant = PlantConfig() if model is None else PlantConfig(model=model)
     if plan.objects:
         plant = dataclasses.replace(plant, model=plant.model.with_objects(*plan.objects))
@@ -120,7 +120,7 @@ def run_scenario(
         name: a name from :data:`SCENARIOS`.
         seed: seed of every random choice in the run.
         design: the arm (default: the paper's 3-cable prototype).
-        model: the plant model (default: the prototype's; see :mod:`hil.model_presets`).
+        model: the plant model (default: the prototype's; see :mod:`hil.sim.presets`).
         faults: faults added to the scenario's own.
         record: write an MCAP recording of every byte in and out of the board.
         progress: called as ``progress(ticks_done, ticks_total)`` every 100 ticks.

@@ -2,7 +2,7 @@
 
 A scenario is a :class:`~hil.environment.Task` with a :meth:`Scenario.plan` (the radio script, the host's
 commands, the faults, the firmware settings, the objects in the scene) and :meth:`Scenario.checks`, which
-turn a :class:`~hil.record.RunRecord` into measured :class:`~hil.record.Check` values. The same checks
+turn a :class:`~hil.run_record.RunRecord` into measured :class:`~hil.run_record.Check` values. The same checks
 judge a lockstep run and a run against a port: every window is taken from the plan (fault windows, radio
 steps), every timing bound is the firmware's own timeout plus what the record says about its resolution,
 a real-time board's lateness and the link's delay. Checks that need the simulated plant only run where a
@@ -25,26 +25,15 @@ from dataclasses import dataclass, field
 from typing import ClassVar, Final
 
 from controller.config import FailsafeConfig, FirmwareConfig
+from hil.environment import Task
+from hil.faults import Fault, FaultKind
+from hil.run_record import TICK_US, Check, RunRecord
+from hil.sim.config import ObjectConfig
+from hil.sim.drone_motion import DroneMotion
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, EventKind, Phase
 
-from hil.drone_motion import DroneMotion
-from hil.environment import Task
-from hil.faults import Fault, FaultKind
-from hil.model_config import ObjectConfig
-from hil.record import TICK_US, Check, RunRecord
-
-__all__ = [
-    "MANUAL",
-    "MS",
-    "SAFE",
-    "TICK_US",
-    "Plan",
-    "S",
-    "Scenario",
-    "fault_window",
-    "rc",
-]
+__all__ = ["MANUAL", "MS", "SAFE", "Plan", "S", "Scenario", "fault_window", "rc"]
 
 MS: Final = 1000
 S: Final = 1_000_000

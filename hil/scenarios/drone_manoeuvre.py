@@ -3,7 +3,7 @@
 The grasp runs exactly as in :mod:`hil.scenarios.grasp` (same plan, same hooks, same checks); once its
 judgement window is over, the drone flies horizontal manoeuvres of rising harshness: for each level, 1 s
 accelerating along world +x, 1 s braking as hard (back to rest), then a short settle. The plant holds the
-drone's pose and applies only the acceleration (:mod:`hil.drone_motion`: the scene lives in the drone's
+drone's pose and applies only the acceleration (:mod:`hil.sim.drone_motion`: the scene lives in the drone's
 frame, so gravity becomes ``g − a``).
 
 The required level is 2 m/s² for 1 s (the issue's example manoeuvre); 4 and 8 m/s² follow so the result
@@ -20,12 +20,12 @@ from typing import Final
 
 import numpy as np
 
-from hil.drone_motion import AccelSegment, DroneMotion, accelerate_and_brake
 from hil.environment import Environment
-from hil.plant_objects import contact_units, contact_wrap_deg
-from hil.record import Check, RunRecord
+from hil.run_record import Check, RunRecord
 from hil.scenarios.base import MS, Plan, S
 from hil.scenarios.grasp import CAN, HALF_WRAP_DEG, HELD_US, Grasp
+from hil.sim.drone_motion import AccelSegment, DroneMotion, accelerate_and_brake
+from hil.sim.objects import contact_units, contact_wrap_deg
 
 LEVELS_M_S2: Final = (2.0, 4.0, 8.0)
 """Horizontal accelerations tried in turn; the first is the required one."""

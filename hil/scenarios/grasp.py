@@ -5,14 +5,13 @@ from __future__ import annotations
 import math
 from typing import Final
 
+from hil.environment import Environment
+from hil.run_record import Check, RunRecord
+from hil.scenarios.base import MS, SAFE, Plan, Scenario, rc
+from hil.sim.config import ObjectConfig
+from hil.sim.objects import contact_wrap_deg
 from protocol.dbus import Lever
 from protocol.messages import GraspState
-
-from hil.environment import Environment
-from hil.model_config import ObjectConfig
-from hil.plant_objects import contact_wrap_deg
-from hil.record import Check, RunRecord
-from hil.scenarios.base import MS, SAFE, Plan, Scenario, rc
 
 CAN: Final = ObjectConfig("can", radius_m=0.010, length_m=0.06, pos_m=(0.6, 0.0, 0.4), mass_kg=0.020)
 CAN_AT: Final = (0.04, 0.0, 0.87)

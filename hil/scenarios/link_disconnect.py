@@ -6,12 +6,20 @@ import math
 
 import numpy as np
 
+from hil.faults import FaultKind
+from hil.run_record import Check, RunRecord
+from hil.scenarios.base import (
+    MS,
+    Plan,
+    Scenario,
+    current_before,
+    fault_window,
+    host_cut_and_latched,
+    host_gone_plan,
+    rearmed,
+)
 from protocol.dbus import Lever
 from protocol.messages import Heartbeat, Phase
-
-from hil.faults import FaultKind
-from hil.record import Check, RunRecord
-from hil.scenarios.base import MS, Plan, Scenario, current_before, fault_window, host_cut_and_latched, host_gone_plan, rearmed
 
 
 class LinkDisconnect(Scenario):

@@ -7,11 +7,10 @@ import math
 import numpy as np
 
 from controller.config import FailsafeConfig, FirmwareConfig
-from protocol.messages import Command, CommandCode, Mode
-
 from hil.faults import Fault, FaultKind
-from hil.record import Check, RunRecord
+from hil.run_record import Check, RunRecord
 from hil.scenarios.base import FLOAT32_TOLERANCE_N, MS, Plan, Scenario, arm_then
+from protocol.messages import Command, CommandCode, Mode
 
 _HALF_S = 500 * MS
 

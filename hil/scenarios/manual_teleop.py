@@ -7,10 +7,9 @@ from typing import Final
 
 import numpy as np
 
-from protocol.dbus import CH_LIMIT, Lever, RcFrame
-
-from hil.record import Check, RunRecord
+from hil.run_record import Check, RunRecord
 from hil.scenarios.base import FLOAT32_TOLERANCE_N, MANUAL, MS, SAFE, Plan, Scenario, rc
+from protocol.dbus import CH_LIMIT, Lever, RcFrame
 
 STEP_TAIL_US: Final = 500 * MS
 """Each stick step is judged over its last half second (the slew limiter has settled by then)."""

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from protocol.dbus import Lever
-
 from hil.faults import Fault, FaultKind
-from hil.record import TICK_US, Check, RunRecord
+from hil.run_record import TICK_US, Check, RunRecord
 from hil.scenarios.base import MS, REQUIRED, SAFE, Plan, Scenario, current_before, fault_window, rc, rearmed
+from protocol.dbus import Lever
 
 
 class MotorSilence(Scenario):

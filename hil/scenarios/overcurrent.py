@@ -5,8 +5,7 @@ from __future__ import annotations
 import math
 
 from controller.config import FirmwareConfig, MappingConfig
-
-from hil.record import Check, RunRecord
+from hil.run_record import Check, RunRecord
 from hil.scenarios.base import MS, Plan, Scenario, arm_then
 
 

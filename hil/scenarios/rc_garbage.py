@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from hil.faults import Fault, FaultKind
-from hil.record import Check, RunRecord
+from hil.run_record import Check, RunRecord
 from hil.scenarios.base import MS, Plan, Scenario, arm_then, fault_window, rc_acted_us, rc_zero_checks
 
 

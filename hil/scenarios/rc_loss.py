@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
-from protocol.dbus import Lever
-
 from hil.faults import Fault, FaultKind
-from hil.record import Check, RunRecord
-from hil.scenarios.base import MS, SAFE, Plan, Scenario, current_before, fault_window, rc, rc_acted_us, rc_zero_checks, rearmed
+from hil.run_record import Check, RunRecord
+from hil.scenarios.base import (
+    MS,
+    SAFE,
+    Plan,
+    Scenario,
+    current_before,
+    fault_window,
+    rc,
+    rc_acted_us,
+    rc_zero_checks,
+    rearmed,
+)
+from protocol.dbus import Lever
 
 
 class RcLoss(Scenario):

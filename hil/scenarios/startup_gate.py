@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from hil.run_record import Check, RunRecord
+from hil.scenarios.base import AFTER_REARM_US, MANUAL, MS, SAFE, Plan, Scenario, rc
 from protocol.dbus import Lever
 from protocol.messages import Phase
-
-from hil.record import Check, RunRecord
-from hil.scenarios.base import AFTER_REARM_US, MANUAL, MS, SAFE, Plan, Scenario, rc
 
 
 class StartupGate(Scenario):

@@ -3,7 +3,7 @@
 Nothing above this package handles pymavlink objects: :class:`MavCodec` turns our dataclasses into
 packet bytes and a byte stream into :class:`MavPacket` envelopes. The codec binds a pymavlink
 ``MAVLink`` object to an in-memory sink, so this package does no I/O and reads no clock; the host's
-``host.drone_link`` moves the bytes. Callers import everything from here; the modules are
+``host.drone.link`` moves the bytes. Callers import everything from here; the modules are
 ``dialect`` (MAVLink 2 forced, constants, enums; the only one importing pymavlink), ``messages``
 (the dataclasses), ``convert`` (dataclass <-> pymavlink object), ``codec`` (:class:`MavCodec`) and
 ``signing`` (key and timestamp helpers) and ``param_encoding`` (typed values in ``param_value``).

@@ -14,12 +14,12 @@ from pathlib import Path
 
 import can
 import pytest
-from c610_rigs import C610TrioServer
-from terminal import ctrl_c, start_in_own_group
 
 from controller.cli import can_bus_config, main, parse_args
 from controller.transport import SerialTransport
 from protocol.messages import Heartbeat, encode
+from tests.support.c610_rigs import C610TrioServer
+from tests.support.terminal import ctrl_c, start_in_own_group
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import pytest
-from controller_harness import Rig, frame
 
 from controller.cables import CableMapper, MotorModel, TensionSlew
 from controller.commands import CommandServer, GraspAcks, Params
@@ -38,6 +37,7 @@ from protocol.messages import (
     decode,
     encode,
 )
+from tests.support.controller_harness import Rig, frame
 
 
 def test_params_set_applies_valid_values_and_keeps_the_old_one_otherwise() -> None:

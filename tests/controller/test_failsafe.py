@@ -7,13 +7,12 @@ from __future__ import annotations
 
 import math
 
-from controller_harness import Rig, frame
-
 from controller.config import FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import ArmBlocker, Command, CommandCode, EventKind, Heartbeat, Phase
+from tests.support.controller_harness import Rig, frame
 
 ZERO = (0, 0, 0)
 MANUAL_CURL = frame(right=Lever.MIDDLE, ch3=400)

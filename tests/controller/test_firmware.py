@@ -10,7 +10,6 @@ from collections import Counter
 from collections.abc import Iterator
 
 import pytest
-from controller_harness import Rig, frame, link_rc_rig
 
 from controller.clock import LockstepClock, RealTimeClock
 from controller.commands import PARAM_VALUES_PER_TICK
@@ -46,6 +45,7 @@ from protocol.messages import (
     decode,
     encode,
 )
+from tests.support.controller_harness import Rig, frame, link_rc_rig
 
 ZERO = (0, 0, 0)
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import pytest
-from controller_harness import Rig, frame
 
 from controller.config import FirmwareConfig
 from controller.errors import ConfigError
@@ -13,6 +12,7 @@ from controller.events import EventQueue
 from controller.grasp import GraspMachine
 from protocol.dbus import Lever
 from protocol.messages import AckResult, Command, CommandAck, CommandCode, GraspState, Mode
+from tests.support.controller_harness import Rig, frame
 
 MOVING = [-0.05, -0.05, -0.05]  # cable paying out while the arm unrolls
 STALLED = [0.0, 0.0, 0.0]

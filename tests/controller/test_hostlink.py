@@ -5,7 +5,6 @@ from __future__ import annotations
 import struct
 
 import pytest
-from controller_harness import Rig, frame, link_rc_rig
 
 from controller.commands import PARAM_VALUES_PER_TICK
 from controller.hostlink import RX_BYTES_PER_TICK, RX_FRAMES_PER_TICK, RX_PRIORITY_PER_TICK, BoardLink
@@ -22,6 +21,7 @@ from protocol.messages import (
     VirtualRc,
     encode,
 )
+from tests.support.controller_harness import Rig, frame, link_rc_rig
 
 RC_PERIOD_MS = 14
 

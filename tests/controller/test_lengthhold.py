@@ -26,7 +26,7 @@ from protocol.messages import (
     Telemetry,
     TelemetryFlags,
 )
-from tests.controller_harness import Rig, frame
+from tests.support.controller_harness import Rig, frame
 
 DT_US = 1000
 HERE = HOLD_HERE

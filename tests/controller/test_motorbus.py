@@ -12,12 +12,12 @@ from pathlib import Path
 import can
 import cantools
 import pytest
-from c610_rigs import C610TrioServer, SlcanAdapterEmulator
 
 from controller.errors import BusError, PortError
 from controller.fake_c610 import FakeC610Trio
 from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus, feedback_filters
 from protocol.c610 import DBC_PATH, MotorFeedback, current_command
+from tests.support.c610_rigs import C610TrioServer, SlcanAdapterEmulator
 
 
 class RecordingBus(MotorBus):

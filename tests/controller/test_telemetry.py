@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from controller_harness import Rig, frame
-
 from controller.clock import zero_ns
 from controller.config import FirmwareConfig
 from controller.firmware import Firmware
@@ -20,6 +18,7 @@ from protocol.messages import (
     Telemetry,
     TelemetryFlags,
 )
+from tests.support.controller_harness import Rig, frame
 
 
 def test_build_without_a_link_reads_the_components() -> None:

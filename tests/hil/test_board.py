@@ -7,7 +7,6 @@ from dataclasses import dataclass, field
 
 import pytest
 import serial
-from realtime_guard import largest_gap_s, retry_void
 
 from controller.config import FirmwareConfig
 from hil.board import (
@@ -35,6 +34,7 @@ from protocol.messages import (
     decode,
     encode,
 )
+from tests.support.realtime_guard import largest_gap_s, retry_void
 
 
 def test_lockstep_tick_order_and_time() -> None:

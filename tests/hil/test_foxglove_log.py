@@ -10,11 +10,11 @@ import jsonschema
 import numpy as np
 import pytest
 from foxglove.messages import LogLevel
-from foxglove_check import Checked, check_recording, poses_array, protobuf_class
 
 from hil import foxglove_log, recording
-from hil.cli import main
+from hil.cli.main import main
 from protocol.messages import GraspState, Mode, Phase, Telemetry
+from tests.support.foxglove_check import Checked, check_recording, poses_array, protobuf_class
 
 
 @pytest.fixture(scope="module")

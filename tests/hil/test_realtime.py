@@ -14,12 +14,12 @@ from typing import Any
 import numpy as np
 import pytest
 import serial
-from realtime_guard import retry_void, void_reason
 
 from hil.board import VirtualBoardProcess
-from hil.cli import main
+from hil.cli.main import main
 from hil.errors import HilError
 from hil.faults import Fault
+from hil.foxglove_log import TELEMETRY
 from hil.realtime import (
     LINK_ALLOWANCE_US,
     TELEMETRY_PERIOD_US,
@@ -28,14 +28,14 @@ from hil.realtime import (
     port_scenario_names,
     run_scenario_on_port,
 )
-from hil.record import Check, RunRecord, Samples
-from hil.recording import KIND_PORT, LINK_RX, LINK_TX, TELEMETRY, read_metadata, read_records
+from hil.recording import KIND_PORT, LINK_RX, LINK_TX, read_metadata, read_records
 from hil.replay import replay
-from hil.scenarios import MS, RC_GAP_CHECK, SCENARIOS, Plan, ScenarioResult, judge, run_scenario
-from hil.scenarios.rc_loss import RcLoss
+from hil.run_record import Check, RunRecord, Samples, ScenarioResult
+from hil.scenarios import MS, RC_GAP_CHECK, SCENARIOS, Plan, RcLoss, judge, run_scenario
 from protocol.dbus import Lever, RcFrame
 from protocol.link import LinkParser
 from protocol.messages import Command, Event, EventKind, Heartbeat, Phase, Telemetry, VirtualRc
+from tests.support.realtime_guard import retry_void, void_reason
 
 
 def _failed(result: ScenarioResult) -> list[str]:

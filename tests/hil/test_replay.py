@@ -129,12 +129,12 @@ def test_a_killed_recording_is_recovered_and_replayed(
 
     from mcap.reader import make_reader
 
-    from hil.cli import main
+    from hil.cli.main import main
 
     path = tmp_path / "killed.mcap"
     repo = Path(__file__).resolve().parents[2]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "hil.cli", "run", "rc-loss", "--seed", "5", "--record", str(path)],
+        [sys.executable, "-m", "hil.cli.main", "run", "rc-loss", "--seed", "5", "--record", str(path)],
         cwd=repo,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,

@@ -10,12 +10,9 @@ import pytest
 from controller.config import FirmwareConfig
 from hil import scenarios
 from hil.faults import Fault, FaultKind
-from hil.record import ScenarioResult
 from hil.recording import read_metadata
-from hil.scenarios import SCENARIOS, Check, drone_manoeuvre, run_scenario
-from hil.scenarios.drone_manoeuvre import DroneManoeuvre
-from hil.scenarios.grasp import Grasp
-from hil.scenarios.rc_loss import RcLoss
+from hil.run_record import Check, ScenarioResult
+from hil.scenarios import SCENARIOS, DroneManoeuvre, Grasp, RcLoss, drone_manoeuvre, run_scenario
 
 
 def _assert_passed(result: ScenarioResult) -> None:

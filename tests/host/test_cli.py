@@ -1,6 +1,6 @@
 """`spirob-host` command line: argv in, exit status and one-line errors out.
 
-Runs against the scripted fake board (tests/link_peer.py) on a real pty / TCP socket, and against the
+Runs against the scripted fake board (tests/support/link_peer.py) on a real pty / TCP socket, and against the
 real virtual board (``hil.board``).
 """
 
@@ -13,14 +13,16 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from link_peer import LinkPeer
-from realtime_guard import wait_for
-from terminal import ctrl_c, start_in_own_group
 
-from host.cli import HostApp, HostOptions, build_parser, main
+from host.app import HostApp
+from host.cli import main
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec
+from host.options import HostOptions, build_parser
 from protocol.dbus import Lever
 from protocol.messages import Mode, Phase
+from tests.support.link_peer import LinkPeer
+from tests.support.realtime_guard import wait_for
+from tests.support.terminal import ctrl_c, start_in_own_group
 
 
 def one_error_line(err: str) -> str:
@@ -186,7 +188,7 @@ def test_refused_socket_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_busy_port_exits_2(peer: LinkPeer, capsys: pytest.CaptureFixture[str]) -> None:
-    from host.board_client import open_port
+    from host.link.process import open_port
 
     holder = open_port(peer.url, timeout_s=0.01)
     try:
@@ -358,8 +360,8 @@ def test_a_killed_link_process_is_restarted_and_the_board_held_zero_current() ->
     import os
     import signal
 
-    from host.board_client import LinkState
-    from host.model import CLI_CLIENT
+    from host.link.client import LinkState
+    from host.panel.model import CLI_CLIENT
     from protocol.messages import Message, Telemetry
 
     after_restart: list[Telemetry] = []
@@ -400,8 +402,8 @@ def test_a_killed_link_process_is_restarted_and_the_board_held_zero_current() ->
 def test_scene_objects_from_the_plant_objects() -> None:
     import numpy as np
 
-    from hil.model_config import ObjectConfig
-    from host.scene import quat_rotate, scene_objects
+    from hil.sim.config import ObjectConfig
+    from host.panel.scene import quat_rotate, scene_objects
 
     objs = scene_objects(
         [
@@ -418,8 +420,8 @@ def test_scene_objects_from_the_plant_objects() -> None:
 
 def test_the_virtual_boards_objects_are_drawn() -> None:
     from hil.board import BoardConfig
-    from hil.model_config import ModelConfig, ObjectConfig
-    from hil.plant import PlantConfig
+    from hil.sim.config import ModelConfig, ObjectConfig
+    from hil.sim.types import PlantConfig
 
     branch = ObjectConfig("branch", 0.01, 0.12, (0.08, 0.0, 0.85))
     config = BoardConfig(rc="link", plant=PlantConfig(model=ModelConfig().with_objects(branch)))

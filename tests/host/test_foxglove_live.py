@@ -15,8 +15,6 @@ from typing import Any
 import jsonschema
 import numpy as np
 import pytest
-from foxglove_check import decode_protobuf, poses_array, protobuf_class
-from link_peer import LinkPeer
 from websockets.sync.client import ClientConnection, connect
 
 from hil import foxglove_log
@@ -24,6 +22,8 @@ from host.app import HostApp
 from host.cli import main
 from host.options import HostOptions
 from protocol.messages import Message, SimPoses
+from tests.support.foxglove_check import decode_protobuf, poses_array, protobuf_class
+from tests.support.link_peer import LinkPeer
 
 SUBPROTOCOL = "foxglove.sdk.v1"
 """Foxglove's WebSocket protocol as the SDK's server (0.30) names it: the wire format of

@@ -2,7 +2,7 @@
 
 No hardware: the events are ``struct js_event`` records written in the kernel's format, fed to the pure
 state and, through a FIFO standing in for ``/dev/input/js0``, to a running host whose board (the fake
-board of tests/link_peer.py) records the DBUS frames it receives.
+board of tests/support/link_peer.py) records the DBUS frames it receives.
 """
 
 from __future__ import annotations
@@ -14,8 +14,6 @@ from pathlib import Path
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from link_peer import LinkPeer
-from realtime_guard import wait_for
 
 from host.app import HostApp
 from host.gamepad import (
@@ -31,10 +29,12 @@ from host.gamepad import (
     format_mapping,
     parse_mapping,
 )
-from host.model import CLI_CLIENT
 from host.options import HostOptions
+from host.panel.model import CLI_CLIENT
 from protocol.dbus import CH_LIMIT, Lever, RcFrame
 from protocol.messages import VirtualRc
+from tests.support.link_peer import LinkPeer
+from tests.support.realtime_guard import wait_for
 
 
 def axis(n: int, value: int, t_ms: int = 0, init: bool = False) -> JsEvent:
@@ -230,7 +230,7 @@ def test_pad_events_travel_as_dbus_frames_and_an_unplugged_pad_sends_safe(tmp_pa
 
 def test_a_tab_that_asks_gets_control_and_start_asks_for_it_back(tmp_path: Path) -> None:
     from host.gamepad import Gamepad
-    from host.model import UiModel
+    from host.panel.model import UiModel
 
     js = tmp_path / "js0"
     os.mkfifo(js)

@@ -78,7 +78,7 @@ def test_format_then_parse_is_the_identity(spec: ObjectSpec) -> None:
 
 
 def test_objects_are_placed_from_the_arms_base_and_fixed() -> None:
-    from hil.model_config import DroneConfig, ModelConfig, ObjectConfig
+    from hil.sim.config import DroneConfig, ModelConfig, ObjectConfig
 
     model = ModelConfig(drone=DroneConfig(pos_m=(0.5, -0.2, 1.0), mount_offset_m=0.02)).with_objects(
         ObjectConfig("object1", 0.01, 0.05, (0.0, 0.0, 0.3))
@@ -95,11 +95,12 @@ def test_the_default_object_is_grasped_from_the_default_start() -> None:
     """The default demo, in lockstep: the arm hangs straight, the right lever goes UP (GRASP mode: the
     arm packs), the grasp is asked for 3 s later; the strategy reaches HOLD wrapped around the pole."""
     from controller.config import FirmwareConfig
+    from hil.experiments import Rig
     from hil.experiments.common import MS, S
-    from hil.experiments.rig import Rig, rc_frame
-    from hil.model_config import ModelConfig
-    from hil.plant_objects import contact_units, contact_wrap_deg
-    from hil.spiral import SpiralDesign
+    from hil.experiments.rig import rc_frame
+    from hil.sim.config import ModelConfig
+    from hil.sim.objects import contact_units, contact_wrap_deg
+    from hil.sim.spiral import SpiralDesign
     from protocol.dbus import Lever
     from protocol.messages import GraspState
 

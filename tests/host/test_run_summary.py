@@ -6,14 +6,16 @@ from __future__ import annotations
 import logging
 
 import pytest
-from link_peer import LinkPeer
-from realtime_guard import wait_for
 
-from host.cli import HostApp, HostOptions, main
-from host.model import CLI_CLIENT
+from host.app import HostApp
+from host.cli import main
+from host.options import HostOptions
+from host.panel.model import CLI_CLIENT
 from host.run_summary import RunSummary
 from protocol.dbus import Lever
 from protocol.messages import Event, EventKind, Mode, Phase, Telemetry
+from tests.support.link_peer import LinkPeer
+from tests.support.realtime_guard import wait_for
 
 
 def feed(summary: RunSummary, script: list[tuple[int, Mode, Phase]], step_us: int = 10_000) -> None:

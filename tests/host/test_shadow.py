@@ -1,7 +1,7 @@
 """host.shadow: the shadow plant that poses the arm from a real board's measured motor currents.
 
 Synthetic ``Telemetry`` frames stand in for the board (a unit-test fake input); the plant is the real
-``hil.plant.Plant`` except where a counting stub makes the step bookkeeping exact.
+``hil.sim.plant.Plant`` except where a counting stub makes the step bookkeeping exact.
 """
 
 from __future__ import annotations
@@ -14,13 +14,14 @@ from typing import Any
 
 import numpy as np
 import pytest
-from link_peer import LinkPeer
-from realtime_guard import wait_for
 
-from host.cli import HostApp, HostOptions
-from host.model import PoseSource, UiModel
+from host.app import HostApp
+from host.options import HostOptions
+from host.panel.model import PoseSource, UiModel
 from host.shadow import ShadowConfig, ShadowPlant, ShadowState, reel_in_currents
 from protocol.messages import Message, SimPoses, Telemetry, TelemetryFlags
+from tests.support.link_peer import LinkPeer
+from tests.support.realtime_guard import wait_for
 
 FRAME_US = 10_000  # the board's telemetry period (100 Hz)
 
@@ -98,7 +99,7 @@ def test_constant_current_on_cable_1_bends_the_arm_toward_cable_1(
     tip0 = np.asarray(first.positions_m[-1])
     tip = np.asarray(last.positions_m[-1])
     assert abs(tip0[0] - base[0]) < 1e-6 and abs(tip0[1] - base[1]) < 1e-6  # hanging straight at first
-    # Cable 1 runs at azimuth 0 (hil.mjcf.cable_angles_rad): +x. The tip swings that way and rises.
+    # Cable 1 runs at azimuth 0 (hil.sim.mjcf.cable_angles_rad): +x. The tip swings that way and rises.
     side = np.array([math.cos(0.0), math.sin(0.0)])
     moved = tip[:2] - base[:2]
     assert float(moved @ side) > 0.02

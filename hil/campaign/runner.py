@@ -1,0 +1,385 @@
+"""Running a campaign: one run (:func:`run_one`, a pure function of a :class:`~hil.campaign.spec.Run`), the
+JSON-lines results file it streams into (:class:`ResultsFile`), and the executors that fan runs out:
+local processes (:func:`execute_local`, the default, no Ray needed) or Ray (:func:`execute_ray`: a local
+Ray, or a cluster by address; imported only then).
+
+Each executor yields rows as runs finish, in any order; a row carries its run's key, so the file and
+``--resume`` do not care about the order. The same run gives the same row (but its ``run_time_s``) on
+every executor: each run builds its own board from its inputs and seed, and shares nothing.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import signal
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import IO, Any
+
+from hil.campaign.spec import CampaignError, Run, build_design, build_firmware
+
+__all__ = [
+    "MAX_RETRIES_N",
+    "POLL_S",
+    "RAY_MISSING",
+    "ResultsFile",
+    "check_ray_address",
+    "execute_local",
+    "execute_ray",
+    "run_one",
+    "stable_row",
+]
+
+POLL_S = 0.5
+"""How often a waiting executor looks at the stop flag (Ctrl-C) [s]."""
+
+MAX_RETRIES_N = 3
+"""Default times a run whose worker died is started again before it is recorded as an error."""
+
+RunFn = Callable[[Run], dict[str, Any]]
+
+
+def run_one(run: Run) -> dict[str, Any]:
+    """Run one campaign run and return its results row (JSON-ready; NaN as null).
+
+    A run that raises is an ``error`` row with the message: one bad run costs that run only.
+    """
+    t0 = time.perf_counter()
+    try:
+        measured = _grasp(run) if run.inputs["kind"] == "grasp" else _scenario(run)
+        outcome = "success" if measured["success"] else "failure"
+        error = None
+    except Exception as exc:  # a run's failure is data: the campaign goes on
+        measured, outcome, error = {}, "error", f"{type(exc).__name__}: {exc}"
+    row: dict[str, Any] = {
+        "key": run.key,
+        "inputs": dict(run.inputs),
+        "outcome": outcome,
+        "measured": _clean(measured),
+        "run_time_s": round(time.perf_counter() - t0, 3),
+    }
+    if error is not None:
+        row["error"] = error
+    return row
+
+
+def _grasp(run: Run) -> dict[str, Any]:
+    from hil.experiments import GraspSetup, grasp_trial
+
+    i = run.inputs
+    design, model = build_design(i, physics="fine")
+    optional = {
+        "mass_kg": i.get("object.mass_kg"),
+        "length_m": i.get("object.length_m"),
+        "object_friction": i.get("object.friction"),
+        "strategy_on": i.get("controller.strategy_on"),
+        "contact_oracle": i.get("controller.contact_oracle"),
+    }
+    setup = GraspSetup(
+        x_m=i["object.x_m"],
+        z_m=i["object.z_m"],
+        diameter_m=i["object.diameter_m"],
+        firmware=build_firmware(i),
+        model=model,
+        seed=i["seed"],
+        **{k: v for k, v in optional.items() if v is not None},
+    )
+    out = grasp_trial(setup, design).as_dict()
+    del out["setup"]  # the row's inputs say it
+    return out
+
+
+def _scenario(run: Run) -> dict[str, Any]:
+    from hil.faults import Fault
+    from hil.scenarios import run_scenario
+
+    i = run.inputs
+    design, model = build_design(i)
+    faults = [Fault.parse(s) for s in i.get("scenario.faults", [])]
+    result = run_scenario(i["scenario.name"], seed=i["seed"], design=design, model=model, faults=faults)
+    out = result.as_dict()
+    for k in ("name", "seed"):
+        del out[k]
+    out["success"] = out.pop("passed")
+    return out
+
+
+def _clean(value: Any) -> Any:
+    """JSON has no NaN or infinity (null instead), no tuples, no numpy scalars."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    if hasattr(value, "item"):  # a numpy scalar
+        return _clean(value.item())
+    return value
+
+
+def stable_row(row: Mapping[str, Any]) -> dict[str, Any]:
+    """A row without what differs between executors and machines (its run time): what must be equal."""
+    return {k: v for k, v in row.items() if k != "run_time_s"}
+
+
+# ---------------------------------------------------------------------- the results file
+
+
+class ResultsFile:
+    """A JSON-lines results file, one row per finished run, appended and flushed to disk as each finishes.
+
+    Opening it for a resume reads the rows already there: a torn last line (the writer was killed in the
+    middle of it) is cut off, so the next row starts on a line of its own; other unreadable lines are
+    counted and left alone (never a crash on bad bytes).
+
+    Attributes:
+        done: the rows already in the file, by run key.
+        unreadable_n: lines that were not a row (a torn last line included).
+    """
+
+    def __init__(self, path: Path, *, resume: bool) -> None:
+        """Open ``path`` for appending rows.
+
+        Raises:
+            CampaignError: the file exists, is not empty and ``resume`` is False, or cannot be opened.
+        """
+        self.path = path
+        self.done: dict[str, dict[str, Any]] = {}
+        self.unreadable_n = 0
+        try:
+            exists = path.is_file() and path.stat().st_size > 0
+            if exists and not resume:
+                raise CampaignError(f"{path} already has results: --resume to go on with it, or remove it")
+            if exists:
+                self._read_and_repair()
+            self._out: IO[bytes] = path.open("ab")
+        except OSError as exc:
+            raise CampaignError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+    def _read_and_repair(self) -> None:
+        data = self.path.read_bytes()
+        end = data.rfind(b"\n") + 1
+        if end < len(data):  # a torn last line: cut it off, the run is simply not done
+            self.unreadable_n += 1
+            with self.path.open("r+b") as f:
+                f.truncate(end)
+        for line in data[:end].splitlines():
+            if not line.strip():
+                continue
+            try:
+                row = json.loads(line)
+            except (json.JSONDecodeError, UnicodeDecodeError):
+                self.unreadable_n += 1
+                continue
+            if isinstance(row, dict) and isinstance(row.get("key"), str):
+                self.done[row["key"]] = row
+            else:
+                self.unreadable_n += 1
+
+    def append(self, row: Mapping[str, Any]) -> None:
+        """Write one row as one line and push it to the disk (a kill now loses no finished run)."""
+        self._out.write(json.dumps(row, allow_nan=False, separators=(",", ":")).encode() + b"\n")
+        self._out.flush()
+        os.fsync(self._out.fileno())
+        self.done[row["key"]] = dict(row)
+
+    def close(self) -> None:
+        """Close the file."""
+        self._out.close()
+
+    def __enter__(self) -> ResultsFile:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+
+# ---------------------------------------------------------------------- executors
+
+
+def _ignore_ctrl_c() -> None:
+    """Workers leave Ctrl-C to the parent (a terminal sends it to the whole process group)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def execute_local(
+    runs: Sequence[Run],
+    jobs: int,
+    stop: threading.Event,
+    *,
+    fn: RunFn = run_one,
+    max_retries: int = MAX_RETRIES_N,
+) -> Iterator[dict[str, Any]]:
+    """Run ``runs`` over ``jobs`` local worker processes, yielding each row as it finishes.
+
+    At most ``2 * jobs`` runs are in flight. A worker that dies (killed, out of memory) breaks the whole
+    pool, and the pool cannot say which run killed it: the runs it held are started again one at a time
+    in a new pool, where a death is that run's own; a run whose worker died alone more than
+    ``max_retries`` times is an ``error`` row. Stops (terminating its workers) once ``stop`` is set.
+    """
+    todo = list(reversed(runs))  # popped from the end: the campaign's order
+    suspects: list[Run] = []  # in flight when a pool broke: run alone until cleared
+    tries: dict[str, int] = {}
+    while (todo or suspects) and not stop.is_set():
+        pool = ProcessPoolExecutor(max_workers=jobs, initializer=_ignore_ctrl_c)
+        running: dict[Future[dict[str, Any]], Run] = {}
+        busy = True
+        try:
+            while (todo or suspects or running) and not stop.is_set():
+                if suspects and not running:
+                    run = suspects.pop()
+                    running[pool.submit(fn, run)] = run
+                while todo and not suspects and len(running) < 2 * jobs:
+                    run = todo.pop()
+                    running[pool.submit(fn, run)] = run
+                finished, _ = wait(running, timeout=POLL_S, return_when=FIRST_COMPLETED)
+                lost: list[Run] = []
+                for fut in finished:
+                    run = running.pop(fut)
+                    try:
+                        yield fut.result()
+                    except BrokenProcessPool:
+                        lost.append(run)
+                if lost:
+                    lost.extend(running.values())  # the whole pool is gone with what it held
+                    running.clear()
+                    yield from _requeue(lost, suspects, tries, max_retries)
+                    break
+            busy = bool(running)
+        finally:
+            _stop_pool(pool, busy)
+
+
+def _requeue(
+    lost: list[Run], suspects: list[Run], tries: dict[str, int], max_retries: int
+) -> Iterator[dict[str, Any]]:
+    """Queue the runs a broken pool held to run alone; a run that was alone when it broke pays a try."""
+    if len(lost) > 1:
+        suspects.extend(lost)
+        return
+    run = lost[0]
+    tries[run.key] = tries.get(run.key, 0) + 1
+    if tries[run.key] > max_retries:
+        yield _lost_row(run, tries[run.key])
+    else:
+        suspects.append(run)
+
+
+def _stop_pool(pool: ProcessPoolExecutor, busy: bool) -> None:
+    """Shut ``pool`` down; ``busy`` (Ctrl-C, a broken pool): terminate its workers first.
+
+    ``ProcessPoolExecutor.shutdown`` lets running runs finish (seconds to minutes each), and Python 3.11
+    has no public call to stop them, hence its ``_processes``.
+    """
+    if busy:
+        for p in list((pool._processes or {}).values()):
+            if p.is_alive():
+                p.terminate()
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _lost_row(run: Run, attempts: int) -> dict[str, Any]:
+    return {
+        "key": run.key,
+        "inputs": dict(run.inputs),
+        "outcome": "error",
+        "measured": {},
+        "run_time_s": 0.0,
+        "error": f"worker lost {attempts} times",
+    }
+
+
+_CONNECT_TIMEOUT_S = 5.0
+"""How long ``--ray-address`` may take to accept a TCP connection [s]."""
+
+
+def check_ray_address(address: str) -> None:
+    """A ``HOST:PORT`` that takes no connection is one line now, not Ray's minute of retries and warnings.
+
+    Raises:
+        CampaignError: nothing listens there (other address forms, ``auto`` or ``ray://``, are Ray's).
+    """
+    if "://" in address or address == "auto":
+        return
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise CampaignError(
+            f"--ray-address wants HOST:PORT (what 'ray start --head' printed), got {address!r}"
+        )
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=_CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise CampaignError(f"cannot reach Ray at {address}: {exc.strerror or exc}") from None
+
+
+RAY_MISSING = "--ray and --ray-address need Ray: pip install 'spirob-teleop[ray]'"
+"""The one line a Ray campaign prints when Ray is not installed."""
+
+
+def execute_ray(
+    runs: Sequence[Run],
+    jobs: int,
+    stop: threading.Event,
+    *,
+    address: str | None = None,
+    max_retries: int = MAX_RETRIES_N,
+) -> Iterator[dict[str, Any]]:
+    """Run ``runs`` as Ray tasks, yielding each row as it finishes.
+
+    ``address`` None starts a local Ray of ``jobs`` CPUs on 127.0.0.1 without a dashboard, and stops it at
+    the end; otherwise joins the cluster at ``address`` (``ray start --head`` printed it). A task whose
+    worker dies is retried by Ray ``max_retries`` times, then recorded as an ``error`` row. At most twice
+    the cluster's CPUs are in flight; Ctrl-C (``stop``) cancels them.
+
+    Raises:
+        CampaignError: Ray is not installed, or the cluster cannot be reached.
+    """
+    try:
+        import ray
+        from ray.exceptions import RayError
+    except ImportError:
+        raise CampaignError(RAY_MISSING) from None
+    if address is not None:
+        check_ray_address(address)
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # a campaign phones nobody
+    try:
+        if address is None:
+            ray.init(
+                address="local",  # a new node, never a cluster another `ray start` left running here
+                num_cpus=jobs,
+                include_dashboard=False,
+                _node_ip_address="127.0.0.1",
+                logging_level=logging.WARNING,
+            )
+        else:
+            ray.init(address=address, logging_level=logging.WARNING)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise CampaignError(f"cannot start or join Ray at {address or 'a local node'}: {exc}") from None
+    try:
+        task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=False)(run_one)
+        cpus = max(1, int(ray.cluster_resources().get("CPU", jobs)))
+        todo = list(reversed(runs))
+        running: dict[Any, Run] = {}
+        while (todo or running) and not stop.is_set():
+            while todo and len(running) < 2 * cpus:
+                run = todo.pop()
+                running[task.remote(run)] = run
+            ready, _ = ray.wait(list(running), num_returns=1, timeout=POLL_S)
+            for ref in ready:
+                run = running.pop(ref)
+                try:
+                    yield ray.get(ref)
+                except RayError:  # the worker died more than max_retries times
+                    yield _lost_row(run, max_retries + 1)
+        for ref in running:
+            ray.cancel(ref, force=True)
+    finally:
+        ray.shutdown()
