@@ -28,7 +28,7 @@ from hil.campaign.spec import Campaign, CampaignError, Run, build_design, load_c
 from hil.campaign.summary import design_rates, success_maps
 from hil.cli.main import main
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PYTHON = sys.executable
 
 SCENARIO_CAMPAIGN = """
@@ -475,7 +475,7 @@ def test_a_sensitivity_variant_scales_its_parameter_and_a_bad_one_is_one_line() 
 
 
 def test_the_sensitivity_strategy_example_expands_to_its_stated_runs() -> None:
-    path = Path(__file__).resolve().parents[2] / "examples" / "campaign_sensitivity_strategy.toml"
+    path = Path(__file__).resolve().parents[3] / "examples" / "campaign_sensitivity_strategy.toml"
     runs = load_campaign(path, []).runs()
     assert len(runs) == 528  # 11 models x 2 arms x 12 placements x 2 seeds, as its comment says
     for run in runs[:: len(runs) // 11]:

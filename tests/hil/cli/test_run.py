@@ -109,7 +109,7 @@ def test_board_command_serves_and_stops(tmp_path: Path) -> None:
         capture_output=True,
         text=True,
         timeout=120,
-        cwd=Path(__file__).resolve().parents[2],
+        cwd=Path(__file__).resolve().parents[3],
     )
     assert proc.returncode == 0, proc.stderr
     assert "board link on socket://127.0.0.1:" in proc.stdout

@@ -28,7 +28,7 @@ from tests.support.mavproxy_proc import free_udp_port
 from tests.support.realtime_guard import scaled_s, timed_out
 
 pytestmark = pytest.mark.slow  # two `spirob-host` runs with the MuJoCo virtual board
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 D = mav.dialect()
 OUTPUT_N, GRAB_PWM, RELEASE_PWM, BAND_PWM = 9, 1900, 1100, 1500
 STALE_MS = 500

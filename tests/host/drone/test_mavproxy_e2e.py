@@ -21,7 +21,7 @@ from controller.config import PARAMS
 from tests.support.mavproxy_proc import MavProxy, free_udp_port
 
 pytestmark = pytest.mark.mavproxy
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture
