@@ -6,7 +6,7 @@ import argparse
 import re
 from pathlib import Path
 
-from controller.config import PARAMS
+from controller.params import PARAMS
 from hil.cli.main import build_parser as hil_parser
 from hil.scenarios import SCENARIOS
 from host.options import build_parser as host_parser

@@ -6,7 +6,7 @@ import pytest
 
 from controller.cables import CableMapper, MotorModel, TensionSlew
 from controller.commands import CommandServer, GraspAcks, Params
-from controller.config import PARAMS, FirmwareConfig
+from controller.config import FirmwareConfig
 from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
@@ -14,6 +14,7 @@ from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
 from controller.lengthhold import LengthHold
 from controller.modes import ModeSelector
+from controller.params import PARAMS
 from controller.rc import RcInput, ScriptedRcSource
 from controller.transport import MemoryTransport
 from protocol.dbus import Lever

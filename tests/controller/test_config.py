@@ -7,8 +7,6 @@ import dataclasses
 import pytest
 
 from controller.config import (
-    PARAM_FIELDS,
-    PARAMS,
     FailsafeConfig,
     FirmwareConfig,
     GraspConfig,
@@ -17,6 +15,7 @@ from controller.config import (
     MotorDriveConfig,
 )
 from controller.errors import ConfigError
+from controller.params import PARAM_FIELDS, PARAMS
 from protocol.messages import NAME_LEN
 
 
