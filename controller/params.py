@@ -108,7 +108,10 @@ def _end(end: float | str | None, unit: str) -> str:
 
 
 def _number(x: float) -> str:
-    return str(int(x)) if float(x).is_integer() and abs(x) < 1e15 else f"{x:g}"
+    """``100000``, ``0.004``, ``1e6``: whole numbers in full below a million, else ``:g`` without ``+0``."""
+    if float(x).is_integer() and abs(x) < 1e6:
+        return str(int(x))
+    return f"{x:g}".replace("e+0", "e").replace("e+", "e")
 
 
 @dataclass(frozen=True, slots=True)
@@ -144,9 +147,11 @@ class Param:
     runtime: Range | None = None
 
     def bounds_text(self) -> str:
-        """The static range as the error message says it (``0 or 1`` for a bool)."""
+        """The static range as an error message says it (``0 or 1`` for a bool)."""
         if self.kind is Kind.BOOL:
             return "0 or 1"
+        if self.kind in (Kind.INTS, Kind.FLOATS):
+            return "one value per motor"
         return (self.bounds or Range()).text(self.unit)
 
     def check_type(self, value: object) -> None:
