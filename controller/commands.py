@@ -14,7 +14,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from controller.cables import CableMapper
-from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig, runtime_refusal
+from controller.config import FirmwareConfig
 from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
@@ -22,6 +22,7 @@ from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
 from controller.lengthhold import LengthHold
 from controller.modes import GRASP_STICK_MIN, ModeSelector
+from controller.params import PARAM_FIELDS, PARAMS
 from controller.rc import LinkRcSource, RcInput, RcSource
 from protocol.dbus import Lever
 from protocol.link import LinkFrame
@@ -59,7 +60,8 @@ class Params:
 
     A refused value leaves the old one in force (the ``ParamValue`` answer carries it) and logs a PARAM
     event ``rejected: <why>``: a value :meth:`FirmwareConfig.validate` refuses, a hardware ceiling, or a
-    safety parameter (``SAFETY_PARAMS``) set outside SAFE (:func:`~controller.config.runtime_refusal`).
+    safety parameter (``controller.params.SAFETY_PARAMS``) set outside SAFE: the rule of
+    :meth:`~controller.config.FirmwareConfig.with_param`.
 
     Args:
         config: the start-up configuration.
@@ -91,16 +93,13 @@ class Params:
         """
         if name not in PARAM_FIELDS:
             raise ConfigError(f"unknown parameter {name!r}")
-        why = runtime_refusal(self.config, name, value, self._safe())
-        if why is None:
-            try:
-                new = self.config.with_param(name, value)
-            except ConfigError as exc:
-                why = str(exc)
-        self.refused = why
-        if why is not None:
-            self._events.push(now_us, EventKind.PARAM, PARAMS.index(name), value, f"rejected: {why}")
+        try:
+            new = self.config.with_param(name, value, safe=self._safe())
+        except ConfigError as exc:
+            self.refused = str(exc)
+            self._events.push(now_us, EventKind.PARAM, PARAMS.index(name), value, f"rejected: {exc}")
             return self.config.get_param(name)
+        self.refused = None
         self.config = new
         self._apply(new)
         now_value = new.get_param(name)

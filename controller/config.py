@@ -14,13 +14,16 @@ Facts behind the defaults:
 The configuration is nested by concern — :class:`MotorDriveConfig` (``motor``), :class:`MappingConfig`
 (``mapping``), :class:`FailsafeConfig` (``failsafe``), :class:`GraspConfig` (``grasp``),
 :class:`HoldConfig` (``hold``) — with the task periods at the top. Its flat form
-(:meth:`FirmwareConfig.from_dict` / :meth:`~FirmwareConfig.to_dict`, and the field behind each wire
-parameter in :data:`PARAM_FIELDS`) names every field by its own name, ``grasp_`` before the grasp
-section's (``grasp_pack_n`` is ``grasp.pack_n``) and ``hold_`` before the length-hold section's.
+(:meth:`FirmwareConfig.from_dict` / :meth:`~FirmwareConfig.to_dict`) names every field by its own name,
+``grasp_`` before the grasp section's (``grasp_pack_n`` is ``grasp.pack_n``) and ``hold_`` before the
+length-hold section's.
 
-Parameters listed in :data:`PARAMS` can be read and set at run time over the board link (``ParamSet``
-changes the firmware's runtime copy, validated; a rejected value is answered with the current one).
-Timing, timeouts and the cable geometry are not among them: they are safety facts, fixed at start-up.
+Every field is a row of the parameter table (:mod:`controller.params`): its default, type, unit and
+bounds are declared there once, and :meth:`FirmwareConfig.validate` checks them row by row; only the
+rules that tie one field to another are written out here. The rows with a wire name can be read and set
+at run time over the board link (``ParamSet`` goes through :meth:`FirmwareConfig.with_param`: validated,
+a rejected value is answered with the current one). Timing, most timeouts and the cable geometry are
+not among them: they are fixed at start-up.
 """
 
 from __future__ import annotations
@@ -32,37 +35,27 @@ from dataclasses import dataclass
 from typing import Any
 
 from controller.errors import ConfigError
-from protocol.c610 import CURRENT_RAW_MAX, M2006_GEAR_RATIO, RAW_PER_AMP
+from controller.params import FIELD_ROWS, PARAM_TABLE, WIRE_ROWS, default
+from protocol.c610 import RAW_PER_AMP
 
 __all__ = [
-    "C610_MAX_A",
     "CONTROL_PERIOD_US",
     "M2006_NO_LOAD_RPM",
-    "M2006_TORQUE_K_RANGE",
     "MOTOR_COUNT",
-    "PARAMS",
-    "PARAM_FIELDS",
-    "SAFETY_PARAMS",
     "FailsafeConfig",
     "FirmwareConfig",
     "GraspConfig",
     "HoldConfig",
     "MappingConfig",
     "MotorDriveConfig",
-    "runtime_refusal",
 ]
 
 MOTOR_COUNT = 3
 """Three cables, three M2006 motors on C610 ids 1..3 (CAN feedback 0x201-0x203)."""
 
-CONTROL_PERIOD_US = 1_000
+CONTROL_PERIOD_US: int = default("control_period_us")
 """The control tick (1 kHz, the C-board's chassis/gimbal loop rate): the default of every 1 ms period."""
 
-C610_MAX_A = CURRENT_RAW_MAX / RAW_PER_AMP
-"""The largest current a C610 takes (-10000..10000 raw = -10..10 A; DJI's C610 manual: 10 A max)."""
-M2006_TORQUE_K_RANGE = (0.1, 0.5)
-"""Torque constants (N·m/A, output shaft) a ``ParamSet`` may give: around DJI's two M2006 P36 figures,
-0.18 (spec sheet) and about 0.33 (1 N·m rated at 3 A). A smaller value asks more current per newton."""
 M2006_NO_LOAD_RPM = 500.0
 """M2006 P36 no-load output speed (DJI's figure): no cable moves faster than this times the spool's
 circumference, so a pay-in governor above it is no governor (a ``ParamSet`` ceiling)."""
@@ -89,13 +82,13 @@ class MotorDriveConfig:
             30 s) peak at 242 N instead of 689 N; the 45 cm arm's 3 A step meets the pen 21 ms later.
     """
 
-    spool_radius_m: float = 0.010
-    torque_constant_nm_per_a: float = 0.18  # DJI M2006 P36 spec sheet (disputed: see module notes)
-    gear_ratio: float = float(M2006_GEAR_RATIO)
-    current_limit_a: float = 3.0
-    motor_signs: tuple[int, int, int] = (1, 1, 1)
-    speed_filter_tau_us: int = 20_000
-    payin_limit_m_per_s: float = 0.1
+    spool_radius_m: float = default("motor.spool_radius_m")
+    torque_constant_nm_per_a: float = default("motor.torque_constant_nm_per_a")
+    gear_ratio: float = default("motor.gear_ratio")
+    current_limit_a: float = default("motor.current_limit_a")
+    motor_signs: tuple[int, int, int] = default("motor.motor_signs")
+    speed_filter_tau_us: int = default("motor.speed_filter_tau_us")
+    payin_limit_m_per_s: float = default("motor.payin_limit_m_per_s")
 
     @property
     def current_limit_raw(self) -> int:
@@ -117,13 +110,13 @@ class MappingConfig:
         stick_deadband: stick counts (of ±660) treated as centred.
     """
 
-    cable_angles_deg: tuple[float, float, float] = (0.0, 120.0, 240.0)
-    pretension_n: float = 0.5
-    common_max_n: float = 8.0
-    bend_max_n: float = 8.0
-    tension_max_n: float = 20.0
-    slew_n_per_s: float = 50.0
-    stick_deadband: int = 20
+    cable_angles_deg: tuple[float, float, float] = default("mapping.cable_angles_deg")
+    pretension_n: float = default("mapping.pretension_n")
+    common_max_n: float = default("mapping.common_max_n")
+    bend_max_n: float = default("mapping.bend_max_n")
+    tension_max_n: float = default("mapping.tension_max_n")
+    slew_n_per_s: float = default("mapping.slew_n_per_s")
+    stick_deadband: int = default("mapping.stick_deadband")
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,10 +130,10 @@ class FailsafeConfig:
         host_required: start with the host heartbeat required (also settable by command/parameter).
     """
 
-    rc_timeout_us: int = 30_000
-    motor_timeout_us: int = 10_000
-    host_timeout_us: int = 500_000
-    host_required: bool = False
+    rc_timeout_us: int = default("failsafe.rc_timeout_us")
+    motor_timeout_us: int = default("failsafe.motor_timeout_us")
+    host_timeout_us: int = default("failsafe.host_timeout_us")
+    host_required: bool = default("failsafe.host_required")
 
 
 @dataclass(frozen=True, slots=True)
@@ -201,29 +194,29 @@ class GraspConfig:
             their tension: a grasped load stays still instead of sagging until the tension balances it.
     """
 
-    strategy_on: bool = True
-    direction_deg: float = 0.0
-    pack_n: float = 18.0
-    pack_rate_n_per_s: float = 12.0
-    reach_n: float = 0.0
-    reach_rate_n_per_s: float = 10.0
-    wrap_n: float = 15.0
-    wrap_rate_n_per_s: float = 8.0
-    takeup_n: float = 1.5
-    takeup_speed_m_per_s: float = 0.08
-    release_rate_n_per_s: float = 8.0
-    contact_speed_m_per_s: float = 0.004
-    contact_slow_ratio: float = 0.7
-    contact_dwell_us: int = 60_000
-    contact_grace_us: int = 200_000
-    contact_min_tension_n: float = 0.3
-    contact_decel_m_per_s2: float = 1.0  # the free arm slows at up to 0.66 m/s² after the ramp (prototype)
-    contact_decel_tau_us: int = 10_000
-    contact_wrap_m_per_s: float = 0.0
-    contact_rest_m: float = 0.06
-    reach_timeout_us: int = 4_000_000
-    release_dwell_us: int = 500_000
-    hold_length: bool = False
+    strategy_on: bool = default("grasp.strategy_on")
+    direction_deg: float = default("grasp.direction_deg")
+    pack_n: float = default("grasp.pack_n")
+    pack_rate_n_per_s: float = default("grasp.pack_rate_n_per_s")
+    reach_n: float = default("grasp.reach_n")
+    reach_rate_n_per_s: float = default("grasp.reach_rate_n_per_s")
+    wrap_n: float = default("grasp.wrap_n")
+    wrap_rate_n_per_s: float = default("grasp.wrap_rate_n_per_s")
+    takeup_n: float = default("grasp.takeup_n")
+    takeup_speed_m_per_s: float = default("grasp.takeup_speed_m_per_s")
+    release_rate_n_per_s: float = default("grasp.release_rate_n_per_s")
+    contact_speed_m_per_s: float = default("grasp.contact_speed_m_per_s")
+    contact_slow_ratio: float = default("grasp.contact_slow_ratio")
+    contact_dwell_us: int = default("grasp.contact_dwell_us")
+    contact_grace_us: int = default("grasp.contact_grace_us")
+    contact_min_tension_n: float = default("grasp.contact_min_tension_n")
+    contact_decel_m_per_s2: float = default("grasp.contact_decel_m_per_s2")
+    contact_decel_tau_us: int = default("grasp.contact_decel_tau_us")
+    contact_wrap_m_per_s: float = default("grasp.contact_wrap_m_per_s")
+    contact_rest_m: float = default("grasp.contact_rest_m")
+    reach_timeout_us: int = default("grasp.reach_timeout_us")
+    release_dwell_us: int = default("grasp.release_dwell_us")
+    hold_length: bool = default("grasp.hold_length")
 
 
 @dataclass(frozen=True, slots=True)
@@ -251,14 +244,14 @@ class HoldConfig:
             [pretension_n, tension_max_n] and then to the current limit).
     """
 
-    pos_kp_per_s: float = 20.0
-    pos_ki_per_s2: float = 0.0
-    pos_kd: float = 0.0
-    pos_max_m_per_s: float = 0.2
-    pos_imax_m_per_s: float = 0.05
-    speed_kp_n_s_per_m: float = 150.0
-    speed_ki_n_per_m: float = 1500.0
-    speed_imax_n: float = 20.0
+    pos_kp_per_s: float = default("hold.pos_kp_per_s")
+    pos_ki_per_s2: float = default("hold.pos_ki_per_s2")
+    pos_kd: float = default("hold.pos_kd")
+    pos_max_m_per_s: float = default("hold.pos_max_m_per_s")
+    pos_imax_m_per_s: float = default("hold.pos_imax_m_per_s")
+    speed_kp_n_s_per_m: float = default("hold.speed_kp_n_s_per_m")
+    speed_ki_n_per_m: float = default("hold.speed_ki_n_per_m")
+    speed_imax_n: float = default("hold.speed_imax_n")
 
 
 _SECTIONS: dict[str, type[Any]] = {
@@ -268,7 +261,6 @@ _SECTIONS: dict[str, type[Any]] = {
     "grasp": GraspConfig,
     "hold": HoldConfig,
 }
-_PREFIX = {"motor": "", "mapping": "", "failsafe": "", "grasp": "grasp_", "hold": "hold_"}
 
 
 @dataclass(frozen=True, slots=True)
@@ -290,13 +282,13 @@ class FirmwareConfig:
         hold: the length-hold cascade (:class:`HoldConfig`).
     """
 
-    control_period_us: int = CONTROL_PERIOD_US
-    link_period_us: int = CONTROL_PERIOD_US
-    detect_period_us: int = 10_000
-    telemetry_period_us: int = 10_000
-    status_period_us: int = 500_000
-    poses_period_us: int = 20_000
-    event_queue_len: int = 64
+    control_period_us: int = default("control_period_us")
+    link_period_us: int = default("link_period_us")
+    detect_period_us: int = default("detect_period_us")
+    telemetry_period_us: int = default("telemetry_period_us")
+    status_period_us: int = default("status_period_us")
+    poses_period_us: int = default("poses_period_us")
+    event_queue_len: int = default("event_queue_len")
     motor: MotorDriveConfig = MotorDriveConfig()
     mapping: MappingConfig = MappingConfig()
     failsafe: FailsafeConfig = FailsafeConfig()
@@ -307,18 +299,21 @@ class FirmwareConfig:
         self.validate()
 
     def validate(self) -> None:
-        """Check every value and their relations (each named by its flat name).
+        """Check every value against its row of the parameter table, then the rules between fields.
+
+        Each value is named by its flat name.
 
         Raises:
             ConfigError: (a ``ValueError``) naming the first bad field and why.
         """
-        for name, section in _TOP.items():
+        for name, section in _SECTIONS.items():
             _require(name, isinstance(getattr(self, name), section), f"expected a {section.__name__}")
         v = self._flat_values()
-        for name, value in v.items():
-            _check_type(name, value)
-        for name in ("control_period_us", "link_period_us", "detect_period_us", "telemetry_period_us"):
-            _require(name, 100 <= v[name] <= 1_000_000, "must be 100..1000000 µs")
+        for row in PARAM_TABLE:
+            row.check_type(v[row.name])
+        for row in PARAM_TABLE:
+            row.check_bounds(v)
+        # Rules between fields.
         control_us = self.control_period_us
         for name in ("detect_period_us", "telemetry_period_us", "status_period_us", "poses_period_us"):
             _require(
@@ -326,84 +321,21 @@ class FirmwareConfig:
                 v[name] % control_us == 0,
                 f"must be a whole number of control periods ({control_us} µs)",
             )
-        _require("status_period_us", 1_000 <= v["status_period_us"] <= 10_000_000, "must be 1 ms..10 s")
-        _require("poses_period_us", 1_000 <= v["poses_period_us"] <= 1_000_000, "must be 1 ms..1 s")
         for name in ("rc_timeout_us", "motor_timeout_us"):
-            _require(name, 2 * control_us <= v[name] <= 1_000_000, "must be 2 ticks..1 s")
-        _require("host_timeout_us", 10_000 <= v["host_timeout_us"] <= 60_000_000, "must be 10 ms..60 s")
+            _require(name, v[name] >= 2 * control_us, f"must be at least 2 control periods ({control_us} µs)")
         _require("cable_angles_deg", len(v["cable_angles_deg"]) == MOTOR_COUNT, f"needs {MOTOR_COUNT} angles")
         _require("motor_signs", len(v["motor_signs"]) == MOTOR_COUNT, f"needs {MOTOR_COUNT} signs")
         _require("motor_signs", all(s in (-1, 1) for s in v["motor_signs"]), "each must be +1 or -1")
-        _require("spool_radius_m", 0.001 <= v["spool_radius_m"] <= 0.1, "must be 1..100 mm")
-        _require("torque_constant_nm_per_a", 0.01 <= v["torque_constant_nm_per_a"] <= 5.0, "must be 0.01..5")
-        _require("gear_ratio", 1.0 <= v["gear_ratio"] <= 1000.0, "must be 1..1000")
-        _require("current_limit_a", 0.0 < v["current_limit_a"] <= C610_MAX_A, "must be in (0, 10] A (C610)")
-        tension_max_n = v["tension_max_n"]
-        _require("pretension_n", 0.0 <= v["pretension_n"] <= tension_max_n, "must be 0..tension_max_n")
-        _require("tension_max_n", 0.0 < tension_max_n <= 1000.0, "must be in (0, 1000] N")
-        for name in (
-            "common_max_n",
-            "bend_max_n",
-            "grasp_pack_n",
-            "grasp_reach_n",
-            "grasp_wrap_n",
-            "grasp_takeup_n",
-        ):
-            _require(name, 0.0 <= v[name] <= tension_max_n, "must be 0..tension_max_n")
         _require(
             "grasp_reach_n",
             v["grasp_reach_n"] < 0.5 * v["grasp_pack_n"],
             "must be below half of grasp_pack_n",
         )
-        for name in (
-            "slew_n_per_s",
-            "grasp_pack_rate_n_per_s",
-            "grasp_reach_rate_n_per_s",
-            "grasp_wrap_rate_n_per_s",
-            "grasp_release_rate_n_per_s",
-        ):
-            _require(name, 0.0 < v[name] <= 100_000.0, "must be in (0, 100000] N/s")
-        _require("stick_deadband", 0 <= v["stick_deadband"] < 660, "must be 0..659 counts")
-        for name in ("grasp_contact_speed_m_per_s", "grasp_takeup_speed_m_per_s"):
-            _require(name, 0.0 < v[name] <= 10.0, "must be (0, 10]")
-        _require("grasp_contact_slow_ratio", 0.0 <= v["grasp_contact_slow_ratio"] < 1.0, "must be in [0, 1)")
-        _require("grasp_contact_min_tension_n", v["grasp_contact_min_tension_n"] >= 0.0, "must be >= 0")
-        _require(
-            "grasp_contact_decel_m_per_s2", 0.0 <= v["grasp_contact_decel_m_per_s2"] <= 1e4, "must be 0..1e4"
-        )
-        _require(
-            "grasp_contact_decel_tau_us", 0 <= v["grasp_contact_decel_tau_us"] <= 1_000_000, "must be 0..1 s"
-        )
-        _require(
-            "grasp_contact_wrap_m_per_s", 0.0 <= v["grasp_contact_wrap_m_per_s"] <= 10.0, "must be 0..10"
-        )
-        _require("grasp_contact_rest_m", 0.0 <= v["grasp_contact_rest_m"] <= 10.0, "must be 0..10 m")
-        for name in (
-            "grasp_contact_dwell_us",
-            "grasp_contact_grace_us",
-            "grasp_reach_timeout_us",
-            "grasp_release_dwell_us",
-        ):
-            _require(name, 0 <= v[name] <= 600_000_000, "must be 0..600 s")
         _require(
             "grasp_reach_timeout_us",
             v["grasp_reach_timeout_us"] > v["grasp_contact_grace_us"],
             "must exceed grasp_contact_grace_us",
         )
-        for name in (
-            "hold_pos_kp_per_s",
-            "hold_pos_ki_per_s2",
-            "hold_pos_kd",
-            "hold_speed_kp_n_s_per_m",
-            "hold_speed_ki_n_per_m",
-        ):
-            _require(name, 0.0 <= v[name] <= 1e6, "must be 0..1e6")
-        for name in ("hold_pos_max_m_per_s", "hold_pos_imax_m_per_s"):
-            _require(name, 0.0 <= v[name] <= 10.0, "must be 0..10 m/s")
-        _require("hold_speed_imax_n", 0.0 <= v["hold_speed_imax_n"] <= 1000.0, "must be 0..1000 N")
-        _require("speed_filter_tau_us", 0 <= v["speed_filter_tau_us"] <= 10_000_000, "must be 0..10 s")
-        _require("payin_limit_m_per_s", 0.0 < v["payin_limit_m_per_s"] <= 10.0, "must be in (0, 10] m/s")
-        _require("event_queue_len", 1 <= v["event_queue_len"] <= 4096, "must be 1..4096")
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> FirmwareConfig:
@@ -415,10 +347,10 @@ class FirmwareConfig:
         Raises:
             ConfigError: an unknown key, a value of the wrong type, or a value out of range.
         """
-        unknown = sorted(set(values) - set(_DEFAULTS))
+        unknown = sorted(set(values) - set(FIELD_ROWS))
         if unknown:
             raise ConfigError(f"unknown configuration key(s): {', '.join(unknown)}")
-        return _DEFAULT.replaced(**{k: _coerce(k, v) for k, v in values.items()})
+        return _DEFAULT.replaced(**{k: FIELD_ROWS[k].coerce(v) for k, v in values.items()})
 
     def to_dict(self) -> dict[str, Any]:
         """Every field by its flat name (tuples as lists), the inverse of :meth:`from_dict`."""
@@ -452,130 +384,66 @@ class FirmwareConfig:
         return dataclasses.replace(self, **top)
 
     def get_param(self, name: str) -> float:
-        """The value of the runtime parameter ``name`` (a wire name in :data:`PARAMS`) as a float.
+        """The value of the run-time parameter ``name`` (a wire name in ``controller.params.PARAMS``).
 
         Bools read as 0.0 / 1.0.
 
         Raises:
-            ConfigError: ``name`` is not in :data:`PARAMS`.
+            ConfigError: ``name`` is not a run-time parameter.
         """
-        flat = PARAM_FIELDS.get(name)
-        if flat is None:
+        row = WIRE_ROWS.get(name)
+        if row is None:
             raise ConfigError(f"unknown parameter {name!r}")
-        section, field = _FLAT[flat]
+        section, field = _FLAT[row.name]
         return float(getattr(getattr(self, section) if section else self, field))
 
-    def with_param(self, name: str, value: float) -> FirmwareConfig:
-        """A copy with the runtime parameter ``name`` (wire name) set to ``value``, validated.
+    def with_param(self, name: str, value: float, *, safe: bool = True) -> FirmwareConfig:
+        """A copy with the run-time parameter ``name`` (wire name) set to ``value``: a ``ParamSet``'s rule.
+
+        The board applies it to every ``ParamSet`` and the host to check a value before sending it, so
+        both refuse the same values with the same words. Beyond :meth:`validate`: a safety parameter
+        changes only in SAFE, a value must meet its row's run-time range (a hardware figure), and the
+        pay-in governor must stay at or below the M2006's no-load cable speed on the configured spool.
+
+        Args:
+            name: wire name.
+            value: the value as it travels (float32 on the wire).
+            safe: the arm is in SAFE (zero current); the host, which does not decide that, passes True
+                and leaves the SAFE-only refusal to the board.
 
         Raises:
-            ConfigError: unknown parameter, a value of the wrong kind (non-integral for an int, not 0/1
-                for a bool, not finite) or one that fails :meth:`validate`.
+            ConfigError: unknown parameter, a safety parameter outside SAFE (``safety parameter: only in
+                SAFE``), a value of the wrong kind (non-integral for an int, not 0/1 for a bool, not
+                finite), or one outside a range.
         """
-        flat = PARAM_FIELDS.get(name)
-        if flat is None:
+        row = WIRE_ROWS.get(name)
+        if row is None:
             raise ConfigError(f"unknown parameter {name!r}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{name}: value must be finite, got {value}")
-        kind = type(_DEFAULTS[flat])
-        new: Any
-        if kind is bool:
-            if value not in (0.0, 1.0):
-                raise ConfigError(f"{name}: must be 0 or 1, got {value}")
-            new = bool(value)
-        elif kind is int:
-            if value != int(value):
-                raise ConfigError(f"{name}: must be an integer, got {value}")
-            new = int(value)
-        else:
-            new = float(value)
-        return self.replaced(**{flat: new})
+        if row.safety and not safe:
+            raise ConfigError("safety parameter: only in SAFE")
+        new = row.from_wire(value)
+        if row.runtime is not None and not row.runtime.contains(new, {}):
+            raise ConfigError(f"{row.name}: {row.runtime.text(row.unit)}")
+        if row.name == "payin_limit_m_per_s":
+            top_m_s = M2006_NO_LOAD_RPM / 60.0 * 2.0 * math.pi * self.motor.spool_radius_m
+            if new > top_m_s:
+                raise ConfigError(
+                    f"{row.name}: must be <= {top_m_s:.3g} m/s (M2006 no-load speed on the spool)"
+                )
+        return self.replaced(**{row.name: new})
 
+    def with_board_values(self, values: Mapping[str, float]) -> FirmwareConfig:
+        """A copy with the run-time parameters a board reported (wire name -> value), validated together.
 
-PARAM_FIELDS: dict[str, str] = {
-    "HOST_TIMEOUT_US": "host_timeout_us",
-    "HOST_REQUIRED": "host_required",
-    "SPOOL_RADIUS_M": "spool_radius_m",
-    "TORQUE_K_NM_A": "torque_constant_nm_per_a",
-    "CURRENT_LIMIT_A": "current_limit_a",
-    "PRETENSION_N": "pretension_n",
-    "COMMON_MAX_N": "common_max_n",
-    "BEND_MAX_N": "bend_max_n",
-    "TENSION_MAX_N": "tension_max_n",
-    "SLEW_N_S": "slew_n_per_s",
-    "STICK_DEADBAND": "stick_deadband",
-    "GRASP_STRATEGY": "grasp_strategy_on",
-    "GRASP_DIR_DEG": "grasp_direction_deg",
-    "GRASP_PACK_N": "grasp_pack_n",
-    "GRASP_REACH_N": "grasp_reach_n",
-    "GRASP_REACH_N_S": "grasp_reach_rate_n_per_s",
-    "GRASP_WRAP_N": "grasp_wrap_n",
-    "GRASP_WRAP_N_S": "grasp_wrap_rate_n_per_s",
-    "GRASP_REL_N_S": "grasp_release_rate_n_per_s",
-    "GRASP_STALL_M_S": "grasp_contact_speed_m_per_s",
-    "GRASP_DWELL_US": "grasp_contact_dwell_us",
-    "GRASP_GRACE_US": "grasp_contact_grace_us",
-    "GRASP_MIN_T_N": "grasp_contact_min_tension_n",
-    "GRASP_TIMEOUT_US": "grasp_reach_timeout_us",
-    "GRASP_REL_DW_US": "grasp_release_dwell_us",
-    "SPEED_TAU_US": "speed_filter_tau_us",
-    "GRASP_PACK_N_S": "grasp_pack_rate_n_per_s",
-    "GRASP_SLOW_RATIO": "grasp_contact_slow_ratio",
-    "GRASP_TAKEUP_N": "grasp_takeup_n",
-    "GRASP_TAKEUP_M_S": "grasp_takeup_speed_m_per_s",
-    "GRASP_HOLD_LEN": "grasp_hold_length",
-    "HOLD_POS_KP": "hold_pos_kp_per_s",
-    "HOLD_POS_KI": "hold_pos_ki_per_s2",
-    "HOLD_POS_KD": "hold_pos_kd",
-    "HOLD_POS_MAX_M_S": "hold_pos_max_m_per_s",
-    "HOLD_POS_IMAX": "hold_pos_imax_m_per_s",
-    "HOLD_SPD_KP": "hold_speed_kp_n_s_per_m",
-    "HOLD_SPD_KI": "hold_speed_ki_n_per_m",
-    "HOLD_SPD_IMAX_N": "hold_speed_imax_n",
-    "GRASP_DECEL_M_S2": "grasp_contact_decel_m_per_s2",
-    "GRASP_DECEL_TAU": "grasp_contact_decel_tau_us",
-    "GRASP_WRAP_M_S": "grasp_contact_wrap_m_per_s",
-    "PAYIN_MAX_M_S": "payin_limit_m_per_s",
-    "GRASP_REST_M": "grasp_contact_rest_m",
-}
-"""Wire name (at most 16 ASCII characters, MAVLink ``param_id`` style) -> flat ``FirmwareConfig`` field."""
+        Names that are not run-time parameters are skipped; no run-time rule applies (the board took
+        these values already).
 
-PARAMS: tuple[str, ...] = tuple(PARAM_FIELDS)
-"""Wire names of the parameters readable and settable over the board link, in index order."""
-
-SAFETY_PARAMS: frozenset[str] = frozenset(
-    {
-        "CURRENT_LIMIT_A",
-        "TENSION_MAX_N",
-        "SPOOL_RADIUS_M",
-        "TORQUE_K_NM_A",
-        "HOST_TIMEOUT_US",
-        "HOST_REQUIRED",
-        "PAYIN_MAX_M_S",
-    }
-)
-"""Parameters that decide how much current flows for a tension, how fast a cable may reel in, or when
-the failsafe acts (the host timeout and whether a host is required at all): a ``ParamSet`` or a
-``REQUIRE_HOST`` command changes them only in SAFE (zero current), never while the arm moves."""
-
-
-def runtime_refusal(config: FirmwareConfig, name: str, value: float, safe: bool) -> str | None:
-    """Why a run-time ``ParamSet`` of ``name`` (wire name) to ``value`` is refused, or None.
-
-    On top of :meth:`FirmwareConfig.validate` (which also bounds the current limit by the C610's 10 A):
-    safety parameters only in SAFE, the torque constant within :data:`M2006_TORQUE_K_RANGE`, the pay-in
-    governor at most the M2006's no-load cable speed on the configured spool.
-    """
-    if name in SAFETY_PARAMS and not safe:
-        return "safety parameter: only in SAFE"
-    if name == "TORQUE_K_NM_A" and not M2006_TORQUE_K_RANGE[0] <= value <= M2006_TORQUE_K_RANGE[1]:
-        lo, hi = M2006_TORQUE_K_RANGE
-        return f"must be {lo:g}..{hi:g} N·m/A (M2006 P36)"
-    if name == "PAYIN_MAX_M_S":
-        top_m_s = M2006_NO_LOAD_RPM / 60.0 * 2.0 * math.pi * config.motor.spool_radius_m
-        if value > top_m_s:
-            return f"must be <= {top_m_s:.3g} m/s (M2006 no-load speed on the spool)"
-    return None
+        Raises:
+            ConfigError: a value of the wrong kind, or values that fail :meth:`validate` together.
+        """
+        return self.replaced(
+            **{WIRE_ROWS[n].name: WIRE_ROWS[n].from_wire(v) for n, v in values.items() if n in WIRE_ROWS}
+        )
 
 
 def _require(name: str, ok: bool, why: str) -> None:
@@ -583,92 +451,11 @@ def _require(name: str, ok: bool, why: str) -> None:
         raise ConfigError(f"{name}: {why}")
 
 
-def _check_type(name: str, value: object) -> None:
-    default = _DEFAULTS[name]
-    if isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(default, float):
-        ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
-    else:  # tuple
-        elem = type(default[0])
-        ok = isinstance(value, tuple) and all(
-            isinstance(v, int | float) and not isinstance(v, bool) and (elem is float or isinstance(v, int))
-            for v in value
-        )
-    if not ok:
-        raise ConfigError(f"{name}: expected {type(default).__name__} like {default!r}, got {value!r}")
-
-
-def _coerce(name: str, value: Any) -> Any:
-    default = _DEFAULTS[name]
-    if isinstance(value, list):
-        value = tuple(value)
-    if isinstance(default, bool):
-        return value
-    if isinstance(default, int) and isinstance(value, float) and value.is_integer():
-        return int(value)
-    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    if isinstance(default, tuple) and isinstance(default[0], float) and isinstance(value, tuple):
-        return tuple(float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value)
-    return value
-
-
-_TOP: dict[str, type[Any]] = dict(_SECTIONS)
-"""Top-level fields that are sections, with their types."""
-
-_FLAT_ORDER = (
-    "control_period_us",
-    "link_period_us",
-    "detect_period_us",
-    "telemetry_period_us",
-    "status_period_us",
-    "poses_period_us",
-    "rc_timeout_us",
-    "motor_timeout_us",
-    "host_timeout_us",
-    "host_required",
-    "cable_angles_deg",
-    "motor_signs",
-    "spool_radius_m",
-    "torque_constant_nm_per_a",
-    "gear_ratio",
-    "current_limit_a",
-    "pretension_n",
-    "common_max_n",
-    "bend_max_n",
-    "tension_max_n",
-    "slew_n_per_s",
-    "stick_deadband",
-    *(f"grasp_{f.name}" for f in dataclasses.fields(GraspConfig)),
-    "speed_filter_tau_us",
-    "payin_limit_m_per_s",
-    "event_queue_len",
-    *(f"hold_{f.name}" for f in dataclasses.fields(HoldConfig)),
-)
-"""The flat form's key order: the one it had before the nesting (recorded configurations keep their bytes)."""
-
 _FLAT: dict[str, tuple[str | None, str]] = {
-    **{f.name: (None, f.name) for f in dataclasses.fields(FirmwareConfig) if f.name not in _SECTIONS},
-    **{
-        _PREFIX[section] + f.name: (section, f.name)
-        for section, cls in _SECTIONS.items()
-        for f in dataclasses.fields(cls)
-    },
+    row.name: (section or None, field)
+    for row in PARAM_TABLE
+    for section, _, field in [row.field.rpartition(".")]
 }
-_FLAT = {flat: _FLAT[flat] for flat in _FLAT_ORDER}
-"""Flat name -> (section or None for a top-level field, field name in it)."""
-
-_DEFAULTS: dict[str, Any] = {
-    flat: next(
-        f.default
-        for f in dataclasses.fields(FirmwareConfig if section is None else _SECTIONS[section])
-        if f.name == field
-    )
-    for flat, (section, field) in _FLAT.items()
-}
-"""Flat name -> default value (read from the classes: validating an instance needs this table)."""
+"""Flat name -> (section or None for a top-level field, field name in it), in the table's order."""
 
 _DEFAULT = FirmwareConfig()

@@ -333,7 +333,7 @@ class Firmware:
     def set_param(self, now_us: int, name: str, value: float) -> float:
         """Set a runtime parameter (wire name) if valid; return the value in force afterwards.
 
-        Safety parameters (``controller.config.SAFETY_PARAMS``) change only in SAFE, as by ``ParamSet``.
+        Safety parameters (``controller.params.SAFETY_PARAMS``) change only in SAFE, as by ``ParamSet``.
 
         Raises:
             ConfigError: unknown name (an invalid value is not an error: the old value stays).

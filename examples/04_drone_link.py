@@ -14,13 +14,14 @@ With ``--url`` it just runs the link for a while so you can attach MAVProxy or Q
 
 The demo exits 1 with one line when a step does not happen (a message missing for 5 s, the parameter not
 taken, the grab not ACCEPTED). The board here is a few lines of script standing in for the firmware
-(armed, GRASP mode, a grasp that reaches, wraps and holds); ``spirob-host --mavlink URL`` wires the same
-link to the real board.
+(armed, GRASP mode, the firmware's parameters checked by the firmware's own rule, a grasp that reaches,
+wraps and holds); ``spirob-host --mavlink URL`` wires the same link to the real board.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import socket
 import statistics
 import sys
@@ -29,6 +30,9 @@ import threading
 import time
 from pathlib import Path
 
+from controller.config import FirmwareConfig
+from controller.errors import ConfigError
+from controller.params import WIRE_ROWS
 from host.drone.config import DroneLinkConfig
 from host.drone.link import DroneLink
 from protocol import mavlink as mav
@@ -38,10 +42,11 @@ from pymavlink import mavutil  # after protocol.mavlink: MAVLINK20=1 is set  # i
 
 
 class ScriptedBoard:
-    """Stands in for the board: 100 Hz telemetry, a parameter table, a grasp that ends in HOLD."""
+    """Stands in for the board: 100 Hz telemetry, the firmware's parameters, a grasp that ends in HOLD."""
 
     def __init__(self) -> None:
-        self.params = {"pretension_n": 0.5, "tension_max_n": 20.0, "grasp_wrap_n": 10.0}
+        self.config = FirmwareConfig()
+        self.params = {name: self.config.get_param(name) for name in WIRE_ROWS}  # the firmware's, in order
         self.grasp = bm.GraspState.IDLE
         self.ticks = 0
         self.sink = None  # set to DroneLink.on_board_message
@@ -54,8 +59,10 @@ class ScriptedBoard:
         if isinstance(msg, bm.ParamRequest):
             replies = [bm.ParamValue(i, len(names), n, self.params[n]) for i, n in enumerate(names)]
         elif isinstance(msg, bm.ParamSet) and msg.name in self.params:
-            self.params[msg.name] = msg.value
-            replies = [bm.ParamValue(names.index(msg.name), len(names), msg.name, msg.value)]
+            with contextlib.suppress(ConfigError):  # the firmware's rule; a refused value keeps the old
+                self.config = self.config.with_param(msg.name, msg.value)
+            self.params[msg.name] = value = self.config.get_param(msg.name)
+            replies = [bm.ParamValue(names.index(msg.name), len(names), msg.name, value)]
         elif isinstance(msg, bm.Command):
             self.grasp = {
                 bm.CommandCode.GRASP: bm.GraspState.REACH,
@@ -126,14 +133,26 @@ def demo(tlog: Path) -> None:
             recv(gcs, "NAMED_VALUE_FLOAT")  # board telemetry is flowing
 
             gcs.mav.param_request_list_send(1, 25)
-            for _ in range(3):
+            params: dict[str, float] = {}
+            count = 1
+            while len(params) < count:
                 pv = recv(gcs, "PARAM_VALUE")
-                print(f"  param {pv.param_id} = {pv.param_value:g}")  # type: ignore[attr-defined]
+                count = pv.param_count  # type: ignore[attr-defined]
+                # Integers travel bytewise in the float (MAVLink's parameter protocol): decode by type.
+                value = mav.decode_param_value(pv.param_value, pv.param_type, bytewise=True)  # type: ignore[attr-defined]
+                params[pv.param_id] = value  # type: ignore[attr-defined]
+            shown = ("HOST_TIMEOUT_US", "TENSION_MAX_N", "PRETENSION_N")
+            print(f"  {len(params)} params, e.g. " + ", ".join(f"{n} = {params[n]:g}" for n in shown))
             gcs.mav.param_set_send(1, 25, b"PRETENSION_N", 0.8, mav.ParamType.REAL32)
-            pv = recv(gcs, "PARAM_VALUE", cond="PARAM_VALUE.param_id=='PRETENSION_N'")
-            print(f"  set PRETENSION_N -> board took {pv.param_value:g}")  # type: ignore[attr-defined]
-            if abs(pv.param_value - 0.8) > 1e-6:  # type: ignore[attr-defined]
-                sys.exit(f"demo failed: PRETENSION_N is {pv.param_value:g}, not 0.8")  # type: ignore[attr-defined]
+            deadline = time.monotonic() + 5.0
+            while True:  # the list may still be streaming: wait for the board's answer to the set
+                pv = recv(gcs, "PARAM_VALUE", cond="PARAM_VALUE.param_id=='PRETENSION_N'")
+                took: float = pv.param_value  # type: ignore[attr-defined]
+                if abs(took - 0.8) <= 1e-6 or time.monotonic() > deadline:
+                    break
+            print(f"  set PRETENSION_N -> board took {took:g}")
+            if abs(took - 0.8) > 1e-6:
+                sys.exit(f"demo failed: PRETENSION_N is {took:g}, not 0.8")
 
             gcs.mav.command_long_send(
                 1, 25, mav.MAV_CMD_DO_GRIPPER, 0, 25, mav.GripperAction.GRAB, 0, 0, 0, 0, 0

@@ -55,8 +55,9 @@ from typing import Any, Final
 import numpy as np
 
 from controller.clock import RealTimeClock
-from controller.config import PARAM_FIELDS, PARAMS, FirmwareConfig
+from controller.config import FirmwareConfig
 from controller.errors import ConfigError
+from controller.params import PARAM_FIELDS, PARAMS
 from hil import recording
 from hil.errors import HilError
 from hil.faults import Fault, FaultKind, FaultSet

@@ -1,4 +1,8 @@
-"""The README and docs stay true: every scenario, parameter, CLI flag and benchmark is where users look."""
+"""The README and docs stay true: every scenario, parameter, CLI flag and benchmark is where users look.
+
+The parameters: the docs' table, the host's parameter editor and the MAVLink types all say what the
+firmware's parameter table (``controller.params``) says.
+"""
 
 from __future__ import annotations
 
@@ -6,10 +10,13 @@ import argparse
 import re
 from pathlib import Path
 
-from controller.config import PARAMS
+from controller.params import PARAMS, WIRE_ROWS, Kind, markdown
 from hil.cli.main import build_parser as hil_parser
 from hil.scenarios import SCENARIOS
+from host.drone.params import PARAM_TYPES
 from host.options import build_parser as host_parser
+from host.panel.param_table import param_info
+from protocol import mavlink as mav
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -26,10 +33,51 @@ def test_readme_lists_every_scenario() -> None:
     assert all(f"`{name}`" in hil_doc for name in SCENARIOS)
 
 
-def test_board_link_doc_lists_every_parameter() -> None:
-    doc = (ROOT / "docs" / "board-link.md").read_text(encoding="utf-8")
+def test_the_parameters_page_is_the_parameter_table() -> None:
+    """docs/parameters.md is generated from controller.params: regenerate it when a row changes."""
+    doc = (ROOT / "docs" / "parameters.md").read_text(encoding="utf-8")
+    assert doc == markdown(), "docs/parameters.md is stale: python -m controller.params > docs/parameters.md"
     rows = re.findall(r"^\| (\d+) \| `([A-Z0-9_]+)` \|", doc, re.M)
     assert [(int(i), n) for i, n in rows] == list(enumerate(PARAMS))
+    for page in ("board-link.md", "host.md", "mavlink.md"):
+        assert "(parameters.md)" in (ROOT / "docs" / page).read_text(encoding="utf-8"), page
+
+
+def test_editor_mavlink_types_and_docs_say_what_the_table_says() -> None:
+    """The parameter editor's metadata, the MAVLink types and the docs' rows, parameter by parameter."""
+    doc = (ROOT / "docs" / "parameters.md").read_text(encoding="utf-8")
+    cells = {
+        row[1].strip("` "): [c.strip() for c in row]
+        for row in (line.split(" | ") for line in doc.splitlines() if re.match(r"^\| \d+ \| `", line))
+    }
+    mav_type = {
+        Kind.BOOL: mav.ParamType.UINT8,
+        Kind.INT: mav.ParamType.INT32,
+        Kind.FLOAT: mav.ParamType.REAL32,
+    }
+    for name, row in WIRE_ROWS.items():
+        info = param_info(name)
+        assert (info.field, info.unit, info.kind, info.doc, info.safety) == (
+            row.name,
+            row.unit,
+            row.kind.value,
+            row.doc,
+            row.safety,
+        ), name
+        assert info.default == float(row.default), name
+        shown = row.runtime.text(row.unit) if row.runtime else row.bounds_text()
+        assert info.bounds == shown, name
+        assert PARAM_TYPES[name] == mav_type[row.kind], name
+        index, _, field, kind, unit, _default, bounds, safe, meaning = cells[name]
+        assert (int(index.strip("| ")), field, kind, unit) == (
+            row.index,
+            f"`{row.name}`",
+            row.kind.value,
+            row.unit,
+        )
+        assert bounds.startswith(row.bounds_text().removeprefix("must be ").removeprefix("in ")), name
+        assert (safe == "yes") == row.safety and meaning.rstrip(" |").replace("\\|", "|") == row.doc, name
+    assert set(cells) == set(PARAMS)
 
 
 def test_readme_documents_every_spirob_host_flag() -> None:

@@ -11,7 +11,8 @@ import math
 import re
 from dataclasses import dataclass, field, replace
 
-from controller.config import C610_MAX_A, MotorDriveConfig
+from controller.config import MotorDriveConfig
+from controller.params import C610_MAX_A
 
 __all__ = [
     "ACTUATOR_KINDS",

@@ -5,9 +5,10 @@ when it is not complete); a ``PARAM_SET`` goes to the board and is answered with
 confirms, or with the value in force when it does not confirm in time. A list requested before the
 board has answered is sent once the mirror is complete (the board is asked again until it answers).
 
-Values are typed as the firmware's configuration types them: booleans ``UINT8``, integers ``INT32``,
-the rest ``REAL32``; integers are encoded bytewise or by C cast as the drone's autopilot does
-(:mod:`protocol.mavlink.param_encoding`). Runs on the link thread, under the link's lock.
+Values are typed by the kind column of the firmware's parameter table (``controller.params``):
+booleans ``UINT8``, integers ``INT32``, the rest ``REAL32``; integers are encoded bytewise or by C cast as
+the drone's autopilot does (:mod:`protocol.mavlink.param_encoding`). Runs on the link thread, under the
+link's lock.
 """
 
 from __future__ import annotations
@@ -19,33 +20,24 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
-from controller.config import PARAM_FIELDS, FirmwareConfig
+from controller.params import WIRE_ROWS, Kind
 from protocol import mavlink as mav
 from protocol import messages as bm
 
-__all__ = ["ParamMirror"]
+__all__ = ["PARAM_TYPES", "ParamMirror"]
 
 _PARAMS_PER_CYCLE: Final[int] = 10
 
 
-def _param_types() -> dict[str, mav.ParamType]:
-    """Wire name -> MAVLink type, from the types of the firmware configuration's fields."""
-    kinds = {flat: type(value) for flat, value in FirmwareConfig().to_dict().items()}
-    types: dict[str, mav.ParamType] = {}
-    for name, flat in PARAM_FIELDS.items():
-        kind = kinds.get(flat)
-        # bool before int: bool is an int subclass.
-        if kind is bool:
-            types[name] = mav.ParamType.UINT8
-        elif kind is int:
-            types[name] = mav.ParamType.INT32
-        else:
-            types[name] = mav.ParamType.REAL32
-    return types
+_MAV_TYPES: Final[dict[Kind, mav.ParamType]] = {
+    Kind.BOOL: mav.ParamType.UINT8,
+    Kind.INT: mav.ParamType.INT32,
+    Kind.FLOAT: mav.ParamType.REAL32,
+}
 
-
-PARAM_TYPES: Final[dict[str, mav.ParamType]] = _param_types()
-"""The MAVLink type of each firmware parameter (by upper-case wire name); others are ``REAL32``."""
+PARAM_TYPES: Final[dict[str, mav.ParamType]] = {name: _MAV_TYPES[row.kind] for name, row in WIRE_ROWS.items()}
+"""The MAVLink type of each firmware parameter (by wire name, from the kind column of the firmware's
+parameter table); others are ``REAL32``."""
 
 
 @dataclass

@@ -1,8 +1,9 @@
-"""The board's parameters as the panel edits them: units, bounds, a host-side check, and the read-back.
+"""The board's parameters as the panel edits them: metadata, a host-side check, and the read-back.
 
-Names, types and bounds come from the firmware's own table (``controller.config``): the host checks a
-value with the same ``FirmwareConfig.with_param`` the board runs, so what the panel refuses the board
-would refuse too, and the text is the same.
+Everything about a parameter (unit, kind, default, bounds, description, whether it changes only in SAFE)
+is read from the firmware's parameter table (``controller.params``). A value is checked with the rule the
+board applies to every ``ParamSet`` (``FirmwareConfig.with_param``) against the board's other values, so
+what the panel refuses the board would refuse too, in the same words.
 """
 
 from __future__ import annotations
@@ -11,8 +12,9 @@ import functools
 import math
 from dataclasses import dataclass
 
-from controller.config import PARAM_FIELDS, FirmwareConfig
+from controller.config import FirmwareConfig
 from controller.errors import ConfigError
+from controller.params import PARAMS, WIRE_ROWS
 
 __all__ = [
     "PARAM_CONFIRM_S",
@@ -23,42 +25,27 @@ __all__ = [
     "param_info",
 ]
 
-PARAM_NAMES: tuple[str, ...] = tuple(PARAM_FIELDS)
+PARAM_NAMES: tuple[str, ...] = PARAMS
 """Parameter wire names in the board's index order (a ``PARAM`` event's code is the index)."""
 
 PARAM_CONFIRM_S = 2.0
 """A parameter set the board has not answered by then is shown as unanswered."""
 
-_UNITS = (
-    # Longest suffix first: "_m_per_s2" before "_m_per_s" before "_m".
-    ("_n_s_per_m", "N·s/m"),
-    ("_nm_per_a", "N·m/A"),
-    ("_m_per_s2", "m/s²"),
-    ("_n_per_s", "N/s"),
-    ("_n_per_m", "N/m"),
-    ("_m_per_s", "m/s"),
-    ("_per_s2", "1/s²"),
-    ("_per_s", "1/s"),
-    ("_deg", "°"),
-    ("_us", "µs"),
-    ("_n", "N"),
-    ("_m", "m"),
-    ("_a", "A"),
-    ("_deadband", "counts"),
-)
-
 
 @dataclass(frozen=True, slots=True)
 class ParamInfo:
-    """What the editor shows about one parameter.
+    """What the editor shows about one parameter (its row of the firmware's table).
 
     Attributes:
         name: wire name.
-        field: the firmware config field it sets.
+        field: the flat name of the firmware config field it sets.
         unit: unit text ("" when dimensionless).
         kind: ``float``, ``int`` or ``bool`` (0 / 1).
         default: the firmware default.
-        bounds: the firmware's range rule, e.g. ``must be 0..tension_max_n``.
+        bounds: the range a set must meet, as the firmware words it (e.g. ``must be 0..tension_max_n``;
+            the run-time range where a hardware figure applies).
+        doc: one line on what it does.
+        safety: the board changes it only in SAFE.
     """
 
     name: str
@@ -67,69 +54,42 @@ class ParamInfo:
     kind: str
     default: float
     bounds: str
-
-
-def _unit(field: str, kind: str) -> str:
-    if kind == "bool":
-        return "0/1"
-    return next((u for suffix, u in _UNITS if field.endswith(suffix)), "")
-
-
-def _bounds(cfg: FirmwareConfig, name: str, field: str, kind: str) -> str:
-    """The firmware's own range text: what it says about a value far outside any range.
-
-    Only its rule for this field (a value can break another field's rule first, e.g. a huge
-    ``TENSION_MAX_N`` is fine but a negative one makes ``pretension_n`` complain).
-    """
-    if kind == "bool":
-        return "0 or 1"
-    texts = []
-    for probe in (-1e12, 1e12):
-        try:
-            cfg.with_param(name, probe)
-        except ConfigError as exc:
-            prefix, _, text = str(exc).partition(": ")
-            if prefix == field and text not in texts:
-                texts.append(text)
-    return "; ".join(texts) or "any finite value"
+    doc: str
+    safety: bool
 
 
 @functools.cache
 def param_info(name: str) -> ParamInfo:
-    """Units, kind, default and bounds of parameter ``name`` (computed once).
+    """Unit, kind, default, bounds, description and SAFE-only flag of parameter ``name``.
 
     Raises:
         KeyError: not a parameter of the board.
     """
-    field = PARAM_FIELDS[name]
-    cfg = FirmwareConfig()
-    default = cfg.get_param(name)
-    raw = cfg.to_dict()[field]
-    kind = "bool" if isinstance(raw, bool) else "int" if isinstance(raw, int) else "float"
-    return ParamInfo(name, field, _unit(field, kind), kind, default, _bounds(cfg, name, field, kind))
+    row = WIRE_ROWS[name]
+    bounds = row.bounds_text() if row.runtime is None else row.runtime.text(row.unit)
+    return ParamInfo(
+        name, row.name, row.unit, row.kind.value, float(row.default), bounds, row.doc, row.safety
+    )
 
 
 def param_check(values: dict[str, float], name: str, value: float) -> str | None:
-    """Check a value against the firmware's bounds before it is sent.
+    """Check a value with the board's own rule before it is sent.
 
     ``values`` are the board's values read so far (over the firmware defaults), so bounds that depend
-    on another parameter (``PRETENSION_N`` <= ``TENSION_MAX_N``) use the board's.
+    on another parameter (``PRETENSION_N`` <= ``TENSION_MAX_N``) use the board's. Whether the arm is in
+    SAFE is the board's to judge (it refuses a safety parameter otherwise, and says so).
 
     Returns:
         None if the board would take it, else the reason (``ConfigError`` text).
     """
-    changes: dict[str, float | int | bool] = {}
-    for other, v in values.items():
-        if other in PARAM_FIELDS and other != name:
-            kind = param_info(other).kind
-            changes[PARAM_FIELDS[other]] = bool(v) if kind == "bool" else int(v) if kind == "int" else v
+    others = {n: v for n, v in values.items() if n != name}
     try:
         # All at once: the board's values only fit together (a lower TENSION_MAX_N with lower targets).
-        cfg = FirmwareConfig().replaced(**changes)
-    except (ConfigError, ValueError, OverflowError):
+        cfg = FirmwareConfig().with_board_values(others)
+    except ConfigError:
         cfg = FirmwareConfig()  # an incomplete read that does not fit the defaults: their bounds
     try:
-        cfg.with_param(name, value)
+        cfg.with_param(name, value, safe=True)
     except ConfigError as exc:
         return str(exc)
     return None

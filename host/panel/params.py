@@ -1,8 +1,10 @@
 """The per-tab Parameters folder: pick a board parameter, see its unit, bounds and value, set it.
 
-The value goes to the board as a ``ParamSet`` (the protocol the MAVLink bridge uses) after the host
-checked it against the firmware's bounds (``host.panel.param_table``); the folder then shows what the board
-read back: confirmed, kept another value (with the board's reason), or no answer yet.
+The folder shows what the firmware's parameter table says about it (unit, bounds, default, kind, whether
+it changes only in SAFE, what it does; ``host.panel.param_table``). The value goes to the board as a
+``ParamSet`` (the protocol the MAVLink bridge uses) after the host checked it with the board's own rule;
+the folder then shows what the board read back: confirmed, kept another value (with the board's reason),
+or no answer yet.
 """
 
 from __future__ import annotations
@@ -46,9 +48,11 @@ def param_text(name: str, values: dict[str, float], status: ParamStatus | None, 
     unit = f" {info.unit}" if info.unit else ""
     board = values.get(name)
     now = "not read yet" if board is None else f"**{_fmt(board, info.kind)}**{unit}"
+    safe_only = " · **SAFE only**" if info.safety else ""
     lines = [
         f"**{name}** on the board: {now}  ",
-        f"Bounds: {info.bounds} · default {_fmt(info.default, info.kind)}{unit} · {info.kind}",
+        f"Bounds: {info.bounds} · default {_fmt(info.default, info.kind)}{unit} · {info.kind}{safe_only}",
+        f"  \n{info.doc[:1].upper()}{info.doc[1:]}.",
     ]
     if status is not None:
         asked = _fmt(status.requested, info.kind)

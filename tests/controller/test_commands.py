@@ -6,7 +6,7 @@ import pytest
 
 from controller.cables import CableMapper, MotorModel, TensionSlew
 from controller.commands import CommandServer, GraspAcks, Params
-from controller.config import PARAMS, FirmwareConfig
+from controller.config import FirmwareConfig
 from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
@@ -14,6 +14,7 @@ from controller.grasp import GraspMachine
 from controller.hostlink import BoardLink
 from controller.lengthhold import LengthHold
 from controller.modes import ModeSelector
+from controller.params import PARAMS, SAFETY_PARAMS, WIRE_ROWS, Kind
 from controller.rc import RcInput, ScriptedRcSource
 from controller.transport import MemoryTransport
 from protocol.dbus import Lever
@@ -223,6 +224,43 @@ def test_armed_param_sets_cannot_raise_the_current() -> None:
         ("TORQUE_K_NM_A", pytest.approx(0.18)),
         ("PAYIN_MAX_M_S", pytest.approx(0.1)),
     ]
+
+
+def _another_valid_value(name: str) -> float:
+    """A value the board takes in SAFE for parameter ``name``: its default moved a little (a bool flipped)."""
+    row = WIRE_ROWS[name]
+    default = float(row.default)
+    if row.kind is Kind.BOOL:
+        value = 1.0 - default
+    elif row.kind is Kind.INT:
+        value = float(round(default * 0.9))
+    else:
+        value = default * 0.9
+    FirmwareConfig().with_param(name, value, safe=True)  # valid: only the SAFE rule can refuse it
+    return value
+
+
+@pytest.mark.parametrize("name", sorted(SAFETY_PARAMS))
+def test_every_safety_parameter_is_refused_while_armed_and_taken_in_safe(name: str) -> None:
+    """Every row of the table flagged SAFE-only, not only the ones an incident named."""
+    rig = Rig(link=True)
+    _direct(rig)
+    rig.drain()
+    before = rig.fw.config.get_param(name)
+    value = _another_valid_value(name)
+    rig.send(ParamSet(name, value))
+    _live(rig, 200)  # the events go out at their own rate
+    msgs = rig.drain()
+    assert [(v.name, v.value) for v in msgs if isinstance(v, ParamValue)] == [(name, pytest.approx(before))]
+    reasons = [e.text for e in msgs if isinstance(e, Event) and e.kind == EventKind.PARAM]
+    assert reasons == ["rejected: safety parameter: only in SAFE"]
+    assert rig.fw.mode == Mode.DIRECT and rig.fw.config.get_param(name) == before
+    rig.set_rc(frame(right=Lever.DOWN))
+    _live(rig, 20)
+    assert rig.fw.mode == Mode.SAFE
+    rig.send(ParamSet(name, value))
+    rig.tick(5)
+    assert rig.fw.config.get_param(name) == pytest.approx(value)
 
 
 def test_non_safety_params_still_change_while_armed() -> None:

@@ -7,8 +7,6 @@ import dataclasses
 import pytest
 
 from controller.config import (
-    PARAM_FIELDS,
-    PARAMS,
     FailsafeConfig,
     FirmwareConfig,
     GraspConfig,
@@ -17,7 +15,6 @@ from controller.config import (
     MotorDriveConfig,
 )
 from controller.errors import ConfigError
-from protocol.messages import NAME_LEN
 
 
 def test_defaults_are_the_documented_facts() -> None:
@@ -72,14 +69,6 @@ def test_from_dict_coerces_and_rejects_unknown_keys() -> None:
     with pytest.raises(ConfigError, match="unknown"):
         FirmwareConfig.from_dict({"spool_radius": 0.01})
     assert FirmwareConfig.from_dict(FirmwareConfig().to_dict()) == FirmwareConfig()
-
-
-def test_params_fit_the_wire_and_map_to_fields() -> None:
-    fields = set(FirmwareConfig().to_dict())
-    for name in PARAMS:
-        assert len(name) <= NAME_LEN and name.isascii()
-        assert PARAM_FIELDS[name] in fields
-    assert len(set(PARAMS)) == len(PARAMS)
 
 
 def test_with_param_validates_and_converts() -> None:

@@ -13,9 +13,10 @@ import pytest
 
 from controller.clock import LockstepClock, RealTimeClock
 from controller.commands import PARAM_VALUES_PER_TICK
-from controller.config import PARAMS, FirmwareConfig
+from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.motorbus import FakeMotorBus
+from controller.params import PARAMS
 from controller.rc import ScriptedRcSource
 from controller.transport import MemoryTransport, SerialTransport
 from protocol.dbus import Lever

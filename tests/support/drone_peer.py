@@ -93,7 +93,7 @@ class Rig:
 def rig_factory(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     """The body of a ``make_rig`` fixture: ``make(**DroneLinkConfig fields)`` builds a started rig.
 
-    ``board_params`` adds parameters to the fake board before the link first asks for them.
+    ``board_params`` sets parameter values (wire names) on the fake board before the link first asks.
     """
     made: list[Rig] = []
 

@@ -1,9 +1,11 @@
-"""A scripted fake board for host unit tests: the far end of a real pty or TCP socket.
+"""The scripted fake board on a real pty or TCP socket: the byte-level shell of ``FakeBoard``.
 
-It speaks the board link (``protocol.link`` + ``protocol.messages``): sends ``Telemetry`` at 100 Hz and
-``SimPoses`` at 50 Hz, decodes and records every host -> board message, and runs a toy "firmware" so
-host tests can see cause and effect: valid RC with the right lever DOWN passes the gate, MIDDLE is MANUAL,
-the left stick vertical (ch3) sets the common tension target, ``ESTOP`` latches zero current.
+The toy firmware is ``tests/support/fake_board.py``'s :class:`~tests.support.fake_board.FakeBoard`, the
+same one the drone-link tests drive in-process; this shell gives it the board's wire: it decodes the
+host's frames (``protocol.link`` + ``protocol.messages``) and hands every message to the fake, writes its
+replies, and sends ``Telemetry`` at 100 Hz and ``SimPoses`` at 50 Hz, as a simulated board starting in
+GATE (no current until the radio's right lever has been seen DOWN). It can drop and resume the
+connection and inject raw bytes.
 
 This is a unit-test fake only; the real virtual board is ``hil.board``.
 """
@@ -19,25 +21,9 @@ import time
 import tty
 from typing import Any
 
-from protocol.dbus import Lever, RcFrame
 from protocol.link import LinkParser
-from protocol.messages import (
-    AckResult,
-    Command,
-    CommandAck,
-    CommandCode,
-    Message,
-    Mode,
-    Phase,
-    SimPoses,
-    Telemetry,
-    TelemetryFlags,
-    VirtualRc,
-    decode,
-    encode,
-)
-
-UNITS = 21
+from protocol.messages import Message, Mode, Phase, decode, encode
+from tests.support.fake_board import FakeBoard
 
 
 class LinkPeer:
@@ -45,23 +31,23 @@ class LinkPeer:
 
     Attributes:
         url: what the host opens (a /dev/pts path or socket://127.0.0.1:PORT).
-        received: every decoded host -> board message, in order.
+        board: the toy firmware behind the wire.
     """
 
     def __init__(self, kind: str = "socket") -> None:
         self.kind = kind
-        self.received: list[Message] = []
-        self.lock = threading.Lock()
+        self.board = FakeBoard(
+            mode=Mode.SAFE,
+            phase=Phase.GATE,
+            armed=False,
+            tension_n=(0.0, 0.0, 0.0),
+            current_raw=(0, 0, 0),
+            sim=True,
+        )
         self._stop = threading.Event()
         self._seq = 0
+        self._t0 = time.monotonic()
         self._parser = LinkParser()
-        self.phase = Phase.GATE
-        self.mode = Mode.SAFE
-        self.tension = 0.0
-        self.rc: RcFrame | None = None
-        self.rc_time = 0.0
-        self.rc_last_arrival = 0.0
-        self.rc_max_gap_s = 0.0
         self.paused = threading.Event()  # set: stop sending and drop the connection
         self._conn: socket.socket | None = None
         self._master: int | None = None
@@ -130,9 +116,36 @@ class LinkPeer:
         except OSError:
             pass
 
+    @property
+    def received(self) -> list[Message]:
+        """Every decoded host -> board message, in order (read it under :attr:`lock`)."""
+        return self.board.received
+
+    @property
+    def lock(self) -> threading.Lock:
+        """Held while the board handles a message or ticks."""
+        return self.board.lock
+
+    @property
+    def phase(self) -> Phase:
+        """The board's failsafe phase (a test may set it, e.g. ESTOP latched before a run)."""
+        return self.board.phase
+
+    @phase.setter
+    def phase(self, value: Phase) -> None:
+        self.board.set(phase=value)
+
+    @property
+    def mode(self) -> Mode:
+        """The board's mode."""
+        return self.board.mode
+
     def messages(self, kind: type[Message]) -> list[Message]:
         with self.lock:
             return [m for m in self.received if isinstance(m, kind)]
+
+    def _now_us(self) -> int:
+        return int((time.monotonic() - self._t0) * 1e6)
 
     # ------------------------------------------------------------------ io
 
@@ -173,7 +186,6 @@ class LinkPeer:
 
     def _run(self) -> None:
         next_tel = next_pose = time.monotonic()
-        t0 = time.monotonic()
         while not self._stop.is_set():
             if self._listener is not None:
                 if self.paused.is_set():
@@ -198,92 +210,16 @@ class LinkPeer:
             if data:
                 for frame in self._parser.feed(data):
                     with contextlib.suppress(Exception):
-                        self._on_message(decode(frame), frame.seq)
+                        for reply in self.board.handle(decode(frame), frame.seq, self._now_us()):
+                            self._write(reply)
             now = time.monotonic()
-            self._firmware(now)
             if now >= next_tel:
                 next_tel += 0.01
-                self._write(self._telemetry(now - t0))
+                self._write(self.board.tick(self._now_us()))
             if now >= next_pose:
                 next_pose += 0.02
-                self._write(self._poses(now - t0))
+                self._write(self.board.poses())
             time.sleep(0.002)
-
-    # ------------------------------------------------------------------ toy firmware
-
-    def _on_message(self, msg: Message, seq: int) -> None:
-        with self.lock:
-            self.received.append(msg)
-        if isinstance(msg, VirtualRc):
-            now = time.monotonic()
-            if self.rc_last_arrival:
-                self.rc_max_gap_s = max(self.rc_max_gap_s, now - self.rc_last_arrival)
-            self.rc_last_arrival = now
-            frame = msg.frame
-            if frame.is_valid():
-                self.rc = frame
-                self.rc_time = time.monotonic()
-        elif isinstance(msg, Command):
-            if msg.code == CommandCode.ESTOP:
-                self.phase = Phase.ESTOP
-            self._write(CommandAck(msg.code, AckResult.ACCEPTED, seq, "ok"))
-
-    def _firmware(self, now: float) -> None:
-        rc = self.rc
-        if self.phase == Phase.ESTOP:
-            self.mode = Mode.SAFE
-        elif rc is None or now - self.rc_time > 0.03:
-            if self.phase != Phase.GATE:
-                self.phase = Phase.RC_LOST
-        elif self.phase in (Phase.GATE, Phase.RC_LOST):
-            if rc.right_lever == Lever.DOWN:
-                self.phase = Phase.OK
-        elif self.phase == Phase.OK:
-            self.mode = {Lever.DOWN: Mode.SAFE, Lever.MIDDLE: Mode.MANUAL, Lever.UP: Mode.GRASP}[
-                Lever(rc.right_lever)
-            ]
-        if self.phase == Phase.OK and self.mode == Mode.MANUAL and rc is not None:
-            self.tension = 0.5 + max(0, rc.channels[3]) / 660 * 8.0
-        else:
-            self.tension = 0.0
-
-    def _telemetry(self, t_s: float) -> Telemetry:
-        rc = self.rc
-        flags = TelemetryFlags.SIM
-        if self.phase == Phase.OK:
-            flags |= TelemetryFlags.ARMED | TelemetryFlags.RC_OK
-        cur = int(self.tension * 0.01 / 0.18 * 1000)
-        return Telemetry(
-            time_us=int(t_s * 1e6),
-            mode=self.mode,
-            phase=self.phase,
-            flags=flags,
-            motors_online=0b111,
-            rc_channels=rc.channels if rc else (0, 0, 0, 0),
-            right_lever=rc.right_lever if rc else 0,
-            left_lever=rc.left_lever if rc else 0,
-            commanded_current=(cur, cur, cur),
-            motor_current=(cur, cur, cur),
-            tension_target_n=(self.tension, self.tension, self.tension),
-            tension_est_n=(self.tension, self.tension, self.tension),
-            cable_length_m=(0.001 * self.tension,) * 3,
-        )
-
-    def _poses(self, t_s: float) -> SimPoses:
-        import math
-
-        pos = [(0.0, 0.0, 1.2)]
-        quat = [(1.0, 0.0, 0.0, 0.0)]
-        bend = 0.02 * self.tension
-        x, z = 0.0, 1.17
-        for i in range(UNITS):
-            ang = bend * i
-            pos.append((x, 0.0, z))
-            quat.append((math.cos(ang / 2), 0.0, math.sin(ang / 2), 0.0))
-            step = 0.015 * 1.075 ** (-i)
-            x += step * math.sin(ang)
-            z -= step * math.cos(ang)
-        return SimPoses(int(t_s * 1e6), tuple(pos), tuple(quat))
 
 
 def _serve(kind: str, urls: Any, stop: Any) -> None:

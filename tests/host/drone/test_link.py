@@ -18,14 +18,16 @@ from typing import Any
 import pytest
 from pymavlink import mavutil
 
+from controller.params import PARAMS
 from host.drone.config import DroneLinkConfig, DroneLinkError, load_signing_key
 from host.drone.gripper import gripper_denial
 from host.drone.link import DroneLink
+from host.drone.params import PARAM_TYPES
 from host.drone.tlog import TLOG_LINK_IN, TLOG_LINK_OUT
 from protocol import mavlink as mav
 from protocol import messages as bm
 from tests.support.drone_peer import WAIT_S, Peer, Rig, free_udp_port, rig_factory
-from tests.support.fake_board import PARAMS, FakeBoard
+from tests.support.fake_board import FakeBoard
 
 GRAB, RELEASE, HOLD = (
     float(mav.GripperAction.GRAB),
@@ -266,18 +268,19 @@ def test_param_list_read_and_set(make_rig: Callable[..., Rig]) -> None:
         got[m.param_id] = m
     assert set(got) == {n.upper() for n in PARAMS}
     assert {m.param_index for m in got.values()} == set(range(len(PARAMS)))
-    assert {(m.param_count, m.param_type) for m in got.values()} == {(len(PARAMS), mav.ParamType.REAL32)}
+    assert {m.param_count for m in got.values()} == {len(PARAMS)}
+    assert {n: m.param_type for n, m in got.items()} == PARAM_TYPES  # typed by the firmware's table
 
     rig.peer.conn.mav.param_request_read_send(1, 25, b"grasp_wrap_n", -1)  # names match case-insensitively
     assert rig.peer.recv_type("PARAM_VALUE").param_id == "GRASP_WRAP_N"
-    rig.peer.conn.mav.param_request_read_send(1, 25, b"", 2)
+    rig.peer.conn.mav.param_request_read_send(1, 25, b"", PARAMS.index("CURRENT_LIMIT_A"))
     assert rig.peer.recv_type("PARAM_VALUE").param_id == "CURRENT_LIMIT_A"
 
     rig.peer.conn.mav.param_set_send(1, 25, b"PRETENSION_N", 0.75, mav.ParamType.REAL32)
     m = rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "PRETENSION_N")
     assert m.param_value == 0.75
-    assert rig.board.params["pretension_n"] == 0.75
-    assert bm.ParamSet("pretension_n", 0.75) in rig.board.received
+    assert rig.board.params["PRETENSION_N"] == 0.75
+    assert bm.ParamSet("PRETENSION_N", 0.75) in rig.board.received
 
 
 def test_param_set_answers_with_what_the_board_took(make_rig: Callable[..., Rig]) -> None:
@@ -304,11 +307,11 @@ def test_param_read_right_after_a_set_waits_for_the_board(make_rig: Callable[...
     start = len(rig.peer.seen)
     rig.peer.conn.mav.param_set_send(1, 25, b"GRASP_WRAP_N", 12.0, mav.ParamType.REAL32)
     rig.peer.conn.mav.param_request_read_send(1, 25, b"GRASP_WRAP_N", -1)
-    rig.peer.conn.mav.param_request_read_send(1, 25, b"", 4)  # the same parameter by index
+    rig.peer.conn.mav.param_request_read_send(1, 25, b"", PARAMS.index("GRASP_WRAP_N"))  # the same, by index
     rig.peer.conn.mav.param_request_list_send(1, 25)
     rig.peer.conn.mav.param_request_read_send(1, 25, b"PRETENSION_N", -1)  # a marker
     rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "PRETENSION_N")
-    rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "SPOOL_RADIUS_M")  # the list went out
+    rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == PARAMS[-1])  # the list went out
     rig.peer.conn.mav.param_request_read_send(1, 25, b"TENSION_MAX_N", -1)  # a second marker
     rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "TENSION_MAX_N")
     assert not [
@@ -325,7 +328,7 @@ def test_param_set_the_board_never_confirms_gets_the_value_in_force(make_rig: Ca
     rig.ready()
     rig.peer.conn.mav.param_set_send(1, 25, b"GRASP_WRAP_N", 12.0, mav.ParamType.REAL32)
     rig.peer.statustext("GRASP_WRAP_N: board did not confirm")
-    assert rig.board.params["grasp_wrap_n"] == 10.0
+    assert rig.board.params["GRASP_WRAP_N"] == 15.0  # the default: never taken
 
 
 # --------------------------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 from pymavlink import mavutil
 
+from controller.params import PARAMS
 from host.drone.config import DroneLinkConfig
 from host.drone.link import DroneLink
 from protocol import mavlink as mav
@@ -91,10 +92,10 @@ def test_mavproxy_sees_the_arm_fetches_and_sets_a_param_grabs_and_watches(setup:
     proxy.expect(r"Detected vehicle 1:25")
 
     # Parameters: MAVProxy fetches the list on its own; then set one and read it back.
-    proxy.expect(r"Received 5 parameters")
+    proxy.expect(rf"Received {len(PARAMS)} parameters")
     start = len(proxy.lines())
     proxy.send("param set PRETENSION_N 0.8")
-    wait_for(lambda: abs(board.params["pretension_n"] - 0.8) < 1e-6, "the board to take PRETENSION_N")
+    wait_for(lambda: abs(board.params["PRETENSION_N"] - 0.8) < 1e-6, "the board to take PRETENSION_N")
     proxy.send("param fetch PRETENSION_N")
     proxy.expect(r"PRETENSION_N = 0\.8000000", start)
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from controller.config import PARAMS
+from controller.params import PARAMS
 from tests.support.mavproxy_proc import MavProxy, free_udp_port
 
 pytestmark = pytest.mark.mavproxy
