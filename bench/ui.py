@@ -137,9 +137,9 @@ def main() -> int:
         log = TelemetryLog()
         app.client.add_listener(log)
         deadline = time.monotonic() + 60
-        while app.model.telemetry is None and time.monotonic() < deadline:
+        while app.board_state.telemetry is None and time.monotonic() < deadline:
             time.sleep(0.1)
-        if app.model.telemetry is None:
+        if app.board_state.telemetry is None:
             print("error: no telemetry from the board", file=sys.stderr)
             return 1
 
@@ -170,13 +170,13 @@ def main() -> int:
         # 1. Scene updates while a browser is connected.
         u0, f0, t0 = app.panel.scene.updates, ws_frames[0], time.monotonic()
         print(f"loop timing with a browser attached ({args.window:.0f} s)...", flush=True)
-        p0 = app.model.poses_count
+        p0 = app.board_state.poses_count
         busy = loop_window(log, args.window, page)
         dt = time.monotonic() - t0
-        poses_rate = (app.model.poses_count - p0) / dt
+        poses_rate = (app.board_state.poses_count - p0) / dt
         live_ups = (app.panel.scene.updates - u0) / dt
         browser_fps = (ws_frames[0] - f0) / dt
-        n_bodies = 0 if app.model.poses is None else len(app.model.poses.positions_m)
+        n_bodies = 0 if app.board_state.poses is None else len(app.board_state.poses.positions_m)
 
         # Full speed with a synthetic 40-body arm (drone + 39 units), panel loop paused meanwhile.
         import numpy as np
@@ -216,7 +216,7 @@ def main() -> int:
             "[contains(@class,'mantine-Flex-root')][1]//div[@role='slider']"
         ).first
         thumb.focus()
-        t = app.model.telemetry
+        t = app.board_state.telemetry
         print(
             f"board before the moves: mode {t.mode.name if t else '?'}, phase {t.phase.name if t else '?'}",
             flush=True,
@@ -248,14 +248,14 @@ def main() -> int:
                         break
                 page.wait_for_timeout(2)
             target = 660 if key == "End" else -660
-            if changed is None and app.model.operator_input()[0][3] != target:
+            if changed is None and app.arbiter.operator_input()[0][3] != target:
                 input_lost += 1  # the page never delivered the key to the slider (focus, load)
                 thumb.focus()
             elif changed is None:
                 misses += 1
-                t_now = app.model.telemetry
+                t_now = app.board_state.telemetry
                 print(
-                    f"  no change after {key}: sticks {app.model.operator_input()[0]}, board phase "
+                    f"  no change after {key}: sticks {app.arbiter.operator_input()[0]}, board phase "
                     f"{t_now.phase.name if t_now else '?'}, mode {t_now.mode.name if t_now else '?'}",
                     flush=True,
                 )

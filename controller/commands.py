@@ -18,7 +18,7 @@ from controller.config import FirmwareConfig
 from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
-from controller.grasp import GraspMachine
+from controller.grasp import GraspMachine, grasp_refusal
 from controller.hostlink import BoardLink
 from controller.lengthhold import LengthHold
 from controller.modes import GRASP_STICK_MIN, ModeSelector
@@ -131,17 +131,18 @@ class GraspAcks:
                 self._later(CommandCode.GRASP, AckResult.ACCEPTED, self.grasp_seq, "holding")
                 self.grasp_seq = -1
             elif state in (GraspState.FAILED, GraspState.RELEASE):
-                self._later(CommandCode.GRASP, AckResult.FAILED, self.grasp_seq, state.name.lower())
+                self._later(CommandCode.GRASP, AckResult.FAILED, self.grasp_seq, f"grasp {state.name}")
                 self.grasp_seq = -1
         if self.release_seq >= 0 and state == GraspState.IDLE:
             self._later(CommandCode.RELEASE, AckResult.ACCEPTED, self.release_seq, "released")
             self.release_seq = -1
 
-    def grasp_left(self) -> None:
-        """GRASP mode was left: both owed acks fail."""
-        self.finish_grasp(AckResult.FAILED, "grasp mode left")
+    def grasp_left(self, why: str) -> None:
+        """GRASP mode was left (``why``: :func:`~controller.grasp.grasp_refusal` of the new state): both
+        owed acks fail with that reason."""
+        self.finish_grasp(AckResult.FAILED, why)
         if self.release_seq >= 0:
-            self._later(CommandCode.RELEASE, AckResult.FAILED, self.release_seq, "grasp mode left")
+            self._later(CommandCode.RELEASE, AckResult.FAILED, self.release_seq, why)
             self.release_seq = -1
 
     def finish_grasp(self, result: AckResult, text: str) -> None:
@@ -343,8 +344,10 @@ class CommandServer:
         return AckResult.DENIED, "only MANUAL or DIRECT: the right lever selects SAFE and GRASP"
 
     def _grasp_command(self, now_us: int, seq: int, code: CommandCode, arg: float) -> tuple[AckResult, str]:
-        if self._modes.mode != Mode.GRASP:
-            return AckResult.REJECTED, "right lever must be UP (GRASP)"
+        fs = self._failsafe
+        refusal = grasp_refusal(fs.phase, fs.armed, self._modes.mode)  # the radio is the master enable
+        if refusal is not None:
+            return AckResult.REJECTED, refusal
         grasp = self._grasp
         acks = self._acks
         if code == CommandCode.GRASP:

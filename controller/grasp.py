@@ -45,7 +45,10 @@ toward the target from straight up to ``grasp_wrap_n`` (WRAP: the arm curls from
 release as above.
 
 Triggers: left lever UP / DOWN edges in GRASP mode, host ``GRASP`` / ``RELEASE`` / ``HOLD`` commands
-(MAVLink DO_GRIPPER through the host).
+(MAVLink DO_GRIPPER through the host). The radio stays the master of the host's commands:
+:func:`grasp_refusal` is the one rule that says when the radio lets them act (the board's command server
+answers with it, and says it again when GRASP mode is left under a command; a host may ask it of the
+latest telemetry to refuse at once).
 """
 
 from __future__ import annotations
@@ -57,9 +60,43 @@ from controller.cables import bend_shares
 from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.contact import ContactDetector
 from controller.events import EventQueue
-from protocol.messages import AckResult, EventKind, GraspState
+from protocol.messages import AckResult, EventKind, GraspState, Mode, Phase
 
-__all__ = ["GraspMachine"]
+__all__ = ["GraspMachine", "grasp_refusal"]
+
+
+def _name(enum: type[Phase] | type[Mode], value: int) -> str:
+    try:
+        return enum(value).name
+    except ValueError:
+        return str(value)
+
+
+def grasp_refusal(phase: int, armed: bool, mode: int) -> str | None:
+    """Why the radio does not let the host command the grasp now (GRASP, RELEASE, HOLD), or None.
+
+    The radio is the master enable: current may flow (failsafe phase OK, armed) and its right lever is
+    UP (GRASP mode). The board decides with this rule (``controller.commands``: a refused command is
+    answered REJECTED with this text); a host may apply it to the latest ``Telemetry`` (``phase``,
+    ``TelemetryFlags.ARMED``, ``mode``) for an answer before the command travels.
+
+    Args:
+        phase: the failsafe ``Phase`` (an unknown value reads as not OK).
+        armed: current may flow.
+        mode: the operating ``Mode``.
+
+    Returns:
+        A short reason (at most 40 characters), or None when the grasp may be commanded.
+    """
+    if phase == Phase.GATE:
+        return "start-up gate (lever DOWN first)"
+    if phase != Phase.OK:
+        return f"failsafe {_name(Phase, phase)}"
+    if not armed:
+        return "arm not armed"
+    if mode != Mode.GRASP:
+        return f"mode {_name(Mode, mode)}, lever not UP"
+    return None
 
 
 class GraspMachine:

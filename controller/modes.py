@@ -26,7 +26,7 @@ from controller.cables import CableMapper, MotorModel
 from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
-from controller.grasp import GraspMachine
+from controller.grasp import GraspMachine, grasp_refusal
 from controller.lengthhold import LengthHold
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import EventKind, GraspState, Mode, Phase
@@ -50,8 +50,9 @@ class GraspListener(Protocol):
     def grasp_progress(self, state: GraspState) -> None:
         """The grasp state machine moved to ``state``."""
 
-    def grasp_left(self) -> None:
-        """GRASP mode was left: whatever the host awaits from the grasp has failed."""
+    def grasp_left(self, why: str) -> None:
+        """GRASP mode was left (``why``: the radio's reason, :func:`~controller.grasp.grasp_refusal`):
+        whatever the host awaits from the grasp has failed."""
 
 
 class ModeSelector:
@@ -121,10 +122,10 @@ class ModeSelector:
             else:
                 mode = _SAFE
         if mode is not self.mode:
-            self._changed(now_us, self.mode, mode, rc)
+            self._changed(now_us, self.mode, mode, rc, phase)
         return mode
 
-    def _changed(self, now_us: int, old: Mode, new: Mode, rc: RcFrame | None) -> None:
+    def _changed(self, now_us: int, old: Mode, new: Mode, rc: RcFrame | None, phase: Phase) -> None:
         self.mode = new
         # A hold belongs to the mode it was set in; SAFE (every failsafe) and any other change drop it.
         self._hold.release_all()
@@ -134,7 +135,7 @@ class ModeSelector:
             self.direct_requested = False  # DIRECT only while the lever stays MIDDLE
         if old == Mode.GRASP:
             self._grasp.reset(now_us)
-            self._listener.grasp_left()
+            self._listener.grasp_left(grasp_refusal(phase, phase is _PHASE_OK, new) or f"mode {new.name}")
         if new == Mode.GRASP:
             self._grasp.reset(now_us)
             self._prev_left_lever = rc.left_lever if rc else 0

@@ -5,12 +5,13 @@ loaded 2-core machine, 5 s more with ``--ui``). It exits 1 with one line when a 
 (the board not starting, the gate not passing, no tension from the stick, the E-stop not latching).
 What it shows:
 
-1. :class:`~host.cli.HostApp` (what ``spirob-host`` runs) starting the virtual board in its own process
-   (or connecting to ``--port``), with the UI model as one listener of the board link and a listener of
-   our own beside it (the recorder and the MAVLink bridge are listeners the same way);
-2. control ownership: the program takes control as the command-line client, drives the virtual radio
-   through the start-up gate (right lever DOWN, then MIDDLE = MANUAL) and moves the curl stick; the
-   board answers with higher tension targets and currents;
+1. :class:`~host.app.HostApp` (what ``spirob-host`` runs) starting the virtual board in its own process
+   (or connecting to ``--port``), with the panel's board state as one listener of the board link and a
+   listener of our own beside it (the recorder and the MAVLink bridge are listeners the same way);
+2. control ownership: the program takes control from the control arbiter as the command-line client,
+   drives the virtual radio through the start-up gate (right lever DOWN, then MIDDLE = MANUAL; each
+   change goes to the link once, which sends it every 14 ms) and moves the curl stick; the board
+   answers with higher tension targets and currents;
 3. E-stop: zero current, latched;
 4. with ``--ui``, the same state in the browser panel (http://127.0.0.1:8080) while it runs.
 """
@@ -26,7 +27,7 @@ from host.app import HostApp
 from host.errors import HostError
 from host.link.client import load_scaled_s
 from host.options import HostOptions
-from host.panel.model import CLI_CLIENT, ControlResult
+from host.panel.arbiter import CLI_CLIENT, ControlResult
 from protocol.dbus import Lever
 from protocol.messages import CommandCode, Message, Mode, Phase, Telemetry
 
@@ -53,16 +54,16 @@ def expect(cond: Callable[[], bool], what: str, timeout_s: float = 10.0) -> None
 
 def tour(app: HostApp, ui: bool) -> None:
     """The steps of the module's docstring, each checked."""
-    assert app.client is not None
-    m = app.model
+    assert app.client is not None and app.board_state is not None and app.arbiter is not None
+    board, m = app.board_state, app.arbiter
 
     def telemetry() -> Telemetry:
-        t = m.telemetry
+        t = board.telemetry
         if t is None:
             raise DemoFailed("no telemetry")
         return t
 
-    # 1. Our own listener beside the UI model: count telemetry frames.
+    # 1. Our own listener beside the panel's board state: count telemetry frames.
     seen = {"telemetry": 0}
 
     def count(msg: Message) -> None:
@@ -70,7 +71,7 @@ def tour(app: HostApp, ui: bool) -> None:
             seen["telemetry"] += 1
 
     app.client.add_listener(count)
-    expect(lambda: m.telemetry is not None, "no telemetry from the board", 30.0)
+    expect(lambda: board.telemetry is not None, "no telemetry from the board", 30.0)
 
     # 2. Take control (nobody else holds it), pass the gate with the right lever DOWN, then MANUAL.
     result = m.request_control(CLI_CLIENT)

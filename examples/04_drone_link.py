@@ -28,6 +28,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from controller.config import FirmwareConfig
@@ -41,8 +42,15 @@ from protocol import messages as bm
 from pymavlink import mavutil  # after protocol.mavlink: MAVLINK20=1 is set  # isort: skip
 
 
+AckHandler = Callable[[bm.CommandAck | None], None]
+
+
 class ScriptedBoard:
-    """Stands in for the board: 100 Hz telemetry, the firmware's parameters, a grasp that ends in HOLD."""
+    """Stands in for the board: 100 Hz telemetry, the firmware's parameters, a grasp that ends in HOLD.
+
+    It is what the drone link sends to (``BoardClient.send`` in ``spirob-host``): a command's answers go
+    to its ``on_ack``, IN_PROGRESS at once and ACCEPTED when the grasp holds, as the firmware answers.
+    """
 
     def __init__(self) -> None:
         self.config = FirmwareConfig()
@@ -50,10 +58,11 @@ class ScriptedBoard:
         self.grasp = bm.GraspState.IDLE
         self.ticks = 0
         self.sink = None  # set to DroneLink.on_board_message
+        self.owed: tuple[bm.CommandCode, AckHandler] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="scripted-board", daemon=True)
 
-    def __call__(self, msg: bm.Message) -> None:  # send_to_board
+    def __call__(self, msg: bm.Message, *, origin: str = "host", on_ack: AckHandler | None = None) -> bool:
         names = list(self.params)
         replies: list[bm.Message] = []
         if isinstance(msg, bm.ParamRequest):
@@ -64,14 +73,20 @@ class ScriptedBoard:
             self.params[msg.name] = value = self.config.get_param(msg.name)
             replies = [bm.ParamValue(names.index(msg.name), len(names), msg.name, value)]
         elif isinstance(msg, bm.Command):
+            code = bm.CommandCode(msg.code)
             self.grasp = {
                 bm.CommandCode.GRASP: bm.GraspState.REACH,
                 bm.CommandCode.RELEASE: bm.GraspState.RELEASE,
-            }.get(msg.code, bm.GraspState.HOLD)
+            }.get(code, bm.GraspState.HOLD)
             self.ticks = 0
-            replies = [bm.CommandAck(msg.code, bm.AckResult.ACCEPTED, 0)]
+            done = self.grasp == bm.GraspState.HOLD
+            result = bm.AckResult.ACCEPTED if done else bm.AckResult.IN_PROGRESS
+            if on_ack is not None:
+                on_ack(bm.CommandAck(code, result, 0))
+                self.owed = None if done else (code, on_ack)
         for r in replies:
             self.sink(r)  # type: ignore[misc]
+        return True
 
     def _run(self) -> None:
         t_us = 0
@@ -85,6 +100,10 @@ class ScriptedBoard:
                     bm.GraspState.RELEASE: bm.GraspState.IDLE,
                 }
                 self.grasp = nxt.get(self.grasp, self.grasp)
+                if self.owed is not None and self.grasp in (bm.GraspState.HOLD, bm.GraspState.IDLE):
+                    code, on_ack = self.owed
+                    self.owed = None
+                    on_ack(bm.CommandAck(code, bm.AckResult.ACCEPTED, 0))  # the final answer
             self.sink(  # type: ignore[misc]
                 bm.Telemetry(
                     t_us,

@@ -19,7 +19,7 @@ import foxglove
 from foxglove.messages import LogLevel
 
 from host.errors import HostError
-from host.link.client import LinkState
+from host.link.source import LinkState
 from protocol.messages import Message, SimPoses, Telemetry
 
 __all__ = ["LIVE_HOST", "FoxgloveLive"]

@@ -6,10 +6,11 @@ delivers 8-byte ``struct js_event`` records: ``__u32 time`` (ms), ``__s16 value`
 reported right after opening), ``__u8 number``. Axes read -32767..32767 (sticks: right / down positive);
 buttons 0 / 1. No extra package is needed.
 
-What the pad sets goes where the panel's sliders go: :meth:`host.panel.model.UiModel.set_stick` and
-``set_lever`` as the command line's client, so the board receives it as the same DBUS frames
-(``VirtualRc`` every 14 ms). The DT7's levers have three positions; a pad has none, so each lever is two
-inputs that step it up or down (DOWN -> MIDDLE -> UP).
+What the pad sets goes where the panel's sliders go: the control arbiter
+(:meth:`host.panel.arbiter.ControlArbiter.set_radio`, the whole pad in one frame) as the command
+line's client, so the board receives it as the same DBUS frames (``VirtualRc`` every 14 ms). The DT7's
+levers have three positions; a pad has none, so each lever is two inputs that step it up or down
+(DOWN -> MIDDLE -> UP).
 
 Default mapping (an Xbox-layout pad on the Linux ``xpad`` driver: axes 0/1 left stick, 3/4 right stick,
 6/7 D-pad; buttons 0 A, 3 Y, 7 Start), overridable with :func:`parse_mapping`::
@@ -37,8 +38,9 @@ import select
 import struct
 import threading
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Final
 
+from host.panel.arbiter import ControlArbiter
 from protocol.dbus import CH_LIMIT, Lever
 
 __all__ = [
@@ -331,11 +333,11 @@ def _step(lever: Lever, direction: int) -> Lever:
 
 
 class Gamepad:
-    """Reads a joystick device in a thread and drives the model's virtual radio with it.
+    """Reads a joystick device in a thread and drives the control arbiter's radio with it.
 
     Args:
         path: the device (``/dev/input/js0``), or anything that delivers ``js_event`` records (a FIFO).
-        model: the ``host.panel.model.UiModel`` whose virtual radio it drives.
+        arbiter: the control arbiter whose radio it drives.
         client: the client id it drives as (the command line's).
         mapping: which inputs drive what.
         reopen_period_s: pause between attempts to reopen a device that went away.
@@ -344,14 +346,14 @@ class Gamepad:
     def __init__(
         self,
         path: str,
-        model: Any,
+        arbiter: ControlArbiter,
         client: int,
         mapping: GamepadMapping = DEFAULT_MAPPING,
         *,
         reopen_period_s: float = 1.0,
     ) -> None:
         self.path = path
-        self.model = model
+        self.arbiter = arbiter
         self.client = client
         self.state = GamepadState(mapping)
         self.reader = JsEventReader()
@@ -371,7 +373,7 @@ class Gamepad:
             OSError: the device cannot be opened (the caller words it).
         """
         self._fd = os.open(self.path, os.O_RDONLY | os.O_NONBLOCK)
-        self.model.request_control(self.client)
+        self.arbiter.request_control(self.client)
         self._thread = threading.Thread(target=self._run, name="gamepad", daemon=True)
         self._thread.start()
 
@@ -425,8 +427,8 @@ class Gamepad:
         _log.warning("gamepad %s lost (%s): right lever DOWN (SAFE), sticks centred", self.path, reason)
 
     def _push(self) -> None:
-        """What the pad holds into the model (only while the command line holds control)."""
-        m, st, client = self.model, self.state, self.client
+        """What the pad holds to the arbiter (only while the command line holds control)."""
+        m, st, client = self.arbiter, self.state, self.client
         if st.control_requests != self._requests_seen:
             self._requests_seen = st.control_requests
             m.request_control(client)
@@ -438,7 +440,7 @@ class Gamepad:
             m.answer_request(client, grant=True)
             holds = False
         if not holds:
-            # The model restarts the operator from right lever DOWN whenever control moves; the pad's
+            # The arbiter restarts the operator from right lever DOWN whenever control moves; the pad's
             # levers wait there too, so control regained starts from SAFE and later steps count.
             self._pushed = None
             st.right_lever = st.left_lever = Lever.DOWN
@@ -447,7 +449,5 @@ class Gamepad:
         if now == self._pushed:
             return
         self._pushed = now
-        for channel, value in enumerate(st.sticks):
-            m.set_stick(client, channel, value)
-        m.set_lever(client, "right", st.right_lever)
-        m.set_lever(client, "left", st.left_lever)
+        s0, s1, s2, s3 = st.sticks
+        m.set_radio(client, (s0, s1, s2, s3), st.right_lever, st.left_lever)

@@ -20,7 +20,7 @@ from controller.cli_kit import Parser, port_number, positive_duration
 from host.errors import HostError
 from host.gamepad import DEFAULT_MAPPING, GamepadMapping, format_mapping, parse_mapping
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
-from host.panel.model import new_token
+from host.panel.arbiter import new_token
 from protocol.dbus import Lever
 
 if TYPE_CHECKING:

@@ -148,7 +148,7 @@ class ShadowPlant:
 
     Args:
         on_poses: called from the shadow thread with each new pose set (drone first, then the units,
-            like ``SimPoses``; ``time_us`` is the board time), e.g. ``UiModel.on_shadow_poses``.
+            like ``SimPoses``; ``time_us`` is the board time), e.g. ``BoardState.on_shadow_poses``.
         config: step bounds.
         plant_factory: builds the plant (in the shadow thread); default ``hil.sim.plant.Plant()``, the
             default design.

@@ -66,7 +66,8 @@ def take(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     with HostApp(HostOptions(ui_port=0), panel_config=PanelConfig(scene_hz=8.0, plot_hz=2.0)) as app:
         app.start()
-        m = app.model
+        m, arbiter = app.board_state, app.arbiter
+        assert m is not None and arbiter is not None
         _wait(lambda: m.telemetry is not None, "the first telemetry")
         with sync_api.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
@@ -81,7 +82,7 @@ def take(out: Path) -> None:
                 _save(page, out / "panel-first-view.png")
 
                 page.get_by_role("button", exact=True, name="Take control").click()
-                _wait(lambda: m.holder is not None, "control")
+                _wait(lambda: arbiter.holder is not None, "control")
                 page.get_by_role("button", name="DOWN").first.click()
                 _wait(lambda: m.telemetry is not None and m.telemetry.phase == Phase.OK, "phase OK")
                 time.sleep(1.5)

@@ -1,46 +1,71 @@
-"""The DO_GRIPPER server of the drone link: the radio's gate, the job in progress and its ACK sequence.
+"""The DO_GRIPPER server of the drone link: the job in progress and its ACK sequence.
 
 The command protocol of docs/mavlink.md: ``IN_PROGRESS`` then ``ACCEPTED`` / ``FAILED``;
 ``TEMPORARILY_REJECTED`` while busy; ``DENIED`` for bad params or when the radio does not allow it;
 ``UNSUPPORTED`` for other commands addressed to us; the final ACK carries no progress. A retransmitted
 command is answered again, never carried out twice. The servo follower (``host.drone.servo``) takes
 the same path through :meth:`GripperServer.request`, without ACKs.
-Runs on the link thread, under the link's lock.
+
+The board decides, once: whether the radio allows the command is the firmware's rule
+(:func:`controller.grasp.grasp_refusal`), asked here of the latest telemetry only to answer ``DENIED``
+at once; the board applies the same rule to the command itself. When a job ends is the board's word
+too: its final ``CommandAck`` for our command (routed back by the board client, ``send_to_board``'s
+``on_ack``) ends the job, ``ACCEPTED`` or ``FAILED`` with the board's reason; telemetry only feeds the
+progress figures. Runs on the link thread, under the link's lock.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Protocol
 
+from controller.grasp import grasp_refusal
 from host.drone.config import DroneLinkConfig
 from host.drone.state import GripperCommand
-from host.drone.telemetry import enum_name
 from protocol import mavlink as mav
 from protocol import messages as bm
 
-__all__ = ["GripperServer", "gripper_denial"]
+__all__ = ["AnswerHandler", "BoardCommand", "BoardPort", "GripperServer", "gripper_denial"]
 
 _US_PER_S: Final[int] = 1_000_000
 _ACK_REPLAY_WINDOW_US: Final[int] = 3 * _US_PER_S
 _BUSY_STATES: Final = frozenset({bm.GraspState.REACH, bm.GraspState.WRAP, bm.GraspState.RELEASE})
 _PROGRESS_PCT: Final[dict[bm.GraspState, int]] = {
-    bm.GraspState.IDLE: 0,
     bm.GraspState.REACH: 30,
-    bm.GraspState.WRAP: 70,
-    bm.GraspState.HOLD: 100,
     bm.GraspState.RELEASE: 50,
-    bm.GraspState.FAILED: 0,
+    bm.GraspState.WRAP: 70,
 }
+"""Progress figures of the states a job passes through (its end is the board's final answer)."""
+
+AnswerHandler = Callable[[bm.CommandAck | None, int], None]
+"""Gets each board answer to one command on the link thread with the link-clock time (None: the command
+can have no answer, e.g. the board link went down)."""
+BoardCommand = Callable[[bm.Command, AnswerHandler], bool]
+"""Sends one command to the board with the handler of its answers; False if it did not go out."""
+
+
+class BoardPort(Protocol):
+    """The board as the drone link sends to it (``BoardClient.send``)."""
+
+    def __call__(
+        self,
+        msg: bm.Message,
+        *,
+        origin: str = ...,
+        on_ack: Callable[[bm.CommandAck | None], None] | None = ...,
+    ) -> bool:
+        """Send ``msg`` (``origin``: who sends it); a ``Command``'s answers go to ``on_ack`` (None: it
+        can have none). False if it did not go out."""
 
 
 def gripper_denial(telemetry: bm.Telemetry | None, age_us: int, stale_us: int) -> str | None:
     """Why a DO_GRIPPER must be refused given the latest board telemetry, or None if it may act.
 
-    The radio is the master enable: the board must be armed, in failsafe phase OK and in GRASP mode
-    (right lever UP).
+    The board's own rule (:func:`controller.grasp.grasp_refusal`: armed, phase OK, right lever UP)
+    applied to its telemetry, so the commander gets ``DENIED`` without a round trip to the board.
 
     Args:
         telemetry: Latest board telemetry (None if none yet).
@@ -52,15 +77,9 @@ def gripper_denial(telemetry: bm.Telemetry | None, age_us: int, stale_us: int) -
     """
     if telemetry is None or age_us > stale_us:
         return "gripper denied: no board telemetry"
-    if telemetry.phase == bm.Phase.GATE:
-        return "gripper denied: start-up gate (lever DOWN first)"
-    if telemetry.phase != bm.Phase.OK:
-        return f"gripper denied: failsafe {enum_name(bm.Phase, telemetry.phase)}"
-    if not telemetry.flags & bm.TelemetryFlags.ARMED:
-        return "gripper denied: arm not armed"
-    if telemetry.mode != bm.Mode.GRASP:
-        return f"gripper denied: mode {enum_name(bm.Mode, telemetry.mode)}, lever not UP"
-    return None
+    armed = bool(telemetry.flags & bm.TelemetryFlags.ARMED)
+    why = grasp_refusal(telemetry.phase, armed, telemetry.mode)
+    return None if why is None else f"gripper denied: {why}"
 
 
 _ACTION_TO_BOARD: Final = {
@@ -74,14 +93,14 @@ _ACTION_TO_BOARD: Final = {
 class _GripperJob:
     """A DO_GRIPPER being carried out (mutable, link thread only)."""
 
+    number: int
+    """Tells this job's board answers from a finished job's."""
     action: mav.GripperAction
     code: bm.CommandCode
     target: bm.GraspState
     requester: tuple[int, int] | None
     """The commander to answer (None for the servo follower, which gets no ACKs)."""
-    start_state: bm.GraspState
     deadline_us: int
-    progressed: bool = False
     last_state: bm.GraspState = bm.GraspState.IDLE
 
 
@@ -100,7 +119,7 @@ class GripperServer:
     Args:
         config: The link's configuration (``compid``, ``board_stale_us``, ``grasp_timeout_us``).
         send: Sends one MAVLink message.
-        to_board: Sends one board-link message.
+        to_board: Sends one board command with the handler of its answers (see :data:`BoardCommand`).
         text: Sends a ``STATUSTEXT`` (severity, text; rate limited by the link).
         count: Counts one event of the named :class:`~host.drone.state.DroneLinkCounters` field.
     """
@@ -109,7 +128,7 @@ class GripperServer:
         self,
         config: DroneLinkConfig,
         send: Callable[[mav.MavMessage], None],
-        to_board: Callable[[bm.Message], None],
+        to_board: BoardCommand,
         text: Callable[[int, str], None],
         count: Callable[[str], None],
     ) -> None:
@@ -118,9 +137,13 @@ class GripperServer:
         self._board = to_board
         self._text = text
         self._count = count
+        self._numbers = itertools.count(1)
         self._job: _GripperJob | None = None
         self._last_final: tuple[tuple[int, int], int, int, int] | None = None  # requester, action, result, t
         self._last_command: GripperCommand | None = None
+        self._settled: bm.GraspState | None = None
+        """The grasp state the board's last final ACCEPTED reported, until newer telemetry arrives (the
+        answer overtakes the telemetry that will show it: the board sends both in order)."""
 
     @property
     def busy(self) -> bool:
@@ -225,7 +248,7 @@ class GripperServer:
             self._ack(requester, cmd_id, mav.MavResult.DENIED, int(action), now, reason)
             self._text(mav.Severity.WARNING, reason)
             return mav.MavResult.DENIED
-        state = bm.GraspState(tel.grasp_state)
+        state = self._settled if self._settled is not None else bm.GraspState(tel.grasp_state)
         if state in _BUSY_STATES:
             result = mav.MavResult.TEMPORARILY_REJECTED
             self._ack(requester, cmd_id, result, int(action), now, f"busy: grasp {state.name}")
@@ -235,13 +258,17 @@ class GripperServer:
             # Nothing to do (already holding, already released): done.
             self._final(requester, int(action), mav.MavResult.ACCEPTED, now, f"gripper: already {state.name}")
             return mav.MavResult.ACCEPTED
-        self._board(bm.Command(code))
-        self._job = _GripperJob(
-            action, code, target, requester, state, now + self.config.grasp_timeout_us, last_state=state
+        job = _GripperJob(
+            next(self._numbers), action, code, target, requester, now + self.config.grasp_timeout_us, state
         )
+        self._job = job
+        verb = action.name.lower()
+        if not self._board(bm.Command(code), lambda ack, at: self._on_answer(job.number, ack, at)):
+            self._finish_job(mav.MavResult.FAILED, f"gripper: {verb} failed: the board link is down", now)
+            return mav.MavResult.FAILED
         self._ack(requester, cmd_id, mav.MavResult.IN_PROGRESS, int(action), now, "", progress=0)
         by = "" if requester is not None else " (autopilot servo)"
-        self._text(mav.Severity.INFO, f"gripper: {action.name.lower()} started{by}")
+        self._text(mav.Severity.INFO, f"gripper: {verb} started{by}")
         return mav.MavResult.IN_PROGRESS
 
     def _ack(
@@ -277,43 +304,39 @@ class GripperServer:
         if job is not None:
             self._final(job.requester, int(job.action), result, now, text)
 
+    def _on_answer(self, number: int, ack: bm.CommandAck | None, now: int) -> None:
+        """The board's answer to job ``number``'s command: its final one ends the job."""
+        job = self._job
+        if job is None or job.number != number:
+            return  # a job that already ended (timeout): the board's late word changes nothing
+        verb = job.action.name.lower()
+        if ack is None:
+            self._finish_job(mav.MavResult.FAILED, f"gripper: {verb} failed: board link lost", now)
+        elif ack.result == bm.AckResult.ACCEPTED:
+            self._settled = job.target
+            self._finish_job(mav.MavResult.ACCEPTED, f"gripper: {verb} done, {job.target.name}", now)
+        elif ack.result != bm.AckResult.IN_PROGRESS:
+            why = ack.text or bm.AckResult(ack.result).name
+            self._finish_job(mav.MavResult.FAILED, f"gripper: {verb} failed: {why}", now)
+
     def on_telemetry(self, tel: bm.Telemetry, now: int) -> None:
-        """Follow the job in progress with new board telemetry: progress ACKs, success or failure.
+        """Progress of the job in progress: an ``IN_PROGRESS`` with a figure per grasp state it passes.
 
         Args:
             tel: The board telemetry.
             now: Link-clock time in µs.
         """
+        self._settled = None
         job = self._job
-        if job is None:
+        if job is None or tel.grasp_state == job.last_state:
             return
-        verb = job.action.name.lower()
-        if tel.phase != bm.Phase.OK:
-            self._finish_job(
-                mav.MavResult.FAILED,
-                f"gripper: {verb} failed: failsafe {enum_name(bm.Phase, tel.phase)}",
-                now,
-            )
+        try:
+            state = bm.GraspState(tel.grasp_state)
+        except ValueError:
             return
-        if not tel.flags & bm.TelemetryFlags.ARMED:
-            self._finish_job(mav.MavResult.FAILED, f"gripper: {verb} failed: disarmed", now)
-            return
-        if tel.mode != bm.Mode.GRASP:
-            self._finish_job(
-                mav.MavResult.FAILED, f"gripper: {verb} failed: mode {enum_name(bm.Mode, tel.mode)}", now
-            )
-            return
-        state = bm.GraspState(tel.grasp_state)
-        if state != job.start_state:
-            job.progressed = True
-        if state == job.target:
-            self._finish_job(mav.MavResult.ACCEPTED, f"gripper: {verb} done, {state.name}", now)
-            return
-        if state == bm.GraspState.FAILED and (job.progressed or job.start_state != bm.GraspState.FAILED):
-            self._finish_job(mav.MavResult.FAILED, f"gripper: {verb} failed: grasp FAILED", now)
-            return
-        if state != job.last_state:
-            job.last_state = state
+        job.last_state = state
+        progress = _PROGRESS_PCT.get(state)
+        if progress is not None:
             self._ack(
                 job.requester,
                 mav.MAV_CMD_DO_GRIPPER,
@@ -321,23 +344,8 @@ class GripperServer:
                 int(job.action),
                 now,
                 "",
-                progress=_PROGRESS_PCT.get(state, 0),
+                progress=progress,
             )
-
-    def on_board_ack(self, ack: bm.CommandAck, now: int) -> None:
-        """Fail the job in progress when the board refuses its command.
-
-        Args:
-            ack: The board's command ACK.
-            now: Link-clock time in µs.
-        """
-        job = self._job
-        if job is None or int(ack.command) != int(job.code):
-            return
-        if ack.result in (bm.AckResult.ACCEPTED, bm.AckResult.IN_PROGRESS):
-            return
-        why = ack.text or enum_name(bm.AckResult, ack.result)
-        self._finish_job(mav.MavResult.FAILED, f"gripper: {job.action.name.lower()} failed: board {why}", now)
 
     def check_timeout(self, now: int) -> None:
         """Fail the job in progress once its deadline has passed.

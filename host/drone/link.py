@@ -21,17 +21,13 @@ It speaks as component ``compid`` (default 25) of the drone's system ``sysid`` (
   timestamp persisted across restarts) and a ``.tlog`` of every packet in and out.
 
 The board side is decoupled: the host feeds every board message to :meth:`DroneLink.on_board_message`
-(``protocol.messages`` objects; thread-safe) and the link sends ``Command`` / ``ParamRequest`` /
-``ParamSet`` through the ``send_to_board`` callable it was given (called from the link thread).
-
-The radio stays the master enable: DO_GRIPPER acts only while the latest telemetry shows the board
-armed, failsafe phase OK and mode GRASP (right lever UP), and a job in progress fails on any failsafe.
+(thread-safe) and the link sends through ``send_to_board`` (``BoardClient.send``, as ``MAVLink``); a
+gripper command's answers come back through its ``on_ack``.
 
 This module is the connection, its thread and the dispatch; the behaviour lives beside it:
-``host.drone.gripper`` (DO_GRIPPER), ``host.drone.params`` (parameter protocol),
-``host.drone.telemetry`` (heartbeat, telemetry, event texts), ``host.drone.config``,
-``host.drone.state`` (snapshots for observers) and ``host.drone.tlog``. Their public names are
-importable from here.
+``host.drone.gripper`` (DO_GRIPPER; the radio's gate is decided on the board), ``host.drone.params``
+(parameter protocol), ``host.drone.telemetry`` (heartbeat, telemetry, event texts),
+``host.drone.config``, ``host.drone.state`` (snapshots for observers) and ``host.drone.tlog``.
 """
 
 from __future__ import annotations
@@ -49,7 +45,7 @@ from types import TracebackType
 from typing import Any, Final
 
 from host.drone.config import DroneLinkConfig, DroneLinkError
-from host.drone.gripper import GripperServer
+from host.drone.gripper import AnswerHandler, BoardPort, GripperServer
 from host.drone.params import ParamMirror
 from host.drone.requests import IDENTITY_COMMANDS, answer_identity
 from host.drone.servo import ServoFollower
@@ -74,6 +70,14 @@ _SIGNING_RESTART_MARGIN: Final[int] = 2 * _SIGNING_PERSIST_PERIOD_US // 10
 than the +1 per packet we can have sent after the last save."""
 
 _log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class _Answer:
+    """A board answer to one of our commands, queued for the link thread."""
+
+    handler: AnswerHandler
+    ack: bm.CommandAck | None
 
 
 def _now_us() -> int:
@@ -103,7 +107,8 @@ class DroneLink:
     Args:
         config: Link configuration.
         send_to_board: Called (from the link thread) with each ``protocol.messages`` message for the
-            board (``Command``, ``ParamRequest``, ``ParamSet``). Must not block for long.
+            board (``Command``, ``ParamRequest``, ``ParamSet``); routes a command's answers to its
+            ``on_ack`` (see :class:`BoardPort`). Must not block for long.
         clock_us: Monotonic clock in µs (injectable for tests).
         wall_clock_us: Unix time in µs, for ``.tlog`` stamps and signing timestamps.
         connect: Opens the connection (injectable); default ``mavutil.mavlink_connection``.
@@ -114,7 +119,7 @@ class DroneLink:
     def __init__(
         self,
         config: DroneLinkConfig,
-        send_to_board: Callable[[bm.Message], None],
+        send_to_board: BoardPort,
         *,
         clock_us: Callable[[], int] = _now_us,
         wall_clock_us: Callable[[], int] = _wall_us,
@@ -132,7 +137,7 @@ class DroneLink:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._lock = threading.RLock()  # RLock: send_to_board may call back into the link
-        self._board_q: queue.Queue[bm.Message] = queue.Queue(maxsize=_BOARD_QUEUE_LEN)
+        self._board_q: queue.Queue[bm.Message | _Answer] = queue.Queue(maxsize=_BOARD_QUEUE_LEN)
         self._text_q: queue.Queue[tuple[int, str]] = queue.Queue(maxsize=256)
         self._closed = False
         # --- state below: written by the link thread under self._lock --------------------------
@@ -141,7 +146,7 @@ class DroneLink:
         self._pose = DronePose()
         self._telemetry: bm.Telemetry | None = None
         self._telemetry_at_us = 0
-        self._gripper = GripperServer(config, self._send, self._board, self._text, self._count)
+        self._gripper = GripperServer(config, self._send, self._board_command, self._text, self._count)
         self._params = ParamMirror(
             config.param_confirm_timeout_us, self._send, self._board, self._text, self._count, clock_us
         )
@@ -229,8 +234,11 @@ class DroneLink:
         Args:
             msg: A decoded board-link message.
         """
+        self._enqueue(msg)
+
+    def _enqueue(self, item: bm.Message | _Answer) -> None:
         try:
-            self._board_q.put_nowait(msg)
+            self._board_q.put_nowait(item)
         except queue.Full:
             with self._lock:
                 self._c["board_queue_dropped"] += 1
@@ -442,9 +450,21 @@ class DroneLink:
 
     def _board(self, msg: bm.Message) -> None:
         try:
-            self._send_to_board(msg)
+            self._send_to_board(msg, origin="MAVLink")
         except Exception:
             self._c["io_errors"] += 1
+
+    def _board_command(self, cmd: bm.Command, on_answer: AnswerHandler) -> bool:
+        """Send a command whose answers ``on_answer`` gets on the link thread; False if it did not go."""
+
+        def deliver(ack: bm.CommandAck | None) -> None:  # on the board client's thread: queued, in order
+            self._enqueue(_Answer(on_answer, ack))
+
+        try:
+            return bool(self._send_to_board(cmd, origin="MAVLink", on_ack=deliver))
+        except Exception:
+            self._c["io_errors"] += 1
+            return False
 
     def _close_conn(self) -> None:
         conn, self._conn = self._conn, None
@@ -594,7 +614,9 @@ class DroneLink:
                 msg = self._board_q.get_nowait()
             except queue.Empty:
                 return
-            if isinstance(msg, bm.Telemetry):
+            if isinstance(msg, _Answer):
+                msg.handler(msg.ack, now)
+            elif isinstance(msg, bm.Telemetry):
                 if self._telemetry is None:
                     self._announce = True
                 self._telemetry = msg
@@ -604,9 +626,7 @@ class DroneLink:
                 self._params.on_board_param(msg)
             elif isinstance(msg, bm.Event):
                 self._text(*event_statustext(msg))
-            elif isinstance(msg, bm.CommandAck):
-                self._gripper.on_board_ack(msg, now)
-            else:
+            elif not isinstance(msg, bm.CommandAck):  # answers to our commands come as _Answer
                 self._c["board_unexpected"] += 1
 
     # ---- periodic ------------------------------------------------------------------------------

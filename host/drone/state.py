@@ -151,3 +151,15 @@ class DroneLinkState:
     tx_rate_hz: float
     params_known: int
     counters: DroneLinkCounters
+
+    def describe(self) -> str:
+        """One line for the panel's health area (markdown)."""
+        alive = sum(1 for p in self.peers if p.alive)
+        last = ""
+        if self.last_command is not None:
+            last = f" · last command {self.last_command.command} → result {self.last_command.result}"
+        return (
+            f"`{self.url}` {'running' if self.running else '**stopped**'} · sys {self.sysid} comp "
+            f"{self.compid} · peers {alive}/{len(self.peers)} · rx {self.rx_rate_hz:.0f}/s tx "
+            f"{self.tx_rate_hz:.0f}/s · signing {'on' if self.signing else 'off'}{last}"
+        )

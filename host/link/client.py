@@ -2,19 +2,24 @@
 
 :class:`BoardClient` opens any pyserial URL or device path (``/dev/ttyACM0``, ``/dev/pts/N``,
 ``socket://127.0.0.1:PORT``, ``loop://``, ``spy://...``) with :func:`serial.serial_for_url` and fans
-every decoded board -> host message out to its listeners (the UI model, the recorder, the MAVLink
-bridge).
+every decoded board -> host message out to its listeners (:class:`host.link.source.BoardSource`: the
+panel's board state, notices and control arbiter, the recorder, the drone link, the run summary).
 
 The port itself is owned by a separate link process (:mod:`host.link.process`: why, and how a hung
 host still ends in zero current); this module is the host process's side of it: it starts that process,
-renews its lease with the latest RC frame, decodes what it forwards and keeps the statistics.
+hands it what the host sends (messages, and the operator's RC frame once per change: :meth:`set_rc`),
+renews its lease (liveness only), decodes what it forwards and keeps the statistics.
+
+Every message sent is told to the sent listeners (with who sent it: the panel's event console lists
+them), and a ``Command`` sent with ``on_ack`` gets its own answers: the link process reports the link
+``seq`` it went out with, and each ``CommandAck`` for that seq (``IN_PROGRESS``, then the final one)
+goes to the sender, or None when the command can no longer be answered (link lost, never written).
 """
 
 from __future__ import annotations
 
 import collections
 import contextlib
-import enum
 import logging
 import multiprocessing as mp
 import multiprocessing.connection as mpc
@@ -24,15 +29,14 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from types import TracebackType
 from typing import Any, Literal
 
+from host.link.acks import AckHandler, AckRoutes
 from host.link.process import BoardLinkError, LinkShared, link_main, now_us
+from host.link.source import BoardSource, LinkState
 from protocol.dbus import FRAME_PERIOD_US, RcFrame
-from protocol.link import LinkParser
 from protocol.messages import (
     HEARTBEAT_PERIOD_US,
-    MESSAGES,
     Command,
     CommandAck,
     Message,
@@ -44,24 +48,17 @@ __all__ = [
     "BoardClient",
     "BoardClientConfig",
     "ByteTap",
-    "LinkState",
     "LinkStats",
-    "MessageListener",
-    "RcSource",
-    "StateListener",
+    "SentListener",
     "load_scaled_s",
 ]
 
 _log = logging.getLogger(__name__)
 
-MessageListener = Callable[[Message], None]
-"""Called on the client's thread with every decoded board -> host message (keep it short)."""
-StateListener = Callable[["LinkState"], None]
-"""Called when the link connects, disconnects or stops."""
 ByteTap = Callable[[Literal["rx", "tx"], bytes, int], None]
 """Called with the exact bytes read (``rx``) or written (``tx``) and the monotonic time in µs."""
-RcSource = Callable[[], RcFrame | None]
-"""Returns the DBUS frame to send now, or None when nobody holds control (then no RC is sent)."""
+SentListener = Callable[[Message, str], None]
+"""Called with every message handed to the link and who sent it (``Tab 3``, ``host``, ``MAVLink``)."""
 
 
 def load_scaled_s(base_s: float) -> float:
@@ -78,30 +75,20 @@ def load_scaled_s(base_s: float) -> float:
     return base_s * max(1.0, load / (os.cpu_count() or 1))
 
 
-class LinkState(enum.Enum):
-    """Connection state of the board link."""
-
-    CONNECTING = "connecting"
-    CONNECTED = "connected"
-    DISCONNECTED = "disconnected"
-    STOPPED = "stopped"
-
-
 @dataclass(frozen=True, slots=True)
 class BoardClientConfig:
     """Timing of the board link.
 
     Attributes:
         heartbeat_period_us: ``Heartbeat`` period (10 Hz; the board's host timeout is 500 ms).
-        rc_period_us: ``VirtualRc`` period while a source gives frames (DR16: 14 ms).
+        rc_period_us: ``VirtualRc`` period while the host has set a frame (DR16: 14 ms).
         reconnect_period_us: pause between attempts to reopen a vanished port.
         rate_window_us: window over which receive rates are computed.
         safe_frames_on_connect: neutral right-lever-DOWN frames sent right after (re)connecting.
         lease_us: the link process stops RC and heartbeat when the host has not renewed its lease for
             this long (a hung host must not keep the arm going). 1 s: on this shared 2-core machine the
             host process was measured stalling 300+ ms under load without being hung.
-        rc_poll_period_us: how often the host reads the RC source into the shared frame (and renews
-            the lease).
+        lease_renew_period_us: how often the host renews its lease (liveness only: no data rides on it).
         rt_priority: SCHED_FIFO priority of the link process (None: normal priority). Below the
             virtual board's firmware loop (50) so it never delays it.
         exclusive: lock a device port against a second opener (pyserial ``exclusive``; POSIX devices).
@@ -115,7 +102,7 @@ class BoardClientConfig:
     rate_window_us: int = 1_000_000
     safe_frames_on_connect: int = 3
     lease_us: int = 1_000_000
-    rc_poll_period_us: int = 5_000
+    lease_renew_period_us: int = 5_000
     rt_priority: int | None = 20
     exclusive: bool = True
     open_timeout_s: float = 20.0
@@ -127,7 +114,7 @@ class BoardClientConfig:
             "reconnect_period_us",
             "rate_window_us",
             "lease_us",
-            "rc_poll_period_us",
+            "lease_renew_period_us",
         ):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be > 0")
@@ -203,11 +190,8 @@ class LinkStats:
         )
 
 
-class BoardClient:
+class BoardClient(BoardSource):
     """The board link on the host side: a link process, one dispatcher thread, listeners, statistics.
-
-    Listeners run on the dispatcher thread and must be quick (store the latest value, queue work);
-    exceptions they raise are logged and counted, never propagated.
 
     Latency estimate: half the round trip of the last ``Command`` -> ``CommandAck`` when one is known,
     otherwise the smoothed excess of (host receive time - board time) of ``Telemetry`` over its running
@@ -217,31 +201,22 @@ class BoardClient:
         >>> with BoardClient("socket://127.0.0.1:5760") as client:  # doctest: +SKIP
         ...     client.add_listener(print)
         ...     client.start()
+        ...     client.set_rc(RcFrame.neutral())  # the operator's radio: sent every 14 ms from now on
     """
 
-    def __init__(
-        self,
-        url: str,
-        config: BoardClientConfig | None = None,
-        *,
-        rc_source: RcSource | None = None,
-        reconnect: bool = True,
-    ) -> None:
+    def __init__(self, url: str, config: BoardClientConfig | None = None, *, reconnect: bool = True) -> None:
         """Create a client (nothing is opened until :meth:`start`).
 
         Args:
             url: pyserial URL or device path of the board link.
             config: timing; defaults are the board's rates.
-            rc_source: read every ``rc_poll_period_us``; a returned frame is sent as ``VirtualRc``
-                every ``rc_period_us`` by the link process.
             reconnect: retry a vanished port until :meth:`stop` (otherwise stop on the first loss).
         """
+        super().__init__()
         self.url = url
         self.config = config or BoardClientConfig()
-        self._rc_source = rc_source
         self._reconnect = reconnect
-        self._listeners: list[MessageListener] = []
-        self._state_listeners: list[StateListener] = []
+        self._sent_listeners: list[SentListener] = []
         self._taps: list[ByteTap] = []
         self._ctx = mp.get_context("spawn")
         self._shared: LinkShared | None = None
@@ -249,20 +224,19 @@ class BoardClient:
         self._conn: mpc.Connection | None = None
         self._events: Any = None
         self._send_lock = threading.Lock()
+        """Orders what goes down the pipe, and the pipe's replacement on a restart."""
+        self._rc: bytes | None = None
+        """The operator's DBUS frame as last set (a restarted link process starts with it)."""
         self._stats_lock = threading.Lock()
         self._stop = threading.Event()
         self._connected = threading.Event()
         self._thread: threading.Thread | None = None
-        self._state = LinkState.STOPPED
         self._stream = MessageStream()
-        self._tx_parser = LinkParser()
-        """Splits what the link process wrote back into frames, to count them and time commands."""
         self._rx_counts: collections.Counter[str] = collections.Counter()
         self._tx_counts: collections.Counter[str] = collections.Counter()
         self._rx_times: dict[str, collections.deque[int]] = {}
         self._tx_dropped = 0
         self._rx_bytes = 0
-        self._listener_errors = 0
         self._reconnects = 0
         self._process_restarts = 0
         self._last_restart = float("-inf")
@@ -270,33 +244,22 @@ class BoardClient:
         self._last_rx_us: int | None = None
         self._min_offset_us: int | None = None
         self._offset_excess_us: float | None = None
-        self._pending_cmd: dict[int, int] = {}
+        self._sent_at: dict[int, int] = {}
+        """Command seq -> when it was written (the round trip)."""
         self._rtt_us: float | None = None
+        self._acks = AckRoutes()
 
     # ------------------------------------------------------------------ wiring
 
-    def add_listener(self, listener: MessageListener) -> None:
-        """Receive every decoded board -> host message (on the dispatcher thread)."""
-        self._listeners.append(listener)
-
-    def add_state_listener(self, listener: StateListener) -> None:
-        """Be told when the link connects, disconnects or stops."""
-        self._state_listeners.append(listener)
+    def add_sent_listener(self, listener: SentListener) -> None:
+        """Be told of every message handed to the link and who sent it (on the sender's thread)."""
+        self._sent_listeners.append(listener)
 
     def add_tap(self, tap: ByteTap) -> None:
         """See the exact bytes read and written (for recording)."""
         self._taps.append(tap)
 
-    def set_rc_source(self, source: RcSource | None) -> None:
-        """Replace the virtual RC source (None: send no RC)."""
-        self._rc_source = source
-
     # ------------------------------------------------------------------ lifecycle
-
-    @property
-    def state(self) -> LinkState:
-        """Current connection state."""
-        return self._state
 
     @property
     def connected(self) -> bool:
@@ -315,7 +278,7 @@ class BoardClient:
         self._shared = LinkShared(self._ctx)
         self._renew_lease()
         proc, events = self._spawn()
-        self._set_state(LinkState.CONNECTING)
+        self.set_state(LinkState.CONNECTING)
         # Wait for the first word from the link process: open or not. A fresh interpreter under load
         # can take many seconds to import and open, hence the wait scaled by the load.
         first: Any = None
@@ -346,19 +309,20 @@ class BoardClient:
 
     def _spawn(self) -> tuple[Any, Any]:
         """Start a link process on the shared memory; returns it and its event queue."""
-        child, parent = self._ctx.Pipe(duplex=False)  # host -> link process requests
-        events = self._ctx.Queue()  # link process -> host: bytes, states, sent frames
-        proc = self._ctx.Process(
-            target=link_main,
-            args=(self.url, self.config, self._shared, child, events, self._reconnect),
-            name="board-link",
-            daemon=True,
-        )
-        proc.start()
-        child.close()
-        self._proc = proc
-        self._conn = parent
-        self._events = events
+        with self._send_lock:  # a frame set meanwhile goes to the new process or is its first frame
+            child, parent = self._ctx.Pipe(duplex=False)  # host -> link process requests
+            events = self._ctx.Queue()  # link process -> host: bytes, states, sent frames
+            proc = self._ctx.Process(
+                target=link_main,
+                args=(self.url, self.config, self._shared, child, events, self._reconnect, self._rc),
+                name="board-link",
+                daemon=True,
+            )
+            proc.start()
+            child.close()
+            self._proc = proc
+            self._conn = parent
+            self._events = events
         return proc, events
 
     def _restart_process(self) -> None:
@@ -366,7 +330,7 @@ class BoardClient:
 
         While no process runs the board receives neither RC nor heartbeat, so it is at zero current
         (RC lost after 30 ms); the new process sends only neutral right-lever-DOWN frames until this
-        host has seen its connect and reset the levers (``rc_gen`` back to "no connect seen").
+        host has seen its connect and its listeners have reset the levers.
         """
         proc = self._proc
         code = proc.exitcode if proc is not None else None
@@ -379,10 +343,9 @@ class BoardClient:
         )
         self._ever_lost = True
         self._connected.clear()
-        self._set_state(LinkState.DISCONNECTED)
+        self.set_state(LinkState.DISCONNECTED)
+        self._unroute_all()
         self._shutdown_process()
-        if self._shared is not None:
-            self._shared.rc_gen.value = -1
         # A process that dies at once again is not restarted in a tight loop.
         pause_s = self._last_restart + self.config.reconnect_period_us / 1e6 - time.monotonic()
         if pause_s > 0 and self._stop.wait(pause_s):
@@ -399,11 +362,13 @@ class BoardClient:
             self._thread = None
         self._shutdown_process()
         self._connected.clear()
+        self._unroute_all()
         if self._state is not LinkState.STOPPED:
-            self._set_state(LinkState.STOPPED)
+            self.set_state(LinkState.STOPPED)
 
     def _shutdown_process(self) -> None:
-        conn, self._conn = self._conn, None
+        with self._send_lock:
+            conn, self._conn = self._conn, None
         proc, self._proc = self._proc, None
         events, self._events = self._events, None
         if conn is not None:
@@ -432,19 +397,39 @@ class BoardClient:
     def __enter__(self) -> BoardClient:
         return self
 
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.stop()
-
     def wait_connected(self, timeout_s: float) -> bool:
         """Block until connected (True) or ``timeout_s`` passes (False)."""
         return self._connected.wait(timeout_s)
 
     # ------------------------------------------------------------------ sending
 
-    def send(self, msg: Message) -> bool:
+    def set_rc(self, frame: RcFrame | None) -> None:
+        """The operator's radio from now on: ``frame`` in every 14 ms slot (None: no RC at all).
+
+        Called once per change (by the control arbiter); the link process's RC slot is the only clock
+        that samples it. After a (re)connect the link sends SAFE frames instead until this client's
+        state listeners have seen the connection (and reset their levers).
+
+        Raises:
+            ValueError: ``frame`` cannot be packed (out-of-range fields).
+        """
+        data = None if frame is None else frame.pack()
+        with self._send_lock:
+            self._rc = data
+            conn = self._conn
+            if conn is not None:
+                with contextlib.suppress(OSError, ValueError):  # a dead process: its successor starts with it
+                    conn.send(("rc", data))
+
+    def send(self, msg: Message, *, origin: str = "host", on_ack: AckHandler | None = None) -> bool:
         """Send one host -> board message (the link process writes it at once).
+
+        Args:
+            msg: the message.
+            origin: who sends it, for the sent listeners (``Tab 3``, ``host``, ``MAVLink``).
+            on_ack: for a ``Command``: called with each ``CommandAck`` answering it (``IN_PROGRESS``, then
+                the final one), or with None once it can have no answer (the link went down first).
+                Not called when this returns False.
 
         Returns:
             True if handed to the link process while connected; False if the link is down or the
@@ -461,57 +446,69 @@ class BoardClient:
         except ValueError:
             _log.exception("cannot encode %r", msg)
             return False
+        ticket = 0
+        if on_ack is not None and isinstance(msg, Command):
+            ticket = self._acks.ticket(int(msg.code), on_ack)
         try:
             with self._send_lock:
-                conn.send(("send", msg))
+                conn.send(("send", msg, ticket))
         except (OSError, ValueError):
             with self._stats_lock:
                 self._tx_dropped += 1
+            self._acks.drop(ticket)
             return False
+        for listener in self._sent_listeners:
+            try:
+                listener(msg, origin)
+            except Exception:
+                self.listener_errors += 1
+                _log.exception("sent listener failed")
         return True
 
     def _renew_lease(self) -> None:
         sh = self._shared
-        if sh is None:
-            return
-        source = self._rc_source
-        frame: RcFrame | None = None
-        if source is not None:
-            try:
-                frame = source()
-            except Exception:
-                self._listener_errors += 1
-                _log.exception("RC source failed")
-        if frame is None:
-            sh.rc_on.value = 0
-        else:
-            try:
-                data = frame.pack()
-            except ValueError:
-                _log.exception("RC source produced an unpackable frame: %r", frame)
-                sh.rc_on.value = 0
-            else:
-                # One writer (this thread); a torn read by the link process is impossible to act on:
-                # the board rejects a malformed frame, and the next period sends a whole one.
-                sh.rc[:] = data  # type: ignore[index]
-                sh.rc_on.value = 1
-        sh.lease_until_us.value = now_us() + self.config.lease_us
+        if sh is not None:
+            sh.lease_until_us.value = now_us() + self.config.lease_us
+
+    # ------------------------------------------------------------------ answers to commands
+
+    def _written(self, ticket: int, seq: int, t_us: int) -> None:
+        """The link process wrote a ``Command`` with ``seq``: time it; route its answers if awaited."""
+        with self._stats_lock:
+            self._sent_at[seq] = t_us
+            if len(self._sent_at) > 64:
+                self._sent_at.pop(next(iter(self._sent_at)))
+        if ticket:
+            for handler in self._acks.written(ticket, seq):
+                self._answer(handler, None)
+
+    def _unroute_all(self) -> None:
+        """The link went down: every command still awaiting an answer gets None."""
+        for handler in self._acks.drop_all():
+            self._answer(handler, None)
+
+    def _answer(self, handler: AckHandler, ack: CommandAck | None) -> None:
+        try:
+            handler(ack)
+        except Exception:
+            self.listener_errors += 1
+            _log.exception("command answer handler failed")
 
     # ------------------------------------------------------------------ dispatching
 
     def _dispatch_loop(self) -> None:
-        poll_s = self.config.rc_poll_period_us / 1e6
+        renew_s = self.config.lease_renew_period_us / 1e6
         next_lease = 0.0
         while not self._stop.is_set():
             events, proc = self._events, self._proc
             if events is None:
                 break
             now = time.monotonic()
-            if now >= next_lease:
-                next_lease = now + poll_s
+            if now >= next_lease:  # liveness only: a stalled thread lets the lease run out
+                next_lease = now + renew_s
                 self._renew_lease()
             try:
-                item = events.get(timeout=poll_s)
+                item = events.get(timeout=renew_s)
             except queue.Empty:
                 if proc is not None and not proc.is_alive() and not self._stop.is_set():
                     self._restart_process()
@@ -528,20 +525,19 @@ class BoardClient:
         if kind == "rx":
             self._on_bytes(item[1], item[2])
         elif kind == "tx":
-            _, data, t_us = item
+            _, data, t_us, counts = item
             with self._stats_lock:
-                for frame in self._tx_parser.feed(data):
-                    cls = MESSAGES.get(frame.cmd_id)
-                    self._tx_counts[cls.__name__ if cls is not None else f"{frame.cmd_id:#06x}"] += 1
-                    if cls is Command:
-                        self._pending_cmd[frame.seq] = t_us
-                        if len(self._pending_cmd) > 64:
-                            self._pending_cmd.pop(next(iter(self._pending_cmd)))
+                self._tx_counts.update(counts)
             if self._taps:
                 self._tap("tx", data, t_us)
+        elif kind == "sent":
+            self._written(item[1], item[2], item[3])
         elif kind == "tx_dropped":
             with self._stats_lock:
                 self._tx_dropped += 1
+            handler = self._acks.drop(item[2])
+            if handler is not None:
+                self._answer(handler, None)
         elif kind == "state":
             _, what, reason, gen = item
             if what == "connected":
@@ -553,33 +549,28 @@ class BoardClient:
                 else:
                     _log.info("board link open: %s", self.url)
                 self._connected.set()
-                self._set_state(LinkState.CONNECTED)
-                # Listeners (the model) have reset their levers: now the link may send their frames.
+                # The state listeners (the control arbiter) reset their levers and set the SAFE frame ...
+                self.set_state(LinkState.CONNECTED)
                 self._renew_lease()
-                if self._shared is not None:
-                    self._shared.rc_gen.value = gen
+                # ... and only then may the link send frames that are not SAFE (in order on the pipe).
+                with self._send_lock:
+                    if self._conn is not None:
+                        with contextlib.suppress(OSError, ValueError):
+                            self._conn.send(("rc_gen", gen))
             else:
                 self._ever_lost = True
                 self._connected.clear()
                 _log.warning("board link lost (%s): %s; retrying", self.url, reason)
-                self._set_state(LinkState.DISCONNECTED)
+                self.set_state(LinkState.DISCONNECTED)
+                self._unroute_all()
 
     def _tap(self, direction: Literal["rx", "tx"], data: bytes, t_us: int) -> None:
         for tap in self._taps:
             try:
                 tap(direction, data, t_us)
             except Exception:
-                self._listener_errors += 1
+                self.listener_errors += 1
                 _log.exception("byte tap failed")
-
-    def _set_state(self, state: LinkState) -> None:
-        self._state = state
-        for listener in self._state_listeners:
-            try:
-                listener(state)
-            except Exception:
-                self._listener_errors += 1
-                _log.exception("state listener failed")
 
     def _on_bytes(self, data: bytes, t_us: int) -> None:
         self._last_rx_us = t_us
@@ -590,7 +581,7 @@ class BoardClient:
             self.dispatch(msg, t_us)
 
     def dispatch(self, msg: Message, rx_us: int | None = None) -> None:
-        """Count ``msg`` and hand it to every listener (the client calls this; replay may too).
+        """Count ``msg``, hand it to every listener, and an answer to the command's sender.
 
         Args:
             msg: a decoded board -> host message.
@@ -615,15 +606,14 @@ class BoardClient:
                 prev = self._offset_excess_us
                 self._offset_excess_us = excess if prev is None else 0.9 * prev + 0.1 * excess
             elif isinstance(msg, CommandAck):
-                sent = self._pending_cmd.pop(msg.request_seq, None)
+                sent = self._sent_at.pop(msg.request_seq, None)
                 if sent is not None:
                     self._rtt_us = float(now - sent)
-        for listener in self._listeners:
-            try:
-                listener(msg)
-            except Exception:
-                self._listener_errors += 1
-                _log.exception("listener %r failed on %s", listener, name)
+        self.fan_out(msg)
+        if isinstance(msg, CommandAck):
+            handler = self._acks.answer(msg)
+            if handler is not None:
+                self._answer(handler, msg)
 
     # ------------------------------------------------------------------ statistics
 
@@ -653,7 +643,7 @@ class BoardClient:
                 parser=stream.parser.counters(),
                 decode_errors=stream.decode_errors - stream.unknown_ids,
                 unknown_messages=stream.unknown_ids,
-                listener_errors=self._listener_errors,
+                listener_errors=self.listener_errors,
                 reconnects=self._reconnects,
                 process_restarts=self._process_restarts,
                 rc_late=int(sh.rc_late.value) if sh else 0,

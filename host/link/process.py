@@ -6,16 +6,22 @@ out every 14 ms (the DR16's rate). Sent from a thread of the host process, frame
 apart several times in 10 s whenever a browser was attached (viser, numpy and Chromium's software
 rendering contend for the GIL and both cores). So a small **link process** (SCHED_FIFO priority 20 when
 permitted, below the virtual board's 50) opens the port, writes the ``Heartbeat`` every 100 ms and the
-latest ``VirtualRc`` frame every 14 ms on absolute deadlines, forwards received bytes to the host
-process, and writes whatever the host sends. The host process (:class:`host.link.client.BoardClient`)
-parses, decodes and dispatches.
+host's RC frame every 14 ms on absolute deadlines, forwards received bytes to the host process, and
+writes whatever the host sends. The host process (:class:`host.link.client.BoardClient`) parses,
+decodes and dispatches.
 
-Safety of that split: the host renews a *lease* (shared memory) every few ms; when it stalls longer than
-``lease_us`` (1 s) the link process stops both RC and heartbeat, so a hung host still ends in zero
-current (RC lost after 30 ms; host lost when the board requires the heartbeat). When the device vanishes
-the link process retries until it comes back; after every (re)connect it sends only neutral
-right-lever-DOWN frames until the host has seen the reconnect and reset its levers, so the start-up
-gate is always passed from SAFE.
+One clock for the radio: the host pushes its DBUS frame here once, when it changes (``("rc", bytes)``
+on the request pipe, in order with everything else it sends); the RC slot of this process is the only
+thing that samples it. Nothing else polls.
+
+Safety of that split: the host renews a *lease* (shared memory) every few ms: liveness only, it carries
+no data. When the host stalls longer than ``lease_us`` (1 s) this process stops both RC and heartbeat,
+so a hung host still ends in zero current (RC lost after 30 ms; host lost when the board requires the
+heartbeat); they resume with the lease. When the device vanishes this process retries until it comes
+back; after every (re)connect it sends only neutral right-lever-DOWN frames until the host has seen
+that connection (``("rc_gen", generation)``, sent after its listeners reset their levers), so the
+start-up gate is always passed from SAFE. A restarted process begins with the host's last frame and no
+connection seen: SAFE frames again.
 """
 
 from __future__ import annotations
@@ -33,8 +39,8 @@ import serial
 
 from controller.config import FailsafeConfig
 from controller.transport import set_tcp_nodelay
-from protocol.dbus import FRAME_LEN, RcFrame
-from protocol.messages import Message, VirtualRc
+from protocol.dbus import RcFrame
+from protocol.messages import Command, Message, VirtualRc
 from protocol.session import HostSession
 
 __all__ = [
@@ -125,15 +131,15 @@ def open_port(url: str, *, timeout_s: float, exclusive: bool = True) -> Any:
 
 
 class LinkShared:
-    """Shared memory between the host and its link process (lock-free single-writer fields)."""
+    """Shared memory between the host and its link process (lock-free single-writer fields).
+
+    The host writes only its lease; the link process writes its RC statistics. Data (the RC frame, the
+    messages to send) travels on the request pipe, in order.
+    """
 
     def __init__(self, ctx: Any) -> None:
-        self.rc = ctx.Array("B", FRAME_LEN, lock=False)
-        self.rc_on = ctx.Value("b", 0, lock=False)
-        """1 while the host wants RC sent."""
-        self.rc_gen = ctx.Value("q", -1, lock=False)
-        """Connection generation the host has acknowledged (frames are SAFE until it matches)."""
         self.lease_until_us = ctx.Value("q", 0, lock=False)
+        """Host liveness: the link process sends RC and heartbeats only until then (its clock, µs)."""
         self.rc_late = ctx.Value("q", 0, lock=False)
         self.rc_max_gap_us = ctx.Value("q", 0, lock=False)
         self.rc_gaps = ctx.Value("q", 0, lock=False)
@@ -146,24 +152,36 @@ _EVENTS_MAX = 20_000
 
 
 def link_main(
-    url: str, cfg: LinkTiming, shared: LinkShared, conn: mpc.Connection, events: Any, reconnect: bool
+    url: str,
+    cfg: LinkTiming,
+    shared: LinkShared,
+    conn: mpc.Connection,
+    events: Any,
+    reconnect: bool,
+    rc_frame: bytes | None = None,
 ) -> None:
     """Body of the link process (module level so the spawn start method can import it).
 
     Args:
         url: pyserial URL or device path of the board link.
         cfg: the link's timing (a :class:`host.link.client.BoardClientConfig`).
-        shared: the host's RC frame, lease and the link's RC statistics.
-        conn: requests from the host (``("send", msg)``, ``("stop",)``).
-        events: to the host: ``("rx", bytes, t_us)``, ``("tx", bytes, t_us)``, ``("tx_dropped", cmd_id)``,
-            ``("state", "connected" | "disconnected", reason, generation)``, ``("open_failed", reason)``.
+        shared: the host's lease and the link's RC statistics.
+        conn: requests from the host, handled in order: ``("send", msg, ticket)`` (ticket 0: nobody
+            awaits its seq), ``("rc", frame_bytes | None)`` (the RC frame from now on; None: no RC),
+            ``("rc_gen", generation)`` (the host has seen that connection), ``("stop",)``.
+        events: to the host: ``("rx", bytes, t_us)``, ``("tx", bytes, t_us, counts)`` (counts: frames
+            written per message type), ``("sent", ticket, seq, t_us)`` (a ``Command`` written),
+            ``("tx_dropped", cmd_id, ticket)``, ``("state", "connected" | "disconnected", reason,
+            generation)``, ``("open_failed", reason)``.
         reconnect: retry a vanished port (otherwise end on the first loss).
+        rc_frame: the host's RC frame when this process starts (a restarted process keeps sending the
+            operator's radio, SAFE until the host has seen its connection).
     """
     # A terminal's Ctrl-C reaches the whole process group. The host shuts this process down in order
     # (a last SAFE frame, then the port closed); dying of KeyboardInterrupt here would skip that.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        _LinkWorker(url, cfg, shared, conn, events, reconnect).run()
+        _LinkWorker(url, cfg, shared, conn, events, reconnect, rc_frame).run()
     except Exception as exc:  # report, never a silent death
         with contextlib.suppress(Exception):
             events.put(("open_failed", f"board link process failed: {type(exc).__name__}: {exc}"))
@@ -187,6 +205,7 @@ class _LinkWorker:
         conn: mpc.Connection,
         events: Any,
         reconnect: bool,
+        rc_frame: bytes | None,
     ) -> None:
         self.url = url
         self.cfg = cfg
@@ -203,7 +222,19 @@ class _LinkWorker:
         self.now_us = 0
         """The time of the current loop pass (the session's callbacks below run inside it)."""
         self.rc_slot_us: int | None = None
-        """The slot of the RC frame the session just queued from shared memory (None: none queued)."""
+        """The slot of the RC frame the session just queued (None: none queued)."""
+        self.rc_frame = rc_frame
+        """The host's DBUS frame (None: the host sends no RC)."""
+        self.rc_gen = -1
+        """The connection generation the host has seen (frames are SAFE until it is this one)."""
+        self.lapsed = False
+        """The lease ran out while RC was on (counted once per lapse)."""
+        self.tx_counts: dict[str, int] = {}
+        """Frames queued since the last write, per message type (sent to the host with the bytes)."""
+        self.tx_tickets: list[tuple[int, int]] = []
+        """(ticket, seq) of the ``Command`` frames queued since the last write."""
+        self._hb_queued = 0
+        self._rc_queued = 0
         # The link's protocol state: seq, heartbeat clock, RC slots. It only sends; the host process
         # decodes what is received.
         self.session = HostSession(
@@ -234,6 +265,17 @@ class _LinkWorker:
         session = self.session
         link, rc = session.data_to_send(), session.rc_to_send()
         slot_us, self.rc_slot_us = self.rc_slot_us, None
+        counts, self.tx_counts = self.tx_counts, {}
+        tickets, self.tx_tickets = self.tx_tickets, []
+        # The session's own frames (heartbeats, RC slots) counted by what it says it queued.
+        for name, now_n, attr in (
+            ("Heartbeat", session.heartbeats_sent, "_hb_queued"),
+            ("VirtualRc", session.rc_frames_sent, "_rc_queued"),
+        ):
+            before = getattr(self, attr)
+            if now_n != before:
+                counts[name] = counts.get(name, 0) + now_n - before
+                setattr(self, attr, now_n)
         if not link and not rc:
             return
         data = link + rc if link and rc else link or rc
@@ -243,7 +285,9 @@ class _LinkWorker:
             self._lost(f"write failed: {exc}")
             return
         now = now_us()
-        self._post("tx", data, now)
+        self._post("tx", data, now, counts)
+        for ticket, seq in tickets:
+            self._post("sent", ticket, seq, now)
         if slot_us is not None:
             self._rc_written(slot_us)
 
@@ -341,23 +385,21 @@ class _LinkWorker:
         return self.port is not None and now <= self.sh.lease_until_us.value
 
     def _rc_payload(self, slot_us: int) -> bytes | None:
-        """The session's RC source: the host's frame from shared memory, if it may be sent now."""
-        sh = self.sh
-        if self.port is None:
+        """The session's RC source: the host's frame, if it may be sent now (the only RC clock)."""
+        frame = self.rc_frame
+        if self.port is None or frame is None:
             self.rc_last_us = None
             return None
-        if self.now_us > sh.lease_until_us.value:
-            if sh.rc_on.value:
-                sh.lease_expired.value += 1
-                sh.rc_on.value = 0
+        if self.now_us > self.sh.lease_until_us.value:
+            if not self.lapsed:  # the host stalled: no stale sticks, and the board times out to zero
+                self.lapsed = True
+                self.sh.lease_expired.value += 1
             self.rc_last_us = None
             return None
-        if not sh.rc_on.value:
-            self.rc_last_us = None
-            return None
+        self.lapsed = False
         self.rc_slot_us = slot_us
         # Until the host has seen this connection, only SAFE frames (right lever DOWN).
-        return bytes(sh.rc) if sh.rc_gen.value == self.gen else _SAFE_FRAME
+        return frame if self.rc_gen == self.gen else _SAFE_FRAME
 
     def _rc_written(self, slot_us: int) -> None:
         """Timing statistics of a slot's RC frame that reached the port."""
@@ -388,14 +430,24 @@ class _LinkWorker:
         try:
             while self.conn.poll(0):
                 item = self.conn.recv()
-                if item[0] == "send":
+                kind = item[0]
+                if kind == "send":
                     msg: Message = item[1]
+                    ticket: int = item[2]
                     if self.port is None:
-                        self._post("tx_dropped", msg.CMD_ID)
+                        self._post("tx_dropped", msg.CMD_ID, ticket)
                     else:
-                        self.session.send(msg, now_us())  # packed once by BoardClient.send already
+                        seq = self.session.send(msg, now_us())  # packed once by BoardClient.send already
+                        name = type(msg).__name__
+                        self.tx_counts[name] = self.tx_counts.get(name, 0) + 1
+                        if isinstance(msg, Command):
+                            self.tx_tickets.append((ticket, seq))
                         self._flush()
-                elif item[0] == "stop":
+                elif kind == "rc":
+                    self.rc_frame = item[1]
+                elif kind == "rc_gen":
+                    self.rc_gen = item[1]
+                elif kind == "stop":
                     self.stop = True
                     return
         except (OSError, EOFError):

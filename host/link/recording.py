@@ -13,7 +13,7 @@ from typing import Any, Final
 
 from host.drone.tlog import TLOG_LINK_OUT
 from host.errors import HostError
-from host.link.client import LinkState
+from host.link.source import LinkState
 from protocol.mavlink import MavCodec, dialect
 from protocol.messages import Message, SimPoses, Telemetry
 from protocol.stream import MessageStream

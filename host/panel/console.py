@@ -22,8 +22,9 @@ class ConsoleEntry:
         seq: increasing number.
         board_time_us: board time (an ``Event``'s own time; otherwise the newest telemetry's time when
             it happened; None before the first telemetry).
-        source: ``board`` (board events), ``failsafe`` (phase changes), ``ack`` (command answers),
-            ``panel`` (commands from a tab or the command line), ``MAVLink`` (the drone link's).
+        source: ``board`` (board events), ``failsafe`` (phase changes), ``ack`` (command answers), or
+            who sent a command to the board: ``Tab 3``, ``host`` (the command line; also the host's own
+            notes, e.g. recordings), ``MAVLink`` (the drone link).
         level: ``info``, ``warning`` or ``error``.
         text: one line.
     """

@@ -1,4 +1,4 @@
-"""The per-tab Control folder: its builder (callbacks only write to the model) and its refresh."""
+"""The per-tab Control folder: its builder (callbacks only call the control arbiter) and its refresh."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ from typing import Any
 
 import viser
 
-from host.panel.model import CLI_CLIENT, ControlResult, UiModel
+from host.panel.arbiter import CLI_CLIENT, ControlArbiter, ControlResult
+from host.panel.board_state import BoardState
 from host.panel.scene import CAMERA_PRESETS
 from host.panel.state_bar import KEY_HOOK_HTML, pilot_state, state_bar_html
 from protocol.dbus import Lever
@@ -105,24 +106,26 @@ class ControlHandles:
 
 def build_control_panel(
     client: viser.ClientHandle,
-    model: UiModel,
+    arbiter: ControlArbiter,
+    board: BoardState,
     *,
     tension_max_n: float,
     set_camera: Callable[[viser.ClientHandle, str], None] | None = None,
 ) -> ControlHandles:
     """Build one tab's state bar, Control folder and View folder.
 
-    Every callback writes to ``model`` on behalf of that tab (or moves this tab's own camera).
+    Every callback calls ``arbiter`` on behalf of that tab (or moves this tab's own camera).
 
     Args:
         client: the tab.
-        model: the UI model.
+        arbiter: who may act, and the way to the board.
+        board: the board's state (the state bar's first text).
         tension_max_n: the DIRECT sliders' ceiling.
         set_camera: moves a tab's camera to a preset (``host.panel.scene.CAMERA_PRESETS``).
     """
     cid = client.client_id
     gui = client.gui
-    first = pilot_state(None, model.link_state, mine=False, holder_known=False)
+    first = pilot_state(None, board.link_state, mine=False, holder_known=False)
     state_bar = gui.add_html(state_bar_html(first), order=_ORDER_STATE)
     gui.add_html(KEY_HOOK_HTML, order=_ORDER_STATE + 1)
 
@@ -245,7 +248,7 @@ def build_control_panel(
     def _(event: Any) -> None:
         if not own(event):
             return
-        result = model.request_control(cid)
+        result = arbiter.request_control(cid)
         if result is ControlResult.DENIED:
             client.add_notification(
                 "Not authorised", "This tab has no access token.", color="red", auto_close_seconds=5
@@ -258,44 +261,44 @@ def build_control_panel(
     @release.on_click
     def _(event: Any) -> None:
         if own(event):
-            model.release_control(cid)
+            arbiter.release_control(cid)
 
     @grant.on_click
     def _(event: Any) -> None:
         if own(event):
-            model.answer_request(cid, grant=True)
+            arbiter.answer_request(cid, grant=True)
 
     @refuse.on_click
     def _(event: Any) -> None:
         if own(event):
-            model.answer_request(cid, grant=False)
+            arbiter.answer_request(cid, grant=False)
 
     @cancel.on_click
     def _(event: Any) -> None:
         if own(event):
-            model.cancel_request(cid)
+            arbiter.cancel_request(cid)
 
     @estop.on_click
     def _(event: Any) -> None:
         if own(event):
-            model.estop(cid)
+            arbiter.estop(cid)
 
     @estop_cmd.on_trigger
     def _(event: Any) -> None:
         if event.client_id is None or event.client_id == cid:
-            model.estop(cid)
+            arbiter.estop(cid)
 
     for ch, slider in sticks.items():
 
         def _stick(event: Any, ch: int = ch) -> None:
             if own(event):
-                model.set_stick(cid, ch, float(event.target.value))
+                arbiter.set_stick(cid, ch, float(event.target.value))
 
         slider.on_update(_stick)
 
     def _centre(event: Any) -> None:
-        if event.client_id is not None and event.client_id == cid and model.has_control(cid):
-            model.centre_sticks(cid)
+        if event.client_id is not None and event.client_id == cid and arbiter.has_control(cid):
+            arbiter.centre_sticks(cid)
             for s in sticks.values():
                 handle: Any = s  # viser types the setter oddly (read-only to mypy)
                 handle.value = 0.0
@@ -307,7 +310,7 @@ def build_control_panel(
         if not own(event):
             return
         # viser's button groups cannot be disabled: a watcher's click is refused here, and said.
-        if not model.set_lever(cid, which, str(event.target.value).removeprefix(SELECTED)):
+        if not arbiter.set_lever(cid, which, str(event.target.value).removeprefix(SELECTED)):
             client.add_notification(
                 "Lever not moved",
                 "Take control first: only the holder's levers reach the board.",
@@ -321,7 +324,7 @@ def build_control_panel(
     def _cmd(button: Any, code: CommandCode, args: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         def _(event: Any) -> None:
             if own(event):
-                model.command(cid, code, args)
+                arbiter.command(cid, code, args)
 
         button.on_click(_)
 
@@ -337,7 +340,7 @@ def build_control_panel(
 
         def _tension(event: Any, i: int = i) -> None:
             if own(event):
-                model.set_direct_tension(cid, i, float(event.target.value))
+                arbiter.set_direct_tension(cid, i, float(event.target.value))
 
         slider.on_update(_tension)
 
@@ -345,30 +348,33 @@ def build_control_panel(
 
         def _hold(event: Any, i: int = i) -> None:
             if own(event):
-                model.set_length_hold(cid, i, bool(event.target.value))
+                arbiter.set_length_hold(cid, i, bool(event.target.value))
 
         box.on_update(_hold)
 
     return h
 
 
-def refresh_control(h: ControlHandles, model: UiModel, force: bool = False) -> None:
-    """Bring one tab's control widgets in line with the model (sends only what changed unless forced).
+def refresh_control(
+    h: ControlHandles, arbiter: ControlArbiter, board: BoardState, force: bool = False
+) -> None:
+    """Bring one tab's control widgets in line with the arbiter and the board (sends only what changed
+    unless forced).
 
     Args:
         h: The tab's handles.
-        model: The UI model.
+        arbiter: who holds control, the operator's radio.
+        board: the board's state.
         force: Send every widget state even if it looks unchanged (a new tab).
     """
-    m = model
     cid = h.client_id
-    holder = m.holder
-    pending = m.pending
+    holder = arbiter.holder
+    pending = arbiter.pending
     mine = holder == cid
-    authorised = m.is_authorised(cid)
-    sticks, right, left, _ = m.operator_input()
-    telemetry = m.telemetry
-    bar = state_bar_html(pilot_state(telemetry, m.link_state, mine=mine, holder_known=holder is not None))
+    authorised = arbiter.is_authorised(cid)
+    sticks, right, left, _ = arbiter.operator_input()
+    telemetry = board.telemetry
+    bar = state_bar_html(pilot_state(telemetry, board.link_state, mine=mine, holder_known=holder is not None))
     if force or bar != h.shown.get("bar"):
         h.state_bar.content = bar
     flags = int(telemetry.flags) if telemetry is not None else 0

@@ -12,7 +12,7 @@ from typing import Any
 
 import viser
 
-from host.panel.model import UiModel
+from host.panel.board_state import BoardState
 from protocol.dbus import Lever
 from protocol.messages import GraspState, Phase, TelemetryFlags
 
@@ -80,19 +80,19 @@ TELEMETRY_HZ = 100.0
 """The board's telemetry rate."""
 
 
-def health_checks(model: UiModel, malformed_n: int = 0) -> list[HealthCheck]:
+def health_checks(board: BoardState, malformed_n: int = 0) -> list[HealthCheck]:
     """The numbers worth watching, each with its thresholds and grade.
 
     Counters that only grow since boot (late ticks, rejected frames, CRC errors) are judged as a
     share of their totals, so one bad moment an hour ago does not stay red.
 
     Args:
-        model: the UI model.
+        board: the board's state.
         malformed_n: panel messages the server could not decode (``host.panel.guard``).
     """
     out: list[HealthCheck] = []
-    stats = model.link_stats
-    t = model.telemetry
+    stats = board.link_stats
+    t = board.telemetry
     if stats is not None:
         rate = stats.rx_rate_hz.get("Telemetry", 0.0)
         low = TELEMETRY_HZ - rate
@@ -202,15 +202,15 @@ def _fmt_rate(rates: dict[str, float] | Any, name: str) -> str:
 
 
 def health_text(
-    model: UiModel, pose_source: str, mavlink_status: str | None, shadow_status: str | None = None
+    board: BoardState, pose_source: str, mavlink_status: str | None, shadow_status: str | None = None
 ) -> tuple[str, str, str]:
     """Markdown of the three health blocks (summary, link, loop)."""
-    t = model.telemetry
-    stats = model.link_stats
-    state = model.link_state.value
+    t = board.telemetry
+    stats = board.link_stats
+    state = board.link_state.value
     if t is None:
         summary = (
-            f"**Board** ({model.source_label}): {state} · no telemetry yet  \n**Pose source**: {pose_source}"
+            f"**Board** ({board.source_label}): {state} · no telemetry yet  \n**Pose source**: {pose_source}"
         )
     else:
         flags = TelemetryFlags(t.flags)
@@ -218,7 +218,7 @@ def health_text(
         rc = "ok" if flags & TelemetryFlags.RC_OK else "**lost**"
         phase = t.phase.name if t.phase == Phase.OK else f"**{t.phase.name}**"
         summary = (
-            f"**Board** ({model.source_label}): {state} · **Mode** {t.mode.name} · **Phase** {phase} · "
+            f"**Board** ({board.source_label}): {state} · **Mode** {t.mode.name} · **Phase** {phase} · "
             f"{'ARMED' if flags & TelemetryFlags.ARMED else 'disarmed'}  \n"
             f"**RC** {rc} (R {Lever(t.right_lever).name if t.right_lever in (1, 2, 3) else '-'}, "
             f"L {Lever(t.left_lever).name if t.left_lever in (1, 2, 3) else '-'}) · {motors}  \n"
@@ -253,7 +253,7 @@ def health_text(
             f"{t.dbus_bytes_dropped} B · link CRC {t.link_crc_errors} · motor offline "
             f"{t.motor_offline_events} · CAN errors {t.can_errors}"
         )
-        status = model.status
+        status = board.status
         if status is not None:
             rows = " · ".join(
                 f"{s.name} late {s.late}/{s.runs}, p99 {s.exec_p99_us} µs" for s in status.tasks[:6]

@@ -15,7 +15,7 @@ from typing import Any
 
 import viser
 
-from host.panel.model import UiModel
+from host.panel.board_params import BoardParams
 from host.panel.param_table import PARAM_CONFIRM_S, PARAM_NAMES, ParamStatus, param_info
 
 __all__ = ["ParamHandles", "build_param_panel", "param_text", "refresh_params"]
@@ -67,7 +67,7 @@ def param_text(name: str, values: dict[str, float], status: ParamStatus | None, 
     return "".join(lines)
 
 
-def build_param_panel(client: viser.ClientHandle, model: UiModel) -> ParamHandles:
+def build_param_panel(client: viser.ClientHandle, model: BoardParams) -> ParamHandles:
     """Build one tab's Parameters folder (setting needs control; anyone may read)."""
     cid = client.client_id
     gui = client.gui
@@ -114,7 +114,7 @@ def build_param_panel(client: viser.ClientHandle, model: UiModel) -> ParamHandle
     return h
 
 
-def refresh_params(h: ParamHandles, model: UiModel, force: bool = False) -> None:
+def refresh_params(h: ParamHandles, model: BoardParams, force: bool = False) -> None:
     """Bring the editor in line with the board's values (sends only what changed unless forced)."""
     chosen = str(h.name.value)
     text = param_text(chosen, model.params, model.param_status.get(chosen), time.monotonic())

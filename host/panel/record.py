@@ -19,7 +19,8 @@ import viser
 
 from host.errors import HostError
 from host.link.recording import LinkRecording
-from host.panel.model import UiModel
+from host.panel.arbiter import ControlArbiter
+from host.panel.notices import Notices
 from protocol.messages import Message
 
 __all__ = ["RecordHandles", "RecordingSwitch", "build_record_panel", "refresh_record"]
@@ -103,8 +104,11 @@ class RecordHandles:
     shown: str = ""
 
 
-def build_record_panel(server: viser.ViserServer, switch: RecordingSwitch, model: UiModel) -> RecordHandles:
-    """Build the shared Recording folder (any authorised tab may start or stop a recording)."""
+def build_record_panel(
+    server: viser.ViserServer, switch: RecordingSwitch, arbiter: ControlArbiter, notices: Notices
+) -> RecordHandles:
+    """Build the shared Recording folder (any authorised tab may start or stop a recording; the event
+    console says so)."""
     gui = server.gui
     with gui.add_folder("Recording", order=_ORDER_RECORD, expand_by_default=False):
         start = gui.add_button("Start recording", color="red", hint=f"A new MCAP file in {switch.directory}")
@@ -113,7 +117,7 @@ def build_record_panel(server: viser.ViserServer, switch: RecordingSwitch, model
     h = RecordHandles(start, stop, status)
 
     def allowed(event: Any) -> bool:
-        return event.client_id is not None and model.is_authorised(event.client_id)
+        return event.client_id is not None and arbiter.is_authorised(event.client_id)
 
     @start.on_click
     def _(event: Any) -> None:
@@ -126,7 +130,7 @@ def build_record_panel(server: viser.ViserServer, switch: RecordingSwitch, model
                 "Recording not started", str(exc), color="red", auto_close_seconds=10.0
             )
             return
-        model.log("host", "info", f"recording to {path}")
+        notices.log("host", "info", f"recording to {path}")
         refresh_record(h, switch)
 
     @stop.on_click
@@ -135,7 +139,7 @@ def build_record_panel(server: viser.ViserServer, switch: RecordingSwitch, model
             return
         path = switch.stop()
         if path is not None:
-            model.log("host", "info", f"recording closed: {path}")
+            notices.log("host", "info", f"recording closed: {path}")
         refresh_record(h, switch)
 
     refresh_record(h, switch)

@@ -42,6 +42,7 @@ __all__ = [
     "build_scene",
     "camera_view",
     "default_hanging_pose",
+    "ned_to_scene",
     "quat_mul",
     "quat_rotate",
     "scene_objects",
@@ -154,6 +155,23 @@ class ArmGeometry:
 
 # ---------------------------------------------------------------------- quaternions (w, x, y, z)
 # viser.transforms does the quaternion algebra on batches; MuJoCo's mju_quatZ2Vec the z-to-axis alignment.
+
+
+def ned_to_scene(position: Any, attitude: Any) -> DronePose:
+    """MAVLink ``LOCAL_POSITION_NED`` / ``ATTITUDE`` (NED world, FRD body) -> the scene's z-up pose (ENU
+    world, FLU body); either may be None (no position: hovering at ``DRONE_HEIGHT_M``)."""
+    if position is not None:
+        pos = (float(position.y_m), float(position.x_m), -float(position.z_m))
+    else:
+        pos = (0.0, 0.0, DRONE_HEIGHT_M)
+    if attitude is None:
+        return DronePose(pos)
+    # Aerospace Z-Y-X (yaw, pitch, roll): body FRD -> world NED.
+    r_ned_frd = vtf.SO3.from_rpy_radians(attitude.roll_rad, attitude.pitch_rad, attitude.yaw_rad).as_matrix()
+    t_enu_ned = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    t_frd_flu = np.diag([1.0, -1.0, -1.0])
+    wxyz = vtf.SO3.from_matrix(t_enu_ned @ r_ned_frd @ t_frd_flu).wxyz
+    return DronePose(pos, (float(wxyz[0]), float(wxyz[1]), float(wxyz[2]), float(wxyz[3])))
 
 
 def quat_mul(a: FloatArray, b: FloatArray) -> FloatArray:

@@ -12,7 +12,7 @@ from __future__ import annotations
 import html
 from dataclasses import dataclass
 
-from host.link.client import LinkState
+from host.link.source import LinkState
 from protocol.dbus import Lever
 from protocol.messages import ArmBlocker, GraspState, Mode, Phase, Telemetry, TelemetryFlags
 

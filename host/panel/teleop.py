@@ -1,4 +1,4 @@
-"""The browser teleop panel (viser 1.1.x): one builder per area, callbacks that only write to the model.
+"""The browser teleop panel (viser 1.1.x): one builder per area, callbacks that only call the arbiter.
 
 Areas and who sees what (one module each, a builder returning its handles: ``host.panel.controls``,
 ``host.panel.plots``, ``host.panel.health``; the 3-D scene is ``host.panel.scene``):
@@ -6,8 +6,8 @@ Areas and who sees what (one module each, a builder returning its handles: ``hos
 - **Control** (built per browser tab, ``client.gui``): who holds control and the hand-over buttons,
   two virtual sticks as four sliders, two three-position levers, arm / disarm, E-STOP (also the Space
   hotkey), grasp / release / hold, and the per-cable tension sliders of DIRECT mode. Controls are
-  disabled for tabs that do not hold control; the model refuses their input anyway (server-side check
-  and clamp of every value).
+  disabled for tabs that do not hold control; the control arbiter (``host.panel.arbiter``) refuses
+  their input anyway (server-side check and clamp of every value).
 - **State bar** (per tab, on top): phase, mode and the one next step for the pilot
   (``host.panel.state_bar``), an E-stop banner while latched; Space is E-stop in every field.
 - **View** (per tab): camera presets (aligned with the sticks by default, behind the drone, side,
@@ -22,13 +22,14 @@ Areas and who sees what (one module each, a builder returning its handles: ``hos
   count), link state, rates, errors, latency, loop statistics, RC / motors, failsafe phase, pose
   source (simulation, shadow plant, none), MAVLink state.
 
-:class:`TeleopPanel` pushes the model to the browser at fixed rates from one thread (scene at up to
-60 Hz when new poses arrive, plots at 10 Hz, health and control state at 4 Hz): the latest value wins,
+:class:`TeleopPanel` pushes the board's state (``host.panel.board_state``), who holds control and the
+notices (``host.panel.notices``) to the browser at fixed rates from one thread (scene at up to 60 Hz
+when new poses arrive, plots at 10 Hz, health and control state at 4 Hz): the latest value wins,
 nothing queues up behind a slow browser.
 
 Security (docs/host.md): the caller binds 127.0.0.1 unless told otherwise and starts the server through
 ``host.panel.guard``, whose handshake check refuses a websocket from another origin or without the
-token; :func:`harden` replaces ``request_share_url`` with a refusal. The model checks the token of
+token; :func:`harden` replaces ``request_share_url`` with a refusal. The arbiter checks the token of
 every tab again before it may act.
 """
 
@@ -44,11 +45,14 @@ from typing import Any, Literal
 import numpy as np
 import viser
 
+from host.panel.arbiter import ControlArbiter
+from host.panel.board_params import BoardParams
+from host.panel.board_state import BoardState, PoseSource
 from host.panel.console import console_html
 from host.panel.controls import ControlHandles, build_control_panel, refresh_control
 from host.panel.guard import request_token
 from host.panel.health import build_health_panel, health_checks, health_html, health_text
-from host.panel.model import PoseSource, UiModel
+from host.panel.notices import Notices
 from host.panel.params import ParamHandles, build_param_panel, refresh_params
 from host.panel.plots import CHART_COLUMNS, build_plot_panel, fixed_scales, plot_frame, y_range
 from host.panel.record import RecordHandles, RecordingSwitch, build_record_panel, refresh_record
@@ -77,7 +81,7 @@ class PanelConfig:
         plot_hz: plot refresh rate.
         health_hz: health and control-state refresh rate.
         plot_window_s: seconds shown in the plots at first (the Window slider changes it, up to the
-            model's history).
+            board state's history).
         plot_points: most points per plotted series.
     """
 
@@ -101,7 +105,7 @@ def harden(server: viser.ViserServer) -> None:
 def client_url_token(server: viser.ViserServer, client_id: int) -> str | None:
     """The token a client's websocket request carried (``token`` query parameter or cookie), if any.
 
-    The handshake already refused a request without a valid one (``host.panel.guard``); the model
+    The handshake already refused a request without a valid one (``host.panel.guard``); the arbiter
     checks it again. viser 1.1.1 keeps the raw websocket connection (``websockets``
     ``ServerConnection``) per client id in ``server._websock_server._live_connections``. Private API,
     pinned by ``viser>=1.1,<1.2``; any failure reads as "no token".
@@ -116,11 +120,14 @@ def client_url_token(server: viser.ViserServer, client_id: int) -> str | None:
 
 
 class TeleopPanel:
-    """Builds the panel on a viser server and keeps it in step with a :class:`UiModel`.
+    """Builds the panel on a viser server and keeps it in step with the board and who holds control.
 
     Args:
         server: a running viser server (bind it to 127.0.0.1 unless told otherwise).
-        model: the UI model.
+        board: the board's state (telemetry, poses, history, link health).
+        arbiter: who may act; every control calls it.
+        notices: the toasts and the event console.
+        params: the board's parameters (the editor).
         geometry: arm geometry for drawing; default: the paper's prototype.
         objects: static objects to draw.
         drone_pose: optional provider of the drone pose (MAVLink), in the scene's z-up world frame.
@@ -134,7 +141,10 @@ class TeleopPanel:
     def __init__(
         self,
         server: viser.ViserServer,
-        model: UiModel,
+        board: BoardState,
+        arbiter: ControlArbiter,
+        notices: Notices,
+        params: BoardParams,
         *,
         geometry: ArmGeometry | None = None,
         objects: Sequence[SceneObject] = (),
@@ -146,7 +156,10 @@ class TeleopPanel:
         config: PanelConfig | None = None,
     ) -> None:
         self.server = server
-        self.model = model
+        self.board = board
+        self.arbiter = arbiter
+        self.notices = notices
+        self.params = params
         self.config = config or PanelConfig()
         self.geometry = geometry or ArmGeometry.default()
         self._drone_pose = drone_pose
@@ -158,11 +171,11 @@ class TeleopPanel:
         self._framed = False
         self.scene: SceneView = build_scene(server, self.geometry, objects)
         self._frame_camera()
-        self.plots = build_plot_panel(server, window_s=self.config.plot_window_s, history_s=model.history_s)
+        self.plots = build_plot_panel(server, window_s=self.config.plot_window_s, history_s=board.history_s)
         self.recorder = recorder
         self.record: RecordHandles | None = None
         if recorder is not None:
-            self.record = build_record_panel(server, recorder, model)
+            self.record = build_record_panel(server, recorder, arbiter, notices)
         with server.gui.add_folder("Events", order=180.0, expand_by_default=False):
             self.console = server.gui.add_html(console_html([]))
         self._console_seq = 0
@@ -185,24 +198,28 @@ class TeleopPanel:
     def _on_connect(self, client: viser.ClientHandle) -> None:
         cid = client.client_id
         token = client_url_token(self.server, cid)
-        self.model.authorise(cid, token)
+        self.arbiter.authorise(cid, token)
         handles = build_control_panel(
-            client, self.model, tension_max_n=self.model.limits.tension_max_n, set_camera=self.set_camera
+            client,
+            self.arbiter,
+            self.board,
+            tension_max_n=self.arbiter.limits.tension_max_n,
+            set_camera=self.set_camera,
         )
-        params = build_param_panel(client, self.model)
+        params = build_param_panel(client, self.params)
         with self._controls_lock:
             self._controls[cid] = handles
             self._params[cid] = params
-        refresh_control(handles, self.model, force=True)
-        refresh_params(params, self.model, force=True)
-        if not self.model.params:
-            self.model.request_params()  # the editor shows the board's values, not the defaults
+        refresh_control(handles, self.arbiter, self.board, force=True)
+        refresh_params(params, self.params, force=True)
+        if not self.params.params:
+            self.params.request_params()  # the editor shows the board's values, not the defaults
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._controls_lock:
             self._controls.pop(client.client_id, None)
             self._params.pop(client.client_id, None)
-        self.model.client_left(client.client_id)
+        self.arbiter.client_left(client.client_id)
 
     def set_camera(self, client: viser.ClientHandle, preset: str) -> None:
         """Move one tab's camera to a preset (``host.panel.scene.CAMERA_PRESETS``)."""
@@ -239,7 +256,7 @@ class TeleopPanel:
         min_scene_s = 1.0 / cfg.scene_hz
         next_plot = next_health = time.monotonic()
         last_scene = 0.0
-        poses_event = self.model.poses_event
+        poses_event = self.board.poses_event
         while not self._stop.is_set():
             # Wake when new poses arrive (not on a fixed tick: under CPU contention a fixed sleep after
             # a late wake-up halves the rate), at most scene_hz, and for the slower periodic refreshes.
@@ -285,7 +302,7 @@ class TeleopPanel:
 
     def update_scene(self) -> bool:
         """Send a scene update if new poses arrived (or the drone moved); returns True if one was sent."""
-        m = self.model
+        m = self.board
         poses = m.poses
         source = m.pose_source
         drone = self._drone_override()
@@ -328,18 +345,18 @@ class TeleopPanel:
         return True
 
     def update_plots(self) -> None:
-        """Refresh the charts from the model's history (nothing while paused)."""
+        """Refresh the charts from the board state's history (nothing while paused)."""
         p = self.plots
         if bool(p.pause.value):
             return
-        data = self.model.history.snapshot(max_points=None)
+        data = self.board.history.snapshot(max_points=None)
         x, series = plot_frame(data, float(p.window.value), str(p.cables.value), self.config.plot_points)
         with self.server.atomic():
             for chart in CHART_COLUMNS:
                 handle = p.chart(chart)
                 if not bool(p.show[chart].value):
                     continue
-                empty = (0.0, self.model.limits.tension_max_n) if chart == "tensions" else None
+                empty = (0.0, self.arbiter.limits.tension_max_n) if chart == "tensions" else None
                 rng = y_range(np.concatenate(series[chart]), chart, empty)
                 if self._y_ranges.get(chart) != rng:
                     self._y_ranges[chart] = rng
@@ -348,7 +365,7 @@ class TeleopPanel:
 
     def update_health(self) -> None:
         """Refresh the health text (only what changed is sent)."""
-        self.model.refresh_link_stats()
+        self.board.refresh_link_stats()
         status = None
         if self._mavlink_status is not None:
             try:
@@ -364,8 +381,8 @@ class TeleopPanel:
         malformed = 0
         if self._malformed_n is not None:
             malformed = self._malformed_n()
-        checks = health_html(health_checks(self.model, malformed))
-        texts = (checks, *health_text(self.model, self.pose_source, status, shadow))
+        checks = health_html(health_checks(self.board, malformed))
+        texts = (checks, *health_text(self.board, self.pose_source, status, shadow))
         h = self.health
         for handle, old, new in zip(
             (h.checks, h.summary, h.link, h.loop), self._health_cache, texts, strict=True
@@ -380,7 +397,7 @@ class TeleopPanel:
             params = list(self._params.values())
         for h in self.controls().values():
             try:
-                refresh_control(h, self.model)
+                refresh_control(h, self.arbiter, self.board)
                 if h.follow_tip:
                     client = self.server.get_clients().get(h.client_id)
                     if client is not None:
@@ -389,19 +406,19 @@ class TeleopPanel:
                 _log.debug("control refresh failed for tab %s", h.client_id, exc_info=True)
         for ph in params:
             try:
-                refresh_params(ph, self.model)
+                refresh_params(ph, self.params)
             except Exception:
                 _log.debug("parameter refresh failed for tab %s", ph.client_id, exc_info=True)
         if self.record is not None and self.recorder is not None:
             refresh_record(self.record, self.recorder)
-        seq = self.model.events.seq
+        seq = self.notices.events.seq
         if seq != self._console_seq:
             self._console_seq = seq
-            self.console.content = console_html(self.model.events.entries())
+            self.console.content = console_html(self.notices.events.entries())
 
     def push_notices(self) -> None:
         """Show new notices as browser notifications (to everyone or to the one tab concerned)."""
-        notices = self.model.notices_after(self._last_notice)
+        notices = self.notices.notices_after(self._last_notice)
         if not notices:
             return
         self._last_notice = notices[-1].seq

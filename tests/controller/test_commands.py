@@ -65,12 +65,16 @@ def test_grasp_acks_final_answers_and_nothing_without_a_link() -> None:
         (CommandCode.RELEASE, AckResult.ACCEPTED, 9),
     ]
     acks.grasp_seq = 11
-    acks.grasp_left()
+    acks.grasp_left("failsafe RC_LOST")
     last = acks.pending[-1]
     assert isinstance(last, CommandAck) and (last.request_seq, last.result) == (11, AckResult.FAILED)
+    assert last.text == "failsafe RC_LOST"  # the radio's reason travels to the host (DO_GRIPPER FAILED)
+    acks.grasp_seq = 12
+    acks.grasp_progress(GraspState.FAILED)
+    assert acks.pending[-1] == CommandAck(CommandCode.GRASP, AckResult.FAILED, 12, "grasp FAILED")
     silent = GraspAcks(False)
     silent.grasp_seq = 1
-    silent.grasp_left()
+    silent.grasp_left("mode SAFE, lever not UP")
     assert silent.pending == [] and silent.grasp_seq == -1
 
 
@@ -147,6 +151,44 @@ def test_parameters_and_virtual_rc_from_a_radio_board() -> None:
         ("SLEW_N_S", 25.0),
     ]
     assert s.server.virtual_rc_ignored == 1
+
+
+@pytest.mark.parametrize(
+    ("phase", "lever", "why"),
+    [
+        (None, Lever.UP, "start-up gate (lever DOWN first)"),
+        (Phase.RC_LOST, Lever.UP, "failsafe RC_LOST"),
+        (Phase.OK, Lever.MIDDLE, "mode MANUAL, lever not UP"),
+        (Phase.OK, Lever.UP, None),
+    ],
+)
+def test_grasp_commands_obey_the_radios_one_rule(phase: Phase | None, lever: Lever, why: str | None) -> None:
+    from controller.grasp import grasp_refusal
+
+    s = Server()
+    if phase is not None:
+        s.failsafe.phase = phase
+        s.modes.select(1_000, phase, frame(right=lever))
+    for code in (CommandCode.GRASP, CommandCode.RELEASE, CommandCode.HOLD):
+        s.send(Command(code))
+    s.server.serve(2_000)
+    acks = [m for m in s.replies() if isinstance(m, CommandAck)]
+    assert len(acks) == 3
+    # The board answers with the rule the host's pre-check uses (host.drone.gripper), word for word.
+    assert why == grasp_refusal(s.failsafe.phase, s.failsafe.armed, s.modes.mode)
+    if why is None:
+        assert acks[0].result == AckResult.IN_PROGRESS
+    else:
+        assert [(a.result, a.text) for a in acks] == [(AckResult.REJECTED, why)] * 3
+
+
+def test_grasp_refusal_names_unknown_values() -> None:
+    from controller.grasp import grasp_refusal
+
+    assert grasp_refusal(99, True, Mode.GRASP) == "failsafe 99"
+    assert grasp_refusal(Phase.OK, False, Mode.GRASP) == "arm not armed"
+    assert grasp_refusal(Phase.OK, True, 42) == "mode 42, lever not UP"
+    assert grasp_refusal(Phase.OK, True, Mode.GRASP) is None
 
 
 def test_owed_acks_go_out_first_and_unknown_codes_are_unsupported() -> None:

@@ -17,12 +17,14 @@ class Listener:
     def __init__(self) -> None:
         self.progress: list[GraspState] = []
         self.left = 0
+        self.why: list[str] = []
 
     def grasp_progress(self, state: GraspState) -> None:
         self.progress.append(state)
 
-    def grasp_left(self) -> None:
+    def grasp_left(self, why: str) -> None:
         self.left += 1
+        self.why.append(why)
 
 
 class Parts:
@@ -68,8 +70,12 @@ def test_right_lever_picks_safe_manual_grasp_and_logs_each_change() -> None:
     assert modes.select(3, Phase.OK, _rc(Lever.UP)) is Mode.GRASP
     assert modes.select(4, Phase.OK, _rc(Lever.MIDDLE)) is Mode.MANUAL
     assert listener.left == 1  # leaving GRASP tells the listener (owed acks fail)
+    assert listener.why == ["mode MANUAL, lever not UP"]  # with the radio's reason (grasp_refusal)
+    assert modes.select(5, Phase.OK, _rc(Lever.UP)) is Mode.GRASP
+    assert modes.select(6, Phase.RC_LOST, _rc(Lever.UP)) is Mode.SAFE
+    assert listener.why[-1] == "failsafe RC_LOST"
     got = [(e.time_us, e.code) for e in events.pop_all() if e.kind == EventKind.MODE]
-    assert got == [(2, Mode.MANUAL), (3, Mode.GRASP), (4, Mode.MANUAL)]
+    assert got == [(2, Mode.MANUAL), (3, Mode.GRASP), (4, Mode.MANUAL), (5, Mode.GRASP), (6, Mode.SAFE)]
 
 
 def test_direct_needs_the_request_and_the_heartbeat() -> None:

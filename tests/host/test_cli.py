@@ -223,21 +223,23 @@ def test_virtual_rc_drives_the_gate_then_manual(peer: LinkPeer) -> None:
     opts = HostOptions(port=peer.url, ui=False, virtual_rc=Lever.MIDDLE)
     with HostApp(opts) as app:
         app.start()
-        assert wait_for(lambda: app.model.telemetry is not None and app.model.telemetry.mode == Mode.MANUAL)
-        assert app.model.telemetry is not None and app.model.telemetry.phase == Phase.OK
+        b = app.board_state
+        assert b is not None
+        assert wait_for(lambda: b.telemetry is not None and b.telemetry.mode == Mode.MANUAL)
+        assert b.telemetry is not None and b.telemetry.phase == Phase.OK
 
 
 def test_unplugged_board_is_retried_and_shown_disconnected() -> None:
     with LinkPeer("socket") as peer, HostApp(HostOptions(port=peer.url, ui=False)) as app:
         app.start()
-        assert wait_for(lambda: app.model.telemetry_count > 5)
+        assert wait_for(lambda: app.board_state.telemetry_count > 5)
         peer.drop_connection()
-        assert wait_for(lambda: app.model.link_state.value == "disconnected")
+        assert wait_for(lambda: app.board_state.link_state.value == "disconnected")
         assert "disconnected" in app.status_line()
         peer.resume()
-        assert wait_for(lambda: app.model.link_state.value == "connected", timeout_s=15)
-        n = app.model.telemetry_count
-        assert wait_for(lambda: app.model.telemetry_count > n + 5)
+        assert wait_for(lambda: app.board_state.link_state.value == "connected", timeout_s=15)
+        n = app.board_state.telemetry_count
+        assert wait_for(lambda: app.board_state.telemetry_count > n + 5)
 
 
 def test_record_then_replay(peer: LinkPeer, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -247,9 +249,9 @@ def test_record_then_replay(peer: LinkPeer, tmp_path: Path, capsys: pytest.Captu
     with HostApp(HostOptions(replay=path, ui=False, replay_speed=20.0)) as app:
         app.start()
         assert app.run(duration_s=30.0) == 0  # headless replay ends by itself
-        assert app.replay_done.is_set()
-        assert app.model.telemetry_count >= 50
-        assert app.model.poses is not None
+        assert app.replay is not None and app.replay.done.is_set()
+        assert app.board_state.telemetry_count >= 50
+        assert app.board_state.poses is not None
     assert main(["--replay", str(path), "--headless", "--replay-speed", "50"]) == 0
 
 
@@ -350,27 +352,27 @@ def test_virtual_board_over_a_pty_with_manual_rc() -> None:
         url = vb.start(timeout_s=60.0)
         with HostApp(HostOptions(port=url, ui=False, virtual_rc=Lever.MIDDLE)) as app:
             app.start()
-            assert wait_for(
-                lambda: app.model.telemetry is not None and app.model.telemetry.mode == Mode.MANUAL, 20.0
-            )
-            assert app.model.poses is not None
+            b = app.board_state
+            assert b is not None
+            assert wait_for(lambda: b.telemetry is not None and b.telemetry.mode == Mode.MANUAL, 20.0)
+            assert b.poses is not None
 
 
 def test_a_killed_link_process_is_restarted_and_the_board_held_zero_current() -> None:
     import os
     import signal
 
-    from host.link.client import LinkState
-    from host.panel.model import CLI_CLIENT
+    from host.link.source import LinkState
+    from host.panel.arbiter import CLI_CLIENT
     from protocol.messages import Message, Telemetry
 
     after_restart: list[Telemetry] = []
     with HostApp(HostOptions(ui=False, virtual_rc=Lever.MIDDLE)) as app:
         app.start()
-        client, m = app.client, app.model
-        assert client is not None
+        client, m, arbiter = app.client, app.board_state, app.arbiter
+        assert client is not None and m is not None and arbiter is not None
         assert wait_for(lambda: m.telemetry is not None and m.telemetry.mode == Mode.MANUAL, 30.0)
-        assert m.set_stick(CLI_CLIENT, 3, 500.0)  # curl: current on every cable
+        assert arbiter.set_stick(CLI_CLIENT, 3, 500.0)  # curl: current on every cable
         assert wait_for(lambda: m.telemetry is not None and min(m.telemetry.commanded_current) > 0, 10.0)
         old_pid = client._proc.pid
         restarted = threading.Event()
@@ -396,7 +398,7 @@ def test_a_killed_link_process_is_restarted_and_the_board_held_zero_current() ->
         assert first.mode == Mode.SAFE and first.right_lever == Lever.DOWN, first
         assert all(t.commanded_current == (0, 0, 0) for t in after_restart), after_restart[-1]
         assert all(t.mode == Mode.SAFE for t in after_restart)
-        assert any("disconnected" in n.title.lower() for n in m.notices_after(0))
+        assert any("disconnected" in n.title.lower() for n in app.notices.notices_after(0))
 
 
 def test_scene_objects_from_the_plant_objects() -> None:

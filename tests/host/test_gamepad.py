@@ -30,7 +30,7 @@ from host.gamepad import (
     parse_mapping,
 )
 from host.options import HostOptions
-from host.panel.model import CLI_CLIENT
+from host.panel.arbiter import CLI_CLIENT
 from protocol.dbus import CH_LIMIT, Lever, RcFrame
 from protocol.messages import VirtualRc
 from tests.support.link_peer import LinkPeer
@@ -201,7 +201,7 @@ def test_pad_events_travel_as_dbus_frames_and_an_unplugged_pad_sends_safe(tmp_pa
     try:
         with LinkPeer("pty") as peer, HostApp(HostOptions(port=peer.url, ui=False, gamepad=str(js))) as app:
             app.start()
-            assert app.model.has_control(CLI_CLIENT)
+            assert app.arbiter is not None and app.arbiter.has_control(CLI_CLIENT)
             os.write(writer, stream(opening_state()))
             # Right lever to MIDDLE (MANUAL), left stick full up, right stick half right.
             os.write(writer, stream([*dpad(-AXIS_MAX), axis(1, -AXIS_MAX), axis(3, AXIS_MAX // 2)]))
@@ -230,12 +230,13 @@ def test_pad_events_travel_as_dbus_frames_and_an_unplugged_pad_sends_safe(tmp_pa
 
 def test_a_tab_that_asks_gets_control_and_start_asks_for_it_back(tmp_path: Path) -> None:
     from host.gamepad import Gamepad
-    from host.panel.model import UiModel
+    from host.panel.arbiter import ControlArbiter
+    from host.panel.notices import Notices
 
     js = tmp_path / "js0"
     os.mkfifo(js)
     writer = os.open(js, os.O_RDWR | os.O_NONBLOCK)
-    model = UiModel()
+    model = ControlArbiter(Notices())
     pad = Gamepad(str(js), model, CLI_CLIENT)
     try:
         pad.start()
@@ -252,7 +253,7 @@ def test_a_tab_that_asks_gets_control_and_start_asks_for_it_back(tmp_path: Path)
         assert wait_for(lambda: model.pending == CLI_CLIENT)
         model.answer_request(tab, grant=True)
         os.write(writer, stream(dpad(-AXIS_MAX)))
-        # Regained from right lever DOWN (the model restarts the operator): one step is MIDDLE.
+        # Regained from right lever DOWN (the arbiter restarts the operator): one step is MIDDLE.
         assert wait_for(lambda: model.holder == CLI_CLIENT and model.operator_input()[1] == Lever.MIDDLE)
     finally:
         pad.stop()

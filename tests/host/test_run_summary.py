@@ -10,7 +10,7 @@ import pytest
 from host.app import HostApp
 from host.cli import main
 from host.options import HostOptions
-from host.panel.model import CLI_CLIENT
+from host.panel.arbiter import CLI_CLIENT
 from host.run_summary import RunSummary
 from protocol.dbus import Lever
 from protocol.messages import Event, EventKind, Mode, Phase, Telemetry
@@ -90,9 +90,10 @@ def test_an_estop_during_a_virtual_rc_run_fails_it() -> None:
         HostApp(HostOptions(port=peer.url, ui=False, virtual_rc=Lever.MIDDLE)) as app,
     ):
         app.start()
-        m = app.model
+        m, arbiter = app.board_state, app.arbiter
+        assert m is not None and arbiter is not None
         assert wait_for(lambda: m.telemetry is not None and m.telemetry.mode == Mode.MANUAL)
-        assert m.estop(CLI_CLIENT)
+        assert arbiter.estop(CLI_CLIENT)
         assert wait_for(lambda: m.telemetry is not None and m.telemetry.phase == Phase.ESTOP)
         assert app.run(0.1) == 1
         assert app.report is not None and app.report.failsafes[-1][1] == "ESTOP"

@@ -17,7 +17,7 @@ import pytest
 
 from host.app import HostApp
 from host.options import HostOptions
-from host.panel.model import PoseSource, UiModel
+from host.panel.board_state import BoardState, PoseSource
 from host.shadow import ShadowConfig, ShadowPlant, ShadowState, reel_in_currents
 from protocol.messages import Message, SimPoses, Telemetry, TelemetryFlags
 from tests.support.link_peer import LinkPeer
@@ -169,7 +169,7 @@ def test_steps_follow_board_time_bounded_and_resync_on_restart(published: Publis
 
 
 def test_sim_poses_switch_the_shadow_off() -> None:
-    model = UiModel()
+    model = BoardState()
     with ShadowPlant(model.on_shadow_poses) as shadow:
         feed(shadow, [telemetry(k * FRAME_US, (500, 0, 0)) for k in range(5)])
         assert model.pose_source is PoseSource.SHADOW
@@ -233,8 +233,8 @@ def test_host_poses_a_hardware_board_from_the_shadow_plant() -> None:
     with HardwarePeer("socket") as peer, HostApp(HostOptions(port=peer.url, ui=False)) as app:
         app.start()
         assert app.shadow is not None
-        assert _wait(lambda: app.model.pose_source is PoseSource.SHADOW, 20.0)
-        assert app.model.poses is not None and len(app.model.poses.positions_m) >= 10
+        assert _wait(lambda: app.board_state.pose_source is PoseSource.SHADOW, 20.0)
+        assert app.board_state.poses is not None and len(app.board_state.poses.positions_m) >= 10
         assert "real time" in app._shadow_status()
     assert app.shadow is None  # stopped and released by close()
 
@@ -245,7 +245,7 @@ def test_host_switches_the_shadow_off_for_a_board_with_sim_poses() -> None:
         shadow = app.shadow
         assert shadow is not None
         assert _wait(lambda: shadow.state is ShadowState.OFF_SIM_POSES, 20.0)
-        assert app.model.pose_source is PoseSource.SIMULATION
+        assert app.board_state.pose_source is PoseSource.SIMULATION
 
 
 def test_no_shadow_flag() -> None:

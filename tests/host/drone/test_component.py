@@ -21,7 +21,7 @@ from host.drone.link import DroneLink
 from host.drone.servo import ServoFollowConfig
 from protocol import mavlink as mav
 from protocol import messages as bm
-from tests.support.drone_peer import WAIT_S, Peer, Rig, free_udp_port, rig_factory
+from tests.support.drone_peer import WAIT_S, GripperBoard, Peer, Rig, free_udp_port, rig_factory
 from tests.support.fake_board import FakeBoard
 
 R = mav.MavResult
@@ -141,16 +141,12 @@ def test_with_an_ardupilot_autopilot_parameters_are_c_cast(make_rig: Callable[..
 # requests before the board answers
 
 
-class LateBoard:
+class LateBoard(GripperBoard):
     """The board behind a link that drops what the host sends until :meth:`come_up`."""
 
     def __init__(self, board: FakeBoard) -> None:
-        self.board = board
-        self.up = threading.Event()
-
-    def __call__(self, msg: bm.Message) -> None:
-        if self.up.is_set():
-            self.board(msg)
+        super().__init__(board)
+        self.up.clear()
 
     def come_up(self) -> None:
         self.up.set()
@@ -166,7 +162,7 @@ def late(tmp_path: Path) -> Iterator[tuple[DroneLink, LateBoard, Peer]]:
     link = DroneLink(
         DroneLinkConfig(url=f"udpout:127.0.0.1:{port}", param_confirm_timeout_us=200_000), late_board
     )
-    board.attach(link.on_board_message)
+    late_board.attach(link.on_board_message)
     link.start()
     try:
         yield link, late_board, peer

@@ -26,7 +26,7 @@ from host.drone.params import PARAM_TYPES
 from host.drone.tlog import TLOG_LINK_IN, TLOG_LINK_OUT
 from protocol import mavlink as mav
 from protocol import messages as bm
-from tests.support.drone_peer import WAIT_S, Peer, Rig, free_udp_port, rig_factory
+from tests.support.drone_peer import WAIT_S, GripperBoard, Peer, Rig, free_udp_port, rig_factory
 from tests.support.fake_board import FakeBoard
 
 GRAB, RELEASE, HOLD = (
@@ -487,10 +487,123 @@ def test_unopenable_connection_raises() -> None:
 
 
 def test_gripper_denial_rules() -> None:
+    from controller.grasp import grasp_refusal
+
     ok = bm.Telemetry(0, bm.Mode.GRASP, bm.Phase.OK, flags=bm.TelemetryFlags.ARMED)
     assert gripper_denial(ok, 0, 500_000) is None
     assert gripper_denial(ok, 600_000, 500_000) == "gripper denied: no board telemetry"
     assert gripper_denial(None, 0, 500_000) == "gripper denied: no board telemetry"
+    # The board's own rule, word for word (one rule, one place: controller.grasp).
+    for phase in bm.Phase:
+        for mode in bm.Mode:
+            for armed in (False, True):
+                flags = bm.TelemetryFlags.ARMED if armed else bm.TelemetryFlags.NONE
+                t = bm.Telemetry(0, mode, phase, flags=flags)
+                why = grasp_refusal(phase, armed, mode)
+                assert gripper_denial(t, 0, 500_000) == (None if why is None else f"gripper denied: {why}")
+
+
+class ScriptedPort:
+    """The board side of the drone link, answered by hand: every command's ``on_ack`` is kept."""
+
+    def __init__(self, board: FakeBoard, sent_ok: bool = True) -> None:
+        self.board = board
+        self.sent_ok = sent_ok
+        self.handlers: list[Callable[[bm.CommandAck | None], None]] = []
+        self.sent: list[tuple[bm.Message, str]] = []
+
+    def __call__(
+        self,
+        msg: bm.Message,
+        *,
+        origin: str = "host",
+        on_ack: Callable[[bm.CommandAck | None], None] | None = None,
+    ) -> bool:
+        self.sent.append((msg, origin))
+        if on_ack is not None:
+            self.handlers.append(on_ack)
+        return self.sent_ok
+
+
+@pytest.fixture
+def scripted(tmp_path: Path) -> Iterator[tuple[DroneLink, ScriptedPort, Peer]]:
+    port = free_udp_port()
+    peer = Peer(f"udpin:127.0.0.1:{port}")
+    board = FakeBoard(ticks_per_phase=2)
+    to_board = ScriptedPort(board)
+    link = DroneLink(DroneLinkConfig(url=f"udpout:127.0.0.1:{port}", grasp_timeout_us=60_000_000), to_board)
+    board.attach(link.on_board_message)
+    board.start()
+    link.start()
+    try:
+        peer.recv_type("HEARTBEAT", lambda m: m.get_srcComponent() == 25)
+        peer.recv_type("NAMED_VALUE_FLOAT")
+        yield link, to_board, peer
+    finally:
+        link.close()
+        board.stop()
+        peer.close()
+
+
+def test_the_boards_final_answer_ends_the_job_not_telemetry(
+    scripted: tuple[DroneLink, ScriptedPort, Peer],
+) -> None:
+    link, port, peer = scripted
+    peer.gripper(GRAB)
+    assert peer.recv_type("COMMAND_ACK").result == R.IN_PROGRESS
+    ((cmd, origin),) = [(m, o) for m, o in port.sent if isinstance(m, bm.Command)]
+    assert (cmd, origin) == (bm.Command(bm.CommandCode.GRASP), "MAVLink")
+    # The fake board's telemetry never saw the command: it shows IDLE all along; the board answers
+    # IN_PROGRESS, and the job is still running: telemetry does not end it.
+    (answer,) = port.handlers
+    answer(bm.CommandAck(bm.CommandCode.GRASP, bm.AckResult.IN_PROGRESS, 0, "grasping"))
+    port.board.set(grasp_state=bm.GraspState.HOLD)  # not the board's answer either
+    time.sleep(0.3)
+    assert link.state().gripper_busy
+    # The board's final word: FAILED with its reason, whatever telemetry shows.
+    answer(bm.CommandAck(bm.CommandCode.GRASP, bm.AckResult.FAILED, 0, "superseded"))
+    final = peer.recv_type("COMMAND_ACK", lambda m: m.result != R.IN_PROGRESS)
+    assert (final.result, final.progress) == (R.FAILED, 0)
+    peer.statustext("grab failed: superseded")
+    assert _wait_until(lambda: not link.state().gripper_busy)
+    # A late answer for a job that ended changes nothing.
+    answer(bm.CommandAck(bm.CommandCode.GRASP, bm.AckResult.ACCEPTED, 0, "holding"))
+    last = link.state().last_command
+    assert last is not None and last.result == R.FAILED
+
+
+def test_a_board_refusal_or_a_lost_link_fails_the_job_with_its_reason(
+    scripted: tuple[DroneLink, ScriptedPort, Peer],
+) -> None:
+    link, port, peer = scripted
+    peer.gripper(GRAB)
+    assert peer.recv_type("COMMAND_ACK").result == R.IN_PROGRESS
+    # The board's gate shut between the telemetry and the command: the board's rule decides.
+    refusal = bm.CommandAck(bm.CommandCode.GRASP, bm.AckResult.REJECTED, 0, "mode MANUAL, lever not UP")
+    port.handlers[-1](refusal)
+    assert peer.recv_type("COMMAND_ACK").result == R.FAILED
+    peer.statustext("grab failed: mode MANUAL, lever not UP")
+    assert _wait_until(lambda: not link.state().gripper_busy)
+    peer.gripper(GRAB)
+    assert peer.recv_type("COMMAND_ACK").result == R.IN_PROGRESS
+    port.handlers[-1](None)  # the board link went down: the command can have no answer
+    assert peer.recv_type("COMMAND_ACK").result == R.FAILED
+    peer.statustext("grab failed: board link lost")
+    # A command that cannot go out at all fails at once (no IN_PROGRESS first).
+    assert _wait_until(lambda: not link.state().gripper_busy)
+    port.sent_ok = False
+    peer.gripper(GRAB)
+    assert peer.recv_type("COMMAND_ACK").result == R.FAILED
+    peer.statustext("grab failed: the board link is down")
+
+
+def _wait_until(cond: Callable[[], bool], timeout_s: float = WAIT_S) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.01)
+    return cond()
 
 
 # --------------------------------------------------------------------------------------------------
@@ -553,8 +666,9 @@ def test_a_stream_transport_works_too() -> None:
         port = int(s.getsockname()[1])
     peer = Peer(f"tcpin:127.0.0.1:{port}")
     board = FakeBoard()
-    link = DroneLink(DroneLinkConfig(url=f"tcp:127.0.0.1:{port}"), board)
-    board.attach(link.on_board_message)
+    to_board = GripperBoard(board)
+    link = DroneLink(DroneLinkConfig(url=f"tcp:127.0.0.1:{port}"), to_board)
+    to_board.attach(link.on_board_message)
     board.start()
     try:
         link.start()

@@ -21,6 +21,7 @@ from controller.params import PARAMS
 from host.drone.config import DroneLinkConfig
 from host.drone.link import DroneLink
 from protocol import mavlink as mav
+from tests.support.drone_peer import GripperBoard
 from tests.support.fake_board import FakeBoard
 from tests.support.mavproxy_proc import MavProxy, free_udp_port, wait_for
 
@@ -55,8 +56,9 @@ class Setup:
             signing_timestamp_path=self.tmp_path / "signing.timestamp" if key else None,
             tlog_path=self.tmp_path / "link.tlog",
         )
-        self.link = DroneLink(cfg, self.board)
-        self.board.attach(self.link.on_board_message)
+        to_board = GripperBoard(self.board)
+        self.link = DroneLink(cfg, to_board)
+        to_board.attach(self.link.on_board_message)
         self.board.start()
         self.link.start()
         return self.proxy, self.link, self.board

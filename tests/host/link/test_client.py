@@ -9,8 +9,9 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from host.link.client import BoardClient, BoardClientConfig, LinkState
+from host.link.client import BoardClient, BoardClientConfig
 from host.link.process import BoardLinkError, open_port
+from host.link.source import LinkState
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import (
     Command,
@@ -48,23 +49,32 @@ def test_receives_and_fans_out_messages(peer: LinkPeer) -> None:
     assert client.state is LinkState.STOPPED
 
 
-def test_heartbeat_and_virtual_rc_only_while_a_source_gives_frames(peer: LinkPeer) -> None:
-    frame: list[RcFrame | None] = [None]
-    with BoardClient(peer.url, rc_source=lambda: frame[0]) as client:
+def test_heartbeat_and_virtual_rc_only_while_a_frame_is_set(peer: LinkPeer) -> None:
+    with BoardClient(peer.url) as client:
         client.start()
         assert _wait(lambda: len(peer.messages(Heartbeat)) >= 2)
-        # On connect: neutral frames with the right lever DOWN, then nothing while the source says None.
+        # On connect: neutral frames with the right lever DOWN, then nothing while no frame is set.
         first = [m.frame for m in peer.messages(VirtualRc)]  # type: ignore[attr-defined]
         assert first and all(f.right_lever == Lever.DOWN and f.channels == (0, 0, 0, 0) for f in first)
         n0 = len(first)
         time.sleep(0.1)
         assert len(peer.messages(VirtualRc)) == n0
-        frame[0] = RcFrame((0, 0, 0, 300), Lever.MIDDLE, Lever.DOWN)
+        # Set once: the link process sends it in every 14 ms slot from then on (the only clock).
+        client.set_rc(RcFrame((0, 0, 0, 300), Lever.MIDDLE, Lever.DOWN))
         assert _wait(lambda: len(peer.messages(VirtualRc)) >= n0 + 5)
         last = peer.messages(VirtualRc)[-1].frame  # type: ignore[attr-defined]
         assert last.channels[3] == 300 and last.right_lever == Lever.MIDDLE
         counters = [m.counter for m in peer.messages(Heartbeat)]  # type: ignore[attr-defined]
         assert counters == sorted(counters)
+        # None: no RC at all (the board falls to zero current after its RC timeout).
+        client.set_rc(None)
+        time.sleep(0.1)
+        n1 = len(peer.messages(VirtualRc))
+        time.sleep(0.2)
+        assert len(peer.messages(VirtualRc)) == n1
+        with pytest.raises(ValueError):
+            client.set_rc(RcFrame((0, 0, 0, 5000), Lever.MIDDLE, Lever.DOWN))  # out of range: refused
+        assert client.stats().tx_counts["VirtualRc"] >= n0 + 5
 
 
 def test_command_round_trip_gives_rtt(peer: LinkPeer) -> None:
@@ -76,6 +86,54 @@ def test_command_round_trip_gives_rtt(peer: LinkPeer) -> None:
         assert _wait(lambda: bool(acks))
         assert client.stats().rtt_us is not None
         assert any(isinstance(m, Command) and m.code == CommandCode.ESTOP for m in peer.received)
+
+
+def test_each_commands_answers_go_to_its_sender_and_sends_are_told(peer: LinkPeer) -> None:
+    answers: dict[str, list[CommandAck | None]] = {"a": [], "b": []}
+    sent: list[tuple[Message, str]] = []
+    with BoardClient(peer.url) as client:
+        client.add_sent_listener(lambda msg, origin: sent.append((msg, origin)))
+        client.start()
+        assert client.send(Command(CommandCode.ARM), origin="Tab 1", on_ack=answers["a"].append)
+        assert client.send(Command(CommandCode.DISARM), origin="MAVLink", on_ack=answers["b"].append)
+        assert client.send(Command(CommandCode.ARM))  # nobody awaits this one's answer
+        assert _wait(lambda: bool(answers["a"]) and bool(answers["b"]))
+        time.sleep(0.2)
+        # Each handler got exactly its own command's answer (the fake board acks every one, same seq).
+        (a,) = answers["a"]
+        (b,) = answers["b"]
+        assert a is not None and a.command == CommandCode.ARM
+        assert b is not None and b.command == CommandCode.DISARM and b.request_seq != a.request_seq
+        assert [(type(m).__name__, o) for m, o in sent] == [
+            ("Command", "Tab 1"),
+            ("Command", "MAVLink"),
+            ("Command", "host"),
+        ]
+        assert client.stats().tx_counts["Command"] == 3
+
+
+def test_a_command_awaiting_answers_gets_none_when_the_link_goes_down() -> None:
+    import socket
+
+    got: list[CommandAck | None] = []
+    with socket.socket() as server:  # a board that reads and never answers
+        server.bind(("127.0.0.1", 0))
+        server.listen(1)
+        url = f"socket://127.0.0.1:{server.getsockname()[1]}"
+        with BoardClient(url, BoardClientConfig(reconnect_period_us=50_000)) as client:
+            client.start()
+            conn, _ = server.accept()
+            with conn:
+                assert client.send(Command(CommandCode.GRASP), on_ack=got.append)
+                assert _wait(lambda: client.stats().tx_counts.get("Command") == 1)
+                time.sleep(0.1)
+                assert got == []  # written, not answered yet
+                server.close()  # and no board to reconnect to
+            # The board goes away: the command can have no answer any more.
+            assert _wait(lambda: got == [None])
+            assert not client.send(Command(CommandCode.GRASP), on_ack=got.append)  # down: refused
+            time.sleep(0.1)
+            assert got == [None]
 
 
 def test_listener_errors_are_counted_not_fatal(peer: LinkPeer) -> None:
@@ -107,12 +165,10 @@ def test_garbage_is_counted_and_good_frames_still_arrive(peer: LinkPeer) -> None
 def test_reconnects_after_the_device_vanishes_and_starts_safe() -> None:
     states: list[LinkState] = []
     cfg = BoardClientConfig(reconnect_period_us=50_000)
-    with (
-        LinkPeer("socket") as peer,
-        BoardClient(peer.url, cfg, rc_source=lambda: RcFrame.neutral(Lever.MIDDLE)) as client,
-    ):
+    with LinkPeer("socket") as peer, BoardClient(peer.url, cfg) as client:
         client.add_state_listener(states.append)
         client.start()
+        client.set_rc(RcFrame.neutral(Lever.MIDDLE))
         assert _wait(lambda: len(peer.messages(VirtualRc)) > 5)
         peer.drop_connection()
         assert _wait(lambda: LinkState.DISCONNECTED in states)
@@ -123,7 +179,7 @@ def test_reconnects_after_the_device_vanishes_and_starts_safe() -> None:
         peer.resume()
         assert _wait(lambda: client.stats().reconnects == 1 and states[-1] is LinkState.CONNECTED)
         assert _wait(lambda: len(peer.messages(VirtualRc)) >= 3)
-        # The first frames after the reconnect are SAFE (right lever DOWN), whatever the source says.
+        # The first frames after the reconnect are SAFE (right lever DOWN), whatever frame was set.
         first = peer.messages(VirtualRc)[0].frame  # type: ignore[attr-defined]
         assert first.right_lever == Lever.DOWN
     assert states[-1] is LinkState.STOPPED
@@ -167,7 +223,8 @@ def test_config_validation() -> None:
 
 def test_a_stalled_host_stops_rc_and_heartbeat() -> None:
     # The lease is renewed by the dispatcher thread; block it inside a listener and the link process
-    # must stop sending RC (the board then times out to zero current) instead of repeating stale sticks.
+    # must stop sending RC (the board then times out to zero current) instead of repeating stale sticks;
+    # it carries no data, so the frame set once goes on when the host is back.
     import threading
 
     release = threading.Event()
@@ -179,11 +236,9 @@ def test_a_stalled_host_stops_rc_and_heartbeat() -> None:
             release.wait(2.0)
 
     cfg = BoardClientConfig(lease_us=100_000)
-    with (
-        LinkPeer("socket") as peer,
-        BoardClient(peer.url, cfg, rc_source=lambda: RcFrame.neutral(Lever.MIDDLE)) as client,
-    ):
+    with LinkPeer("socket") as peer, BoardClient(peer.url, cfg) as client:
         client.start()
+        client.set_rc(RcFrame.neutral(Lever.MIDDLE))
         assert _wait(lambda: len(peer.messages(VirtualRc)) > 5)
         client.add_listener(stall)
         assert _wait(stalled.is_set)

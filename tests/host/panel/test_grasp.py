@@ -38,7 +38,7 @@ def app() -> Iterator[HostApp]:
     assert opts.objects == (DEFAULT_OBJECT,)  # the default scene, as `spirob-host` builds it
     with HostApp(opts, panel_config=PANEL) as host:
         host.start()
-        if not _wait(lambda: host.panel.model.telemetry is not None, 60.0):
+        if not _wait(lambda: host.panel.board.telemetry is not None, 60.0):
             timed_out("the first telemetry from the board")
         yield host
 
@@ -56,7 +56,8 @@ def page(tmp_path_factory: pytest.TempPathFactory, app: HostApp) -> Iterator[Any
 
 
 def test_the_default_scenes_object_is_grasped_from_the_panel(app: HostApp, page: Any) -> None:
-    m = app.model
+    m, arb = app.board_state, app.arbiter
+    assert m is not None and arb is not None
     assert [o.name for o in app.objects] == ["object1"]
     assert app.panel is not None and len(app.panel.scene.handles.objects) == 1
 
@@ -64,7 +65,7 @@ def test_the_default_scenes_object_is_grasped_from_the_panel(app: HostApp, page:
         return m.telemetry
 
     page.get_by_role("button", exact=True, name="Take control").click()
-    assert _wait(lambda: m.holder is not None)
+    assert _wait(lambda: arb.holder is not None)
     lever_button(page, "Right lever", "DOWN").click()
     assert _wait(lambda: telemetry().phase == Phase.OK), telemetry()
     lever_button(page, "Right lever", "UP").click()

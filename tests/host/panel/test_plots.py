@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from host.panel.board_state import BoardState
 from host.panel.health import health_checks, health_html
 from host.panel.history import PLOT_COLUMNS
-from host.panel.model import UiModel
 from host.panel.plots import CABLE_CHOICES, plot_frame, y_range
 from protocol.messages import Telemetry
 
@@ -46,7 +46,7 @@ def test_y_ranges_are_physical_when_empty_and_never_collapse() -> None:
 
 
 def test_health_checks_grade_against_thresholds() -> None:
-    m = UiModel()
+    m = BoardState()
     t = Telemetry(10_000_000, motors_online=0b011, control_exec_p99_us=950, control_lateness_p99_us=50)
     m.on_board_message(t)
     checks = {c.name: c for c in health_checks(m, malformed_n=3)}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from host.link.client import LinkState
+from host.link.source import LinkState
 from host.panel.state_bar import KEY_HOOK_HTML, pilot_state, state_bar_html
 from protocol.dbus import Lever
 from protocol.messages import ArmBlocker, Mode, Phase, Telemetry, TelemetryFlags

@@ -74,7 +74,7 @@ def app() -> Iterator[HostApp]:
             opts = HostOptions(ui_port=0, token=TOKEN)
         host = stack.enter_context(HostApp(opts, panel_config=PANEL))
         host.start()
-        if not _wait(lambda: host.panel.model.telemetry is not None, 60.0):
+        if not _wait(lambda: host.panel.board.telemetry is not None, 60.0):
             timed_out("the first telemetry from the board")  # start-up: skipped if the machine starved it
         yield host
 
@@ -124,11 +124,12 @@ def wait_bar(page: Any, *texts: str) -> str:
 def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     from PIL import Image, ImageStat
 
-    m = app.model
+    m, arb = app.board_state, app.arbiter
+    assert m is not None and arb is not None
     assert f"token={TOKEN}" in app.url
     page_a = open_panel(browser, app)  # the printed URL: the page sets the cookie the websocket carries
     a = client_of(app, set())
-    assert m.is_authorised(a)
+    assert arb.is_authorised(a)
 
     # The canvas renders the scene: after the poses arrive, the screenshot is not blank and shows arm blue.
     assert _wait(lambda: app.panel is not None and app.panel.scene.updates > 10)
@@ -152,7 +153,7 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
 
     # Take control, pass the gate (right lever DOWN), MANUAL (MIDDLE), arm.
     page_a.get_by_role("button", exact=True, name="Take control").click()
-    assert _wait(lambda: m.holder == a)
+    assert _wait(lambda: arb.holder == a)
     page_a.get_by_text("You hold control.").wait_for(timeout=10_000)
     lever_button(page_a, "Right lever", "DOWN").click()
     assert _wait(lambda: m.telemetry is not None and m.telemetry.phase == Phase.OK)
@@ -166,7 +167,7 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     curl = stick_input(page_a, "Left ↕ tighten all cables")
     curl.fill("500")
     curl.press("Enter")
-    assert _wait(lambda: m.operator_input()[0][3] == 500, 10.0)
+    assert _wait(lambda: arb.operator_input()[0][3] == 500, 10.0)
 
     def tensions_up() -> bool:
         t = m.telemetry
@@ -190,14 +191,14 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     page_b = open_panel(browser, app)
     b = client_of(app, {a})
     page_b.get_by_role("button", exact=True, name="Take control").click()
-    assert _wait(lambda: m.pending == b)
+    assert _wait(lambda: arb.pending == b)
     time.sleep(0.5)
-    assert m.holder == a, "a second tab took control silently"
+    assert arb.holder == a, "a second tab took control silently"
     page_b.get_by_text("Request sent; waiting for the holder.").wait_for(timeout=10_000)
     # The holder hands it over explicitly; the new holder starts from SAFE.
     page_a.get_by_role("button", exact=True, name="Hand control over").click(timeout=10_000)
-    assert _wait(lambda: m.holder == b)
-    frame = m.virtual_rc_frame()
+    assert _wait(lambda: arb.holder == b)
+    frame = arb.rc_frame()
     assert frame is not None and frame.right_lever == 2 and frame.channels == (0, 0, 0, 0)
 
     # E-stop on the hotkey (Space) from the new holder's tab: currents go to zero.
@@ -214,21 +215,22 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     page_b.get_by_text("E-STOP pressed").first.wait_for(timeout=10_000)
     page_a.close()
     page_b.close()
-    assert _wait(lambda: m.holder is None)
+    assert _wait(lambda: arb.holder is None)
 
 
 def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> None:
     """A first-time pilot's steps, each said by the panel: the state bar's next step in each phase, the
     board's reason for a refused command, the control request toast, the parameter editor's round trip
     through the board, and Space with the focus in a number box."""
-    m = app.model
+    m, arb, params = app.board_state, app.arbiter, app.board_params
+    assert m is not None and arb is not None and params is not None
     page_a = open_panel(browser, app)
     a = client_of(app, set())
     # Nobody drives yet: no RC, the board waits (RC_LOST or GATE), the bar says how to start.
     text = wait_bar(page_a, "Take control")
     assert text.split(" · ")[0] in ("RC_LOST", "GATE"), text
     page_a.get_by_role("button", exact=True, name="Take control").click()
-    assert _wait(lambda: m.holder == a)
+    assert _wait(lambda: arb.holder == a)
     # The new holder sends the right lever DOWN: the gate opens, SAFE; the lever button shows it.
     wait_bar(page_a, "OK · SAFE", "ARMED", "move the right lever to MIDDLE to drive")
     assert lever_button(page_a, "Right lever", "DOWN").inner_text().strip() == "● DOWN"
@@ -238,7 +240,7 @@ def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> No
     page_a.get_by_role("button", exact=True, name="Enter DIRECT mode").click()
     page_a.get_by_text("Board refused SET_MODE").first.wait_for(timeout=15_000)
     page_a.get_by_text("DIRECT needs phase OK and the right lever MIDDLE").first.wait_for(timeout=5_000)
-    assert any("SET_MODE REJECTED" in e.text for e in m.events.entries())
+    assert any("SET_MODE REJECTED" in e.text for e in app.notices.events.entries())
 
     # MIDDLE: MANUAL, and the bar says how to drive.
     lever_button(page_a, "Right lever", "MIDDLE").click()
@@ -251,7 +253,7 @@ def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> No
     page_b.get_by_role("button", exact=True, name="Take control").click()
     page_a.get_by_text(f"Tab {b} asks for control").first.wait_for(timeout=15_000)
     page_a.get_by_role("button", exact=True, name="Keep control").click()
-    assert _wait(lambda: m.pending is None) and m.holder == a
+    assert _wait(lambda: arb.pending is None) and arb.holder == a
     page_b.close()
 
     # The parameter editor: set STICK_DEADBAND, the board reads it back, the page shows it confirmed.
@@ -259,13 +261,13 @@ def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> No
     page_a.get_by_label("Parameter").first.click()
     page_a.get_by_role("option", name="STICK_DEADBAND", exact=True).click()
     page_a.get_by_text("Bounds: must be 0..659 counts").first.wait_for(timeout=10_000)
-    old = m.params.get("STICK_DEADBAND")
+    old = params.params.get("STICK_DEADBAND")
     new = 17 if old != 17 else 18
     box = stick_input(page_a, "Value")
     box.fill(str(new))
     box.press("Enter")
     page_a.get_by_role("button", exact=True, name="Set on board").click()
-    assert _wait(lambda: m.params.get("STICK_DEADBAND") == new), m.params.get("STICK_DEADBAND")
+    assert _wait(lambda: params.params.get("STICK_DEADBAND") == new), params.params.get("STICK_DEADBAND")
     page_a.get_by_text(f"Set to {new}: confirmed by the board").first.wait_for(timeout=10_000)
 
     # Space with the focus in that number box: E-stop, the banner and the way out.
@@ -327,7 +329,7 @@ def test_panel_refuses_other_origins_and_missing_tokens() -> None:
                     timeout=page_load_ms()
                 )
             (cid,) = app.panel.controls()
-            assert app.model.is_authorised(cid)
+            assert app.arbiter is not None and app.arbiter.is_authorised(cid)
 
             # A page from another port on 127.0.0.1 in that same browser: refused, with the token in
             # the URL and with the panel's cookie (cookies ignore ports; the Origin does not).

@@ -1,0 +1,76 @@
+"""host.panel.scene: the arm's drawing, quaternion helpers, camera presets, MAVLink pose to scene."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from host.panel.scene import ArmGeometry, DronePose, arm_drawing, default_hanging_pose, quat_mul, quat_rotate
+
+
+def test_arm_drawing_of_a_hanging_arm() -> None:
+    geom = ArmGeometry.default()
+    pos, quat = default_hanging_pose(geom, DronePose((0.0, 0.0, 1.0)))
+    d = arm_drawing(pos, quat, geom)
+    n = geom.units
+    assert d.unit_positions.shape == (n, 3) and d.unit_scales.shape == (n, 3)
+    assert d.cable_segments.shape == (3 * (n + 1), 2, 3)
+    # Hanging straight down: every unit below the previous one, the tip lowest, cables 120° apart.
+    assert np.all(np.diff(d.unit_positions[:, 2]) < 0)
+    assert d.tip_m[2] == pytest.approx(1.0 - 0.03 - sum(geom.unit_lengths_m), abs=1e-9)
+    a, b = d.cable_segments[1, 0, :2], d.cable_segments[n + 2, 0, :2]
+    angle = math.degrees(math.atan2(a[0] * b[1] - a[1] * b[0], a @ b))
+    assert abs(angle) == pytest.approx(120.0, abs=1e-6)
+    # Units point along the hang: each instance's +z maps to -z in the world.
+    z = quat_rotate(d.unit_wxyzs, np.tile([0.0, 0.0, 1.0], (n, 1)))
+    assert np.allclose(z, [0.0, 0.0, -1.0])
+
+
+def test_arm_drawing_resamples_other_unit_counts() -> None:
+    geom = ArmGeometry.default()
+    pos, quat = default_hanging_pose(geom.resized(10))
+    assert arm_drawing(pos, quat, geom).unit_positions.shape == (10, 3)
+    with pytest.raises(ValueError):
+        arm_drawing(pos[:1], quat[:1], geom)
+
+
+def test_quaternion_helpers() -> None:
+    q = np.array([math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)])  # 90° about z
+    assert np.allclose(quat_rotate(q, np.array([1.0, 0.0, 0.0])), [0.0, 1.0, 0.0])
+    assert np.allclose(quat_mul(q, q), [0.0, 0.0, 0.0, 1.0])
+
+
+def test_camera_presets_follow_the_stick_axes() -> None:
+    from host.panel.scene import CAMERA_PRESETS, camera_view
+
+    drone = DronePose((0.0, 0.0, 1.0))
+    centre, tip = (0.0, 0.0, 0.9), (0.0, 0.0, 0.76)
+    views = {p: camera_view(p, centre, drone, tip) for p in CAMERA_PRESETS}
+    # Stick view: from -y looking +y, so stick right (+x) is screen right and stick up (+y) is away.
+    pos, look = views["sticks"]
+    assert pos[1] < look[1] and abs(pos[0] - look[0]) < 1e-9
+    assert views["top"][0][2] > 1.5 and views["tip"][1] == tip
+    # Behind the drone follows its yaw: nose (body +x) turned to +y puts the camera at -y.
+    yawed = DronePose((0.0, 0.0, 1.0), (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)))
+    pos, look = camera_view("behind", centre, yawed, tip)
+    assert pos[1] < look[1] - 1.0 and abs(pos[0]) < 1e-6
+    with pytest.raises(ValueError, match="camera preset"):
+        camera_view("nowhere", centre, drone, tip)
+
+
+def test_ned_to_scene_turns_the_drones_pose_z_up() -> None:
+    from types import SimpleNamespace
+
+    from host.panel.scene import DRONE_HEIGHT_M, ned_to_scene
+
+    assert ned_to_scene(None, None) == DronePose((0.0, 0.0, DRONE_HEIGHT_M))
+    pos = SimpleNamespace(x_m=1.0, y_m=2.0, z_m=-3.0)  # north 1, east 2, 3 m up
+    level = SimpleNamespace(roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.0)
+    pose = ned_to_scene(pos, level)
+    assert pose.position_m == (2.0, 1.0, 3.0)  # ENU: east, north, up
+    # Nose north (NED yaw 0) is the scene's +y; yawed 90° (east) it points along +x.
+    east = ned_to_scene(pos, SimpleNamespace(roll_rad=0.0, pitch_rad=0.0, yaw_rad=math.pi / 2))
+    assert np.allclose(quat_rotate(np.array(pose.wxyz), np.array([1.0, 0.0, 0.0])), [0.0, 1.0, 0.0])
+    assert np.allclose(quat_rotate(np.array(east.wxyz), np.array([1.0, 0.0, 0.0])), [1.0, 0.0, 0.0])
