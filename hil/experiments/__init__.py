@@ -4,8 +4,9 @@ Each experiment is a pure function of ``(design, params, seed, model)`` (``model
 :class:`~hil.sim.config.ModelConfig`, a preset or a variant) that runs the virtual board in
 lockstep (firmware + plant, :class:`hil.board.VirtualBoard`) and returns a frozen, picklable result with
 ``as_dict()``; a ``progress(done, total)`` callback reports how far it is. Each experiment is one module
-(its parameters, its run, its table rows and its figure); the rig, the grasp trial, the geometry and the
-parallel map they share have their own. ``spirob-hil experiment NAME`` (:mod:`hil.cli.experiment`)
+(its parameters, its run, its table rows and its figure); the geometry, the statistics and the parallel
+map they share have their own, and the trial code they share with campaigns (the rig, the grasp trial, the
+45 cm arm) is :mod:`hil.trial`. ``spirob-hil experiment NAME`` (:mod:`hil.cli.experiment`)
 prints each number next to the paper's prediction and, with ``--report DIR``, writes a PNG.
 
 =============  ==========================================  =============================================
@@ -34,9 +35,8 @@ sensitivity    which conclusions survive ±50 % on the      packing, dynamic and
                model's uncertain parameters                variant of the model; holds / fails table
 =============  ==========================================  =============================================
 
-Geometry: the drone sits at (0, 0, 1) m and the arm's base (its mount) 20 mm below it; the arm hangs
-along −z and cable 0 is on its +x side. Object positions are given relative to the base, in the x-z
-plane (the plane cable 0 bends the arm in).
+Geometry: :mod:`hil.trial.scene` (the arm hangs along −z under the drone, cable 0 on its +x side; object
+positions are relative to the arm's base, in the x-z plane).
 """
 
 from __future__ import annotations
@@ -45,11 +45,9 @@ from hil.experiments.catalogue import EXPERIMENTS, Experiment, run_experiment
 from hil.experiments.common import SIZES, Progress
 from hil.experiments.dynamic import DynamicParams, DynamicResult
 from hil.experiments.geometry import Envelope, base_first_tip_curve, fit_log_spiral
-from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial
 from hil.experiments.grasp_range import GraspRangeParams, GraspRangeResult
 from hil.experiments.load import LoadParams, LoadResult
 from hil.experiments.packing import PackingParams, PackingResult
-from hil.experiments.rig import Rig
 from hil.experiments.strategy import StrategyParams, StrategyResult
 from hil.experiments.workspace import WorkspaceParams, WorkspaceResult
 
@@ -60,23 +58,18 @@ __all__ = [
     "DynamicResult",
     "Envelope",
     "Experiment",
-    "GraspOutcome",
     "GraspRangeParams",
     "GraspRangeResult",
-    "GraspSetup",
     "LoadParams",
     "LoadResult",
     "PackingParams",
     "PackingResult",
     "Progress",
-    "Rig",
     "StrategyParams",
     "StrategyResult",
     "WorkspaceParams",
     "WorkspaceResult",
     "base_first_tip_curve",
     "fit_log_spiral",
-    "grasp_firmware",
-    "grasp_trial",
     "run_experiment",
 ]

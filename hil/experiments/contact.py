@@ -26,25 +26,23 @@ import numpy as np
 
 from hil.experiments.common import (
     DEFAULT_MODEL,
-    OBJ,
     Progress,
     Row,
-    S,
     extremes_rows,
     pyplot,
     save_figure,
     sized,
     worst_extremes,
 )
-from hil.experiments.grasp import GraspSetup, grasp_firmware, grasp_rig
 from hil.experiments.parallel import parallel_map
-from hil.experiments.rig import world_m
 from hil.experiments.stats import bootstrap_interval, wilson_interval
 from hil.experiments.strategy import TINY, StrategyParams, placements
 from hil.sim.config import ModelConfig
 from hil.sim.objects import contact_units
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspSetup, grasp_firmware, grasp_rig
+from hil.trial.scene import OBJ, S, world_m
 from protocol.messages import GraspState
 
 OLD_DETECTOR = {

@@ -24,9 +24,6 @@ import numpy as np
 
 from hil.experiments.common import (
     BOARD_MODEL,
-    FAR_M,
-    MS,
-    OBJ,
     Progress,
     Row,
     extremes_rows,
@@ -36,12 +33,12 @@ from hil.experiments.common import (
     worst_extremes,
 )
 from hil.experiments.parallel import parallel_map
-from hil.experiments.rig import world_m
 from hil.sim.config import ModelConfig, ObjectConfig
 from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes, PlantConfig
+from hil.trial.scene import FAR_M, MS, OBJ, world_m
 
 
 @dataclass(frozen=True)

@@ -30,28 +30,17 @@ import mujoco
 import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
-from hil.experiments.common import (
-    DEFAULT_MODEL,
-    FAR_M,
-    MS,
-    OBJ,
-    G,
-    Progress,
-    Row,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from hil.experiments.dynamic_rig import paper_arm_45cm, scaled_model, with_contact_timeconst, with_timestep
+from hil.experiments.common import DEFAULT_MODEL, G, Progress, Row, pyplot, save_figure, sized, worst_extremes
 from hil.experiments.parallel import parallel_map
-from hil.experiments.rig import direct_rig, world_m
 from hil.experiments.stats import wilson_interval
 from hil.sim.config import ModelConfig, ObjectConfig
 from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.arm_45cm import paper_arm_45cm, scaled_model, with_contact_timeconst, with_timestep
+from hil.trial.rig import direct_rig
+from hil.trial.scene import FAR_M, MS, OBJ, world_m
 from protocol.messages import CommandCode
 
 CAPTURE_MS = 120.0
@@ -428,7 +417,7 @@ def dynamic(
     jobs: int = 1,
     model: ModelConfig = DEFAULT_MODEL,
 ) -> DynamicResult:
-    """Fig. S11 on the paper's 45 cm 2-cable arm (:func:`~hil.experiments.dynamic_rig.paper_arm_45cm`).
+    """Fig. S11 on the paper's 45 cm 2-cable arm (:func:`~hil.trial.arm_45cm.paper_arm_45cm`).
 
     Args:
         params: the trials.
@@ -436,7 +425,7 @@ def dynamic(
         progress: ``progress(done, total)`` in trials.
         jobs: worker processes.
         model: the plant model as set for the prototype (a preset or a sensitivity variant); its arm is
-            scaled to the 45 cm arm (:func:`~hil.experiments.dynamic_rig.scaled_model`).
+            scaled to the 45 cm arm (:func:`~hil.trial.arm_45cm.scaled_model`).
 
     Raises:
         ValueError: a hold outside :data:`HOLDS`.

@@ -8,11 +8,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from hil.experiments.common import BASE_Z_M
 from hil.sim.config import ModelConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PlantConfig
+from hil.trial.scene import BASE_Z_M
 
 
 def fit_log_spiral(points: npt.NDArray[np.complex128]) -> tuple[float, complex, float]:

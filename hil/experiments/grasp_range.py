@@ -30,12 +30,12 @@ from hil.experiments.common import (
     worst_extremes,
 )
 from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
 from hil.experiments.parallel import parallel_map
 from hil.experiments.stats import bootstrap_interval
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
 
 PULL_DIR = (1.0, 0.0, 0.0)
 """The pull-out force's direction: horizontal, away from the arm's axis (+x, the object's side)."""

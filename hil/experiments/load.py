@@ -31,12 +31,12 @@ from hil.experiments.common import (
     worst_extremes,
 )
 from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
 from hil.experiments.parallel import parallel_map
 from hil.experiments.stats import Slope, ols_slope
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
 
 
 @dataclass(frozen=True)

@@ -11,21 +11,13 @@ from typing import Any
 import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
-from hil.experiments.common import (
-    BASE_Z_M,
-    DEFAULT_MODEL,
-    Progress,
-    Row,
-    extremes_rows,
-    pyplot,
-    save_figure,
-    sized,
-)
+from hil.experiments.common import DEFAULT_MODEL, Progress, Row, extremes_rows, pyplot, save_figure, sized
 from hil.experiments.geometry import fit_log_spiral, joint_points_xz
-from hil.experiments.rig import direct_rig
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.rig import direct_rig
+from hil.trial.scene import BASE_Z_M
 
 
 @dataclass(frozen=True)

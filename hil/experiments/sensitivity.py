@@ -36,62 +36,10 @@ from hil.experiments.strategy import StrategyParams, strategy
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.sim.variants import BASELINE, PARAMETERS, Variant
 
 FACTORS = (0.5, 1.5)
 """Each parameter is multiplied by these (±50 %)."""
-
-
-def _base_stiffness(m: ModelConfig, f: float) -> ModelConfig:
-    k = m.arm.base_stiffness_nm_per_rad * f
-    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, base_stiffness_nm_per_rad=k))
-
-
-def _damping_ratio(m: ModelConfig, f: float) -> ModelConfig:
-    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, damping_ratio=m.arm.damping_ratio * f))
-
-
-def _spool_inertia(m: ModelConfig, f: float) -> ModelConfig:
-    j = m.motor.rotor_inertia_kg_m2 * f
-    return dataclasses.replace(m, motor=dataclasses.replace(m.motor, rotor_inertia_kg_m2=j))
-
-
-def _drive_friction(m: ModelConfig, f: float) -> ModelConfig:
-    t = m.motor.output_friction_nm * f
-    return dataclasses.replace(m, motor=dataclasses.replace(m.motor, output_friction_nm=t))
-
-
-def _contact_friction(m: ModelConfig, f: float) -> ModelConfig:
-    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, geom_friction=m.arm.geom_friction * f))
-
-
-PARAMETERS: dict[str, Callable[[ModelConfig, float], ModelConfig]] = {
-    "base stiffness": _base_stiffness,
-    "damping ratio": _damping_ratio,
-    "spool inertia": _spool_inertia,
-    "drive friction": _drive_friction,
-    "contact friction": _contact_friction,
-}
-"""The varied parameters: name -> ``(model, factor) -> model``. The contact friction's objects follow the
-arm's (see :func:`hil.experiments.dynamic.dynamic`)."""
-
-BASELINE = "baseline"
-
-
-@dataclass(frozen=True)
-class Variant:
-    """One model: the baseline, or one parameter scaled by ``factor``."""
-
-    parameter: str
-    factor: float
-
-    @property
-    def label(self) -> str:
-        """``baseline`` or e.g. ``base stiffness x0.5``."""
-        return BASELINE if self.parameter == BASELINE else f"{self.parameter} x{self.factor:g}"
-
-    def apply(self, model: ModelConfig) -> ModelConfig:
-        """The variant of ``model``."""
-        return model if self.parameter == BASELINE else PARAMETERS[self.parameter](model, self.factor)
 
 
 def variants(size: str = "default") -> tuple[Variant, ...]:

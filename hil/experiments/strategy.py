@@ -21,7 +21,6 @@ import numpy as np
 
 from hil.experiments.common import (
     DEFAULT_MODEL,
-    SUCCESS_WRAP_DEG,
     Progress,
     Row,
     extremes_rows,
@@ -32,12 +31,13 @@ from hil.experiments.common import (
     worst_extremes,
 )
 from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_trial_job
 from hil.experiments.parallel import parallel_map
 from hil.experiments.stats import mcnemar_exact, wilson_interval
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_trial_job
+from hil.trial.scene import SUCCESS_WRAP_DEG
 
 ARMS = ("off", "on", "oracle")
 """The three arms: strategy off; on with the firmware's contact detector; on with the true contact."""

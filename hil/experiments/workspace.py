@@ -13,7 +13,6 @@ import numpy.typing as npt
 
 from controller.config import FirmwareConfig, MappingConfig, MotorDriveConfig
 from hil.experiments.common import (
-    BASE_Z_M,
     DEFAULT_MODEL,
     Progress,
     Row,
@@ -26,10 +25,11 @@ from hil.experiments.common import (
 )
 from hil.experiments.geometry import Envelope
 from hil.experiments.parallel import parallel_map
-from hil.experiments.rig import direct_rig
 from hil.sim.config import ActuatorConfig, ModelConfig
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.rig import direct_rig
+from hil.trial.scene import BASE_Z_M
 
 
 @dataclass(frozen=True)

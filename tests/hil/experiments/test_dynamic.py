@@ -10,26 +10,20 @@ import pytest
 
 from controller.config import FirmwareConfig
 from hil.experiments import DynamicParams, DynamicResult
-from hil.experiments.common import BOARD_MODEL, DEFAULT_MODEL, FAR_M, MS, OBJ
+from hil.experiments.common import BOARD_MODEL, DEFAULT_MODEL
 from hil.experiments.dynamic import TINY, _clear_start_offset_m, _clearance_m, dynamic
-from hil.experiments.dynamic_rig import (
+from hil.experiments.sensitivity import MEASURES, SensitivityResult, packing_measure, sensitivity, variants
+from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.spiral import SpiralDesign
+from hil.sim.variants import PARAMETERS, Variant
+from hil.trial.arm_45cm import (
     paper_arm_45cm,
     scaled_model,
     with_contact_timeconst,
     with_timestep,
 )
-from hil.experiments.rig import direct_rig, world_m
-from hil.experiments.sensitivity import (
-    MEASURES,
-    PARAMETERS,
-    SensitivityResult,
-    Variant,
-    packing_measure,
-    sensitivity,
-    variants,
-)
-from hil.sim.config import ModelConfig, ObjectConfig
-from hil.sim.spiral import SpiralDesign
+from hil.trial.rig import direct_rig
+from hil.trial.scene import FAR_M, MS, OBJ, world_m
 
 
 def test_the_45cm_arm_is_the_papers_two_cable_arm() -> None:

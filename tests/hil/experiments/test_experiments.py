@@ -14,24 +14,23 @@ from controller.config import FirmwareConfig
 from hil.cli.main import main
 from hil.experiments import (
     EXPERIMENTS,
-    GraspSetup,
     PackingResult,
-    Rig,
     StrategyParams,
     StrategyResult,
     WorkspaceResult,
-    grasp_trial,
     run_experiment,
 )
 from hil.experiments.contact import ContactParams, ReachTrial, contact_jobs
-from hil.experiments.dynamic_rig import paper_arm_45cm, scaled_model
 from hil.experiments.geometry import ArmFootprint
-from hil.experiments.sensitivity import Variant
 from hil.experiments.strategy import arm_of, placements
 from hil.sim.config import ArmConfig, ModelConfig, ObjectConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.sim.variants import Variant
+from hil.trial.arm_45cm import paper_arm_45cm, scaled_model
+from hil.trial.grasp import GraspSetup, grasp_trial
+from hil.trial.rig import Rig
 
 STIFFER = ModelConfig(arm=ArmConfig(base_stiffness_nm_per_rad=1.2 * ArmConfig().base_stiffness_nm_per_rad))
 """A non-default model: every experiment must run on the model it is given."""

@@ -1,5 +1,5 @@
-"""One grasp: the firmware's GRASP state machine against one object, measured (shared by strategy,
-grasp-range and load)."""
+"""One grasp: the firmware's GRASP state machine against one object, measured (the strategy, contact,
+grasp-range and load experiments' trial, and a campaign's grasp run)."""
 
 from __future__ import annotations
 
@@ -11,12 +11,12 @@ from typing import Any
 import numpy as np
 
 from controller.config import FirmwareConfig
-from hil.experiments.common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, SUCCESS_WRAP_DEG, S
-from hil.experiments.rig import Rig, rc_frame, world_m
 from hil.sim.config import ModelConfig, ObjectConfig
 from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.rig import Rig, rc_frame
+from hil.trial.scene import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, SUCCESS_WRAP_DEG, S, world_m
 from protocol.dbus import Lever
 from protocol.messages import GraspState
 
@@ -87,7 +87,7 @@ class GraspOutcome:
             least 2 units, is less than :data:`HELD_DROP_MM` below its release height and slower than
             :data:`HELD_SPEED_M_S`.
         success: the grasp criterion fixed before the experiments ran: ``held`` and ``wrap_deg`` at
-            least :data:`~hil.experiments.common.SUCCESS_WRAP_DEG` (half the circumference).
+            least :data:`~hil.trial.scene.SUCCESS_WRAP_DEG` (half the circumference).
         max_current_raw: largest |current| sent to an ESC.
         extremes: the worst physics of the whole trial (:meth:`hil.sim.plant.Plant.extremes`).
         load_n: with a load ramp, the force at which the object came out (moved more than
