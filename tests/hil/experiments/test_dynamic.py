@@ -9,9 +9,16 @@ import pickle
 import pytest
 
 from controller.config import FirmwareConfig
-from hil.experiments import DynamicParams, DynamicResult
+from hil.experiments.base import Conditions
 from hil.experiments.common import BOARD_MODEL, DEFAULT_MODEL
-from hil.experiments.dynamic import TINY, _clear_start_offset_m, _clearance_m, dynamic
+from hil.experiments.dynamic import (
+    TINY,
+    DynamicParams,
+    DynamicResult,
+    _clear_start_offset_m,
+    _clearance_m,
+    dynamic,
+)
 from hil.experiments.sensitivity import MEASURES, SensitivityResult, packing_measure, sensitivity, variants
 from hil.sim.config import ModelConfig, ObjectConfig
 from hil.sim.spiral import SpiralDesign
@@ -79,7 +86,7 @@ def test_a_throw_starts_clear_of_the_hook() -> None:
 
 @pytest.fixture(scope="module")
 def tiny_dynamic() -> DynamicResult:
-    return dynamic(TINY, seed=1)
+    return dynamic(TINY, Conditions(seed=1))
 
 
 def test_dynamic_tiny_reports_every_trial_and_the_convergence(tiny_dynamic: DynamicResult) -> None:
@@ -124,15 +131,15 @@ def test_sensitivity_variants_change_one_parameter_each() -> None:
 
 def test_packing_measure_runs_on_the_given_model() -> None:
     proto = SpiralDesign.paper_prototype()
-    soft = packing_measure(proto, Variant("base stiffness", 0.5).apply(ModelConfig()), "tiny", 0, 1)
-    stiff = packing_measure(proto, Variant("base stiffness", 1.5).apply(ModelConfig()), "tiny", 0, 1)
+    soft = packing_measure("tiny", Conditions(proto, Variant("base stiffness", 0.5).apply(ModelConfig())))
+    stiff = packing_measure("tiny", Conditions(proto, Variant("base stiffness", 1.5).apply(ModelConfig())))
     # the base joint sets the packing tension: a stiffer base needs more
     assert soft["pack_tension_n"] < stiff["pack_tension_n"]
 
 
 def test_sensitivity_tiny_table_and_json() -> None:
     # The table's and the JSON's shape, not the physics: the board's 1 ms step keeps it quick.
-    r = sensitivity(size="tiny", seed=0, jobs=1, model=BOARD_MODEL)
+    r = sensitivity("tiny", Conditions(model=BOARD_MODEL))
     r = pickle.loads(pickle.dumps(r))
     assert isinstance(r, SensitivityResult)
     d = r.as_dict()

@@ -12,17 +12,14 @@ import pytest
 
 from controller.config import FirmwareConfig
 from hil.cli.main import main
-from hil.experiments import (
-    EXPERIMENTS,
-    PackingResult,
-    StrategyParams,
-    StrategyResult,
-    WorkspaceResult,
-    run_experiment,
-)
+from hil.experiments.base import Conditions
+from hil.experiments.catalogue import EXPERIMENTS, run_experiment
 from hil.experiments.contact import ContactParams, ReachTrial, contact_jobs
+from hil.experiments.convergence import ConvergenceResult
 from hil.experiments.geometry import ArmFootprint
-from hil.experiments.strategy import arm_of, placements
+from hil.experiments.packing import PackingResult
+from hil.experiments.strategy import StrategyParams, StrategyResult, arm_of, placements
+from hil.experiments.workspace import WorkspaceResult
 from hil.sim.config import ArmConfig, ModelConfig, ObjectConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
@@ -75,11 +72,10 @@ def test_each_experiment_runs_tiny_on_a_given_model_reports_and_plots(
     assert again.as_dict()["seed"] == 3
     d = result.as_dict()
     json.dumps(d)  # JSON-ready (NaN allowed here; the CLI maps it to null)
-    exp = EXPERIMENTS[name]
-    rows = exp.rows(result)
+    rows = result.table_rows()
     assert rows and all(len(r) == 3 for r in rows)
-    assert exp.samples(result)
-    png = exp.plot(result, tmp_path)
+    assert result.describe_samples()
+    png = result.figure(tmp_path)
     assert png.exists() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert d["extremes"]["tension_n"] > 0.0  # every experiment reports the worst physics of its trials
     assert any("penetration" in r[0] for r in rows)
@@ -175,6 +171,7 @@ def test_an_object_out_of_reach_is_a_failed_grasp() -> None:
 
 def test_convergence_tiny_measures_each_step_and_the_finer_step_meets_the_penetration_goal() -> None:
     r = run_experiment("convergence", size="tiny")
+    assert isinstance(r, ConvergenceResult)
     assert [s.timestep_s for s in r.steps] == [0.001, 0.0005]
     for s in r.steps:
         # the stated contacts' goal (docs/plant.md): under 1 mm for a pen pressed by a 54 N curl
@@ -184,7 +181,7 @@ def test_convergence_tiny_measures_each_step_and_the_finer_step_meets_the_penetr
     # (reported as such in docs/plant.md); the 0.5 ms step meets it.
     assert r.steps[0].wrap_penetration_m < 2e-3
     assert r.steps[1].wrap_penetration_m < 1e-3
-    rows = EXPERIMENTS["convergence"].rows(r)
+    rows = r.table_rows()
     assert rows[0][1] == "1 ms | 0.5 ms"
 
 
@@ -200,7 +197,7 @@ def test_contact_trial_kinds() -> None:
 def test_contact_reaches_at_the_strategys_placements() -> None:
     design = SpiralDesign.paper_prototype()
     spots = placements(design, StrategyParams(), seed=0)
-    jobs = contact_jobs(design, ContactParams(), seed=0)
+    jobs = contact_jobs(ContactParams(), Conditions(design, seed=0))
     assert [(s.x_m, s.z_m, s.diameter_m) for s, det, _ in jobs[::2]] == spots
     assert {det for _, det, _ in jobs} == {"old", "new"}
 
