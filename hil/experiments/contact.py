@@ -175,7 +175,7 @@ class ContactResult:
         return rows
 
     def describe_samples(self) -> str:
-        """The sample counts, in words."""
+        """Placements and detectors, in words."""
         n = len(self.trials) // 2
         sp = self.params.placements
         return (

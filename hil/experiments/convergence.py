@@ -30,7 +30,7 @@ from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes, PlantConfig
-from hil.trial.scene import FAR_M, MS, OBJ, world_m
+from hil.trial.scene import MS, OBJ, target_object, world_m
 
 
 @dataclass(frozen=True)
@@ -142,7 +142,7 @@ class ConvergenceResult:
         return rows
 
     def describe_samples(self) -> str:
-        """The result's sample counts, in words."""
+        """Physics steps and the runs at each, in words."""
         p = self.params
         return (
             f"{len(self.steps)} physics steps; per step a {p.ramp_ms} ms ramp, a {p.pen_ms} ms pen run, "
@@ -192,7 +192,7 @@ def packing_tension_n(p: ConvergenceParams, model: ModelConfig, seed: int) -> fl
 
 def pen_figures(p: ConvergenceParams, model: ModelConfig, seed: int) -> tuple[float, float, float, float]:
     """Half-wrap time [ms], wrap penetration [m], press penetration [m] and its ratio to the radius."""
-    pen = ObjectConfig(OBJ, radius_m=p.pen_radius_m, length_m=0.14, pos_m=FAR_M, mass_kg=p.pen_mass_kg)
+    pen = target_object(p.pen_radius_m, 0.14, p.pen_mass_kg)
     plant = _plant(model, seed, pen)
     plant.hold_object(OBJ, world_m(*p.pen))
     plant.run(200 * MS)
@@ -212,7 +212,7 @@ def pen_figures(p: ConvergenceParams, model: ModelConfig, seed: int) -> tuple[fl
 
 def throw_penetration_m(p: ConvergenceParams, model: ModelConfig, seed: int, speed_m_s: float) -> float:
     """Largest penetration of a 10 mm-radius, 10 g object thrown at the hanging arm."""
-    obj = ObjectConfig(OBJ, radius_m=0.01, length_m=0.06, pos_m=FAR_M, mass_kg=0.01)
+    obj = target_object(0.01, 0.06, 0.01)
     plant = _plant(model, seed, obj)
     plant.hold_object(OBJ)
     plant.run(300 * MS)

@@ -34,14 +34,14 @@ from hil.experiments.base import Conditions, Experiment, Sizes
 from hil.experiments.common import G, Row, pyplot, save_figure, worst_extremes
 from hil.experiments.parallel import parallel_map
 from hil.experiments.stats import wilson_interval
-from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.config import ModelConfig
 from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
 from hil.trial.arm_45cm import paper_arm_45cm, scaled_model, with_contact_timeconst, with_timestep
 from hil.trial.rig import direct_rig
-from hil.trial.scene import FAR_M, MS, OBJ, world_m
+from hil.trial.scene import MS, OBJ, target_object, world_m
 from protocol.messages import CommandCode
 
 CAPTURE_MS = 120.0
@@ -302,7 +302,7 @@ class DynamicResult:
         return rows
 
     def describe_samples(self) -> str:
-        """The result's sample counts, in words."""
+        """Pen steps, throws and physics steps, in words."""
         base = self.params.timesteps_s[0]
         pens, throws = len(self.at(base, "pen")), len(self.at(base, "throw"))
         steps = ", ".join(f"{1000 * ts:g}" for ts in self.params.timesteps_s)
@@ -388,23 +388,9 @@ def _trial(item: _Item) -> DynamicRun:
     # contact-friction variant must change both.
     friction = arm_model.arm.geom_friction
     if pen:
-        obj = ObjectConfig(
-            OBJ,
-            radius_m=p.pen_diameter_m / 2,
-            length_m=p.pen_length_m,
-            pos_m=FAR_M,
-            mass_kg=p.pen_mass_kg,
-            friction=friction,
-        )
+        obj = target_object(p.pen_diameter_m / 2, p.pen_length_m, p.pen_mass_kg, friction)
     else:
-        obj = ObjectConfig(
-            OBJ,
-            radius_m=p.object_diameter_m / 2,
-            length_m=p.object_length_m,
-            pos_m=FAR_M,
-            mass_kg=p.object_mass_kg,
-            friction=friction,
-        )
+        obj = target_object(p.object_diameter_m / 2, p.object_length_m, p.object_mass_kg, friction)
     # A step, not a ramp: the slew limiter opened, the ceiling at the 3 A current limit.
     fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=54.0, slew_n_per_s=100_000.0))
     model = with_contact_timeconst(with_timestep(arm_model, timestep_s), p.contact_s)

@@ -19,11 +19,10 @@ from typing import Any
 import numpy as np
 
 from hil.experiments.base import Conditions, Experiment, Sizes
-from hil.experiments.common import Row, extremes_rows, mm, pyplot, save_figure, worst_extremes
-from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.outcomes import grasp_trials
+from hil.experiments.common import Row, extremes_rows, mm, pyplot, save_figure
+from hil.experiments.geometry import ArmFootprint, gap_depth_placements
+from hil.experiments.outcomes import GraspOutcomes, grasp_trials
 from hil.experiments.stats import bootstrap_interval
-from hil.sim.types import PhysicsExtremes
 from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware
 
 PULL_DIR = (1.0, 0.0, 0.0)
@@ -60,7 +59,7 @@ class GraspRangeParams:
 
 
 @dataclass(frozen=True)
-class GraspRangeResult:
+class GraspRangeResult(GraspOutcomes):
     """Pull-out force per diameter with its bootstrap interval, against d_min and d_max (a
     :class:`~hil.experiments.base.Result`)."""
 
@@ -108,11 +107,6 @@ class GraspRangeResult:
         ok = self._held_range()
         return max(ok) if ok else math.nan
 
-    @property
-    def extremes(self) -> PhysicsExtremes:
-        """The worst physics over every trial."""
-        return worst_extremes(o.extremes for o in self.outcomes)
-
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {
@@ -125,9 +119,7 @@ class GraspRangeResult:
             "d_max_sim_m": self.d_max_sim_m,
             "per_diameter": self.per_diameter(),
             "penetration_m": self.extremes.penetration_m,
-            "extremes": self.extremes.as_dict(),
-            "trials": len(self.outcomes),
-            "outcomes": [o.as_dict() for o in self.outcomes],
+            **self.outcomes_dict(),
             "params": dataclasses.asdict(self.params),
         }
 
@@ -163,13 +155,12 @@ class GraspRangeResult:
         return rows
 
     def describe_samples(self) -> str:
-        """The result's sample counts, in words."""
+        """Diameters, placements and grasps, the pull and the bootstrap, in words."""
         p = self.params
-        cells = p.grid[0] * p.grid[1]
         return (
-            f"{len(p.diameters_m)} diameters x {cells} placements = {len(self.outcomes)} grasps "
-            "(strategy on, "
-            f"{p.wrap_n:g} N wrap), pulled along +x at {p.pull_rate_n_per_s:g} N/s up to {p.pull_cap_n:g} N; "
+            f"{len(p.diameters_m)} diameters x {p.grid[0] * p.grid[1]} placements = "
+            f"{len(self.outcomes)} grasps (strategy on, {p.wrap_n:g} N wrap), pulled along +x at "
+            f"{p.pull_rate_n_per_s:g} N/s up to {p.pull_cap_n:g} N; "
             f"bootstrap {p.resamples} resamples"
         )
 
@@ -219,28 +210,23 @@ def grasp_range(p: GraspRangeParams, on: Conditions) -> GraspRangeResult:
     design, model, seed = on.design, on.model, on.seed
     fw = grasp_firmware(grasp_wrap_n=p.wrap_n)
     foot = ArmFootprint.of(design, model)
-    setups = []
+    setups: list[GraspSetup] = []
     for d in p.diameters_m:
-        rng = np.random.default_rng([seed, round(d * 1e6)])
-        xs = (p.gap_range_m[0] + d / 2, p.gap_range_m[1] + d / 2)
-        zs = (-(p.depth_range_m[1] + d / 2), -(p.depth_range_m[0] + d / 2))
-        for x, z in jittered_placements(foot, d, xs, zs, p.grid, rng, p.clearance_m):
-            setups.append(
-                GraspSetup(
-                    x,
-                    z,
-                    d,
-                    strategy_on=True,
-                    mass_kg=p.mass_kg,
-                    hold_s=p.hold_s,
-                    load_rate_n_per_s=p.pull_rate_n_per_s,
-                    load_cap_n=p.pull_cap_n,
-                    load_dir=PULL_DIR,
-                    firmware=fw,
-                    model=model,
-                    seed=seed,
-                )
-            )
+        pull = GraspSetup(  # strategy on; placed at each spot below
+            x_m=math.nan,
+            z_m=math.nan,
+            diameter_m=d,
+            mass_kg=p.mass_kg,
+            hold_s=p.hold_s,
+            load_rate_n_per_s=p.pull_rate_n_per_s,
+            load_cap_n=p.pull_cap_n,
+            load_dir=PULL_DIR,
+            firmware=fw,
+            model=model,
+            seed=seed,
+        )
+        spots = gap_depth_placements(foot, d, p.gap_range_m, p.depth_range_m, p.grid, p.clearance_m, seed)
+        setups += [dataclasses.replace(pull, x_m=x, z_m=z) for x, z in spots]
     return GraspRangeResult(p, seed, design.d_min_m, design.d_max_m, grasp_trials(setups, on))
 
 

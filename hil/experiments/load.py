@@ -20,11 +20,10 @@ from typing import Any
 import numpy as np
 
 from hil.experiments.base import Conditions, Experiment, Sizes
-from hil.experiments.common import G, Row, extremes_rows, pyplot, save_figure, worst_extremes
-from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.outcomes import grasp_trials
+from hil.experiments.common import G, Row, extremes_rows, pyplot, save_figure
+from hil.experiments.geometry import ArmFootprint, gap_depth_placements
+from hil.experiments.outcomes import GraspOutcomes, grasp_trials
 from hil.experiments.stats import Slope, ols_slope
-from hil.sim.types import PhysicsExtremes
 from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware
 
 
@@ -70,7 +69,7 @@ def held_kg(o: GraspOutcome) -> float:
 
 
 @dataclass(frozen=True)
-class LoadResult:
+class LoadResult(GraspOutcomes):
     """Held mass against wrap force per friction, its slope, and eq. (16)'s (a
     :class:`~hil.experiments.base.Result`)."""
 
@@ -108,11 +107,6 @@ class LoadResult:
                 )
         return out
 
-    @property
-    def extremes(self) -> PhysicsExtremes:
-        """The worst physics over every trial."""
-        return worst_extremes(o.extremes for o in self.outcomes)
-
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {
@@ -122,9 +116,7 @@ class LoadResult:
             "slopes": [{"friction": mu, **self.slope(mu).as_dict()} for mu in self.params.frictions],
             "rows": self.rows(),
             "penetration_m": self.extremes.penetration_m,
-            "extremes": self.extremes.as_dict(),
-            "trials": len(self.outcomes),
-            "outcomes": [o.as_dict() for o in self.outcomes],
+            **self.outcomes_dict(),
             "params": dataclasses.asdict(self.params),
         }
 
@@ -155,11 +147,11 @@ class LoadResult:
         return rows
 
     def describe_samples(self) -> str:
-        """The result's sample counts, in words."""
+        """Wrap forces, frictions, placements and grasps, in words."""
         p = self.params
-        cells = p.grid[0] * p.grid[1]
         return (
-            f"{len(p.forces_n)} wrap forces x {len(p.frictions)} frictions x {cells} placements = "
+            f"{len(p.forces_n)} wrap forces x {len(p.frictions)} frictions x {p.grid[0] * p.grid[1]} "
+            "placements = "
             f"{len(self.outcomes)} grasps of a {p.diameter_m * 1000:g} mm cylinder, "
             "load growing to twice the bound "
             f"in {p.ramp_s:g} s"
@@ -195,33 +187,27 @@ def load(p: LoadParams, on: Conditions) -> LoadResult:
     design, model, seed = on.design, on.model, on.seed
     d = p.diameter_m
     bound_slope = design.max_load_kg(d, 1.0)  # eq. (16) is proportional to F
-    rng = np.random.default_rng([seed, round(d * 1e6)])
-    xs = (p.gap_range_m[0] + d / 2, p.gap_range_m[1] + d / 2)
-    zs = (-(p.depth_range_m[1] + d / 2), -(p.depth_range_m[0] + d / 2))
-    spots = jittered_placements(ArmFootprint.of(design, model), d, xs, zs, p.grid, rng, p.clearance_m)
-    setups = []
+    foot = ArmFootprint.of(design, model)
+    spots = gap_depth_placements(foot, d, p.gap_range_m, p.depth_range_m, p.grid, p.clearance_m, seed)
+    setups: list[GraspSetup] = []
     for mu in p.frictions:
         variant = dataclasses.replace(model, arm=dataclasses.replace(model.arm, geom_friction=mu))
         for f in p.forces_n:
-            fw = grasp_firmware(grasp_wrap_n=f)
             cap_n = 2.0 * bound_slope * f * G
-            for x, z in spots:
-                setups.append(
-                    GraspSetup(
-                        x,
-                        z,
-                        d,
-                        strategy_on=True,
-                        mass_kg=p.mass_kg,
-                        hold_s=p.hold_s,
-                        load_rate_n_per_s=cap_n / p.ramp_s,
-                        load_cap_n=cap_n,
-                        object_friction=mu,
-                        firmware=fw,
-                        model=variant,
-                        seed=seed,
-                    )
-                )
+            weigh = GraspSetup(  # strategy on; placed at each spot below
+                x_m=math.nan,
+                z_m=math.nan,
+                diameter_m=d,
+                mass_kg=p.mass_kg,
+                hold_s=p.hold_s,
+                load_rate_n_per_s=cap_n / p.ramp_s,
+                load_cap_n=cap_n,
+                object_friction=mu,
+                firmware=grasp_firmware(grasp_wrap_n=f),
+                model=variant,
+                seed=seed,
+            )
+            setups += [dataclasses.replace(weigh, x_m=x, z_m=z) for x, z in spots]
     return LoadResult(p, seed, bound_slope, grasp_trials(setups, on))
 
 

@@ -82,7 +82,7 @@ class PackingResult:
         }
 
     def table_rows(self) -> list[Row]:
-        """The result\'s numbers next to the paper\'s, one row each."""
+        """The result's numbers next to the paper's, one row each."""
         order = (
             "tip first"
             if self.order_correlation < -0.8
@@ -113,7 +113,7 @@ class PackingResult:
         ]
 
     def describe_samples(self) -> str:
-        """The result\'s sample counts, in words."""
+        """The ramp and the joints, in words."""
         return f"1 ramp of {self.params.ramp_s:g} s to {self.params.tension_end_n:g} N, {self.joints} joints"
 
     def figure(self, out: Path) -> Path:

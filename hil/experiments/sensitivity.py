@@ -249,7 +249,7 @@ class SensitivityResult:
         return rows
 
     def describe_samples(self) -> str:
-        """The result's sample counts, in words."""
+        """Models, measures and the strategy's placements, in words."""
         text = (
             f"{len(self.variants)} models (baseline, {(len(self.variants) - 1) // len(FACTORS)} parameters x "
             f"{len(FACTORS)}) x "

@@ -20,13 +20,12 @@ from typing import Any
 import numpy as np
 
 from hil.experiments.base import Conditions, Experiment, Sizes
-from hil.experiments.common import DEFAULT_MODEL, Row, extremes_rows, pct, pyplot, save_figure, worst_extremes
+from hil.experiments.common import DEFAULT_MODEL, Row, extremes_rows, pct, pyplot, save_figure
 from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.outcomes import grasp_trials
+from hil.experiments.outcomes import GraspOutcomes, grasp_trials
 from hil.experiments.stats import mcnemar_exact, wilson_interval
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
-from hil.sim.types import PhysicsExtremes
 from hil.trial.grasp import GraspOutcome, GraspSetup
 from hil.trial.scene import SUCCESS_WRAP_DEG
 
@@ -92,7 +91,7 @@ def placements(
 
 
 @dataclass(frozen=True)
-class StrategyResult:
+class StrategyResult(GraspOutcomes):
     """Every placement grasped by each arm (:data:`ARMS`; a :class:`~hil.experiments.base.Result`)."""
 
     params: StrategyParams
@@ -148,11 +147,6 @@ class StrategyResult:
         """:meth:`paired` of every strategy-on arm against off."""
         return [self.paired(a) for a in self.arms() if a != "off"]
 
-    @property
-    def extremes(self) -> PhysicsExtremes:
-        """The worst physics over every trial."""
-        return worst_extremes(o.extremes for o in self.outcomes)
-
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         arms = self.arms()
@@ -171,9 +165,7 @@ class StrategyResult:
             ],
             "penetration_m": e.penetration_m,
             "penetration_ratio": e.penetration_ratio,
-            "extremes": e.as_dict(),
-            "trials": len(self.outcomes),
-            "outcomes": [o.as_dict() for o in self.outcomes],
+            **self.outcomes_dict(),
             "params": dataclasses.asdict(self.params),
         }
 
@@ -206,7 +198,7 @@ class StrategyResult:
         return rows
 
     def describe_samples(self) -> str:
-        """The result's sample counts, in words."""
+        """Diameters, placements, arms and grasps, in words."""
         p = self.params
         per_d = p.grid[0] * p.grid[1] * p.seeds
         return (

@@ -154,7 +154,7 @@ class WorkspaceResult:
         }
 
     def table_rows(self) -> list[Row]:
-        """The result\'s numbers next to the paper\'s, one row each."""
+        """The result's numbers next to the paper's, one row each."""
         n = sum(x.samples for x in self.runs)
         exact = sum(x.inside_share_exact * x.samples for x in self.runs) / n if n else math.nan
         rows: list[Row] = [
@@ -188,7 +188,7 @@ class WorkspaceResult:
         return rows
 
     def describe_samples(self) -> str:
-        """The result\'s sample counts, in words."""
+        """Designs, plant variants, drive time and tip samples, in words."""
         return (
             f"{len(self.runs)} design/plant variants x up to {self.params.duration_s:g} s of random tensions "
             f"(until coverage saturates), "

@@ -11,12 +11,21 @@ from typing import Any
 import numpy as np
 
 from controller.config import FirmwareConfig
-from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.config import ModelConfig
 from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
 from hil.trial.rig import Rig, rc_frame
-from hil.trial.scene import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, SUCCESS_WRAP_DEG, S, world_m
+from hil.trial.scene import (
+    HELD_DROP_MM,
+    HELD_SPEED_M_S,
+    MS,
+    OBJ,
+    SUCCESS_WRAP_DEG,
+    S,
+    target_object,
+    world_m,
+)
 from protocol.dbus import Lever
 from protocol.messages import GraspState
 
@@ -132,14 +141,7 @@ def grasp_rig(setup: GraspSetup, design: SpiralDesign) -> Rig:
     packed if the strategy is on, the object waiting out of reach on its support."""
     fw = setup.firmware or grasp_firmware()
     fw = fw.replaced(grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
-    obj = ObjectConfig(
-        OBJ,
-        radius_m=setup.diameter_m / 2,
-        length_m=setup.length_m,
-        pos_m=FAR_M,
-        mass_kg=setup.mass_kg,
-        friction=setup.object_friction,
-    )
+    obj = target_object(setup.diameter_m / 2, setup.length_m, setup.mass_kg, setup.object_friction)
     rig = Rig(
         design,
         fw,

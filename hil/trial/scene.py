@@ -8,6 +8,8 @@ cable 0 bends the arm in): :func:`world_m`.
 
 from __future__ import annotations
 
+from hil.sim.config import ObjectConfig
+
 MS = 1000
 """Microseconds per millisecond (board time is in µs)."""
 S = 1_000_000
@@ -30,3 +32,13 @@ SUCCESS_WRAP_DEG = 180.0
 def world_m(x_m: float, z_m: float) -> tuple[float, float, float]:
     """World position of a point given relative to the arm's base in the x-z plane."""
     return (x_m, 0.0, BASE_Z_M + z_m)
+
+
+def target_object(
+    radius_m: float, length_m: float, mass_kg: float, friction: float = ObjectConfig.friction
+) -> ObjectConfig:
+    """The trial's one object (:data:`OBJ`): a free cylinder across the x-z plane, waiting out of reach at
+    :data:`FAR_M` until its trial places it."""
+    return ObjectConfig(
+        OBJ, radius_m=radius_m, length_m=length_m, pos_m=FAR_M, mass_kg=mass_kg, friction=friction
+    )

@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import json
-import math
 import pickle
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from controller.config import FirmwareConfig
 from hil.cli.main import main
 from hil.experiments.base import Conditions
 from hil.experiments.catalogue import EXPERIMENTS, run_experiment
@@ -20,14 +18,12 @@ from hil.experiments.geometry import ArmFootprint
 from hil.experiments.packing import PackingResult
 from hil.experiments.strategy import StrategyParams, StrategyResult, arm_of, placements
 from hil.experiments.workspace import WorkspaceResult
-from hil.sim.config import ArmConfig, ModelConfig, ObjectConfig
+from hil.sim.config import ArmConfig, ModelConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
 from hil.sim.variants import Variant
 from hil.trial.arm_45cm import paper_arm_45cm, scaled_model
-from hil.trial.grasp import GraspSetup, grasp_trial
-from hil.trial.rig import Rig
 
 STIFFER = ModelConfig(arm=ArmConfig(base_stiffness_nm_per_rad=1.2 * ArmConfig().base_stiffness_nm_per_rad))
 """A non-default model: every experiment must run on the model it is given."""
@@ -153,20 +149,6 @@ def test_strategy_placements_are_jittered_paired_and_clear_of_the_packed_coil() 
     assert all(foot.clearance_m(x, z, d / 2) >= p.clearance_m for x, z, d in spots)
     assert foot.clearance_m(0.03, -0.03, 0.01) < 0  # inside the packed coil
     assert spots == placements(design, p, seed=0) != placements(design, p, seed=1)
-
-
-def test_the_rig_runs_the_given_model_with_the_objects_appended() -> None:
-    model = ModelConfig(arm=ArmConfig(base_stiffness_nm_per_rad=0.3))
-    obj = ObjectConfig("can", radius_m=0.01, length_m=0.05, pos_m=(0.5, 0.0, 0.5), mass_kg=0.02)
-    rig = Rig(SpiralDesign.paper_prototype(), FirmwareConfig(), [], objects=(obj,), model=model)
-    used = rig.plant.config.model
-    assert used.arm.base_stiffness_nm_per_rad == 0.3 and used.objects == (obj,)
-    rig.close()
-
-
-def test_an_object_out_of_reach_is_a_failed_grasp() -> None:
-    out = grasp_trial(GraspSetup(0.20, -0.05, 0.02, strategy_on=True))
-    assert out.state == "FAILED" and not out.held and math.isnan(out.t_hold_s)
 
 
 def test_convergence_tiny_measures_each_step_and_the_finer_step_meets_the_penetration_goal() -> None:
