@@ -11,7 +11,7 @@ Back ends: :class:`CanMotorBus` (any python-can bus: ``socketcan`` (``can0``), `
 ``slcan`` over a serial port such as /dev/ttyACM0, ``virtual``; python-can's ``interface`` name picks the
 driver; 1 Mbit/s, receive filters for the feedback ids, an optional ``can.Logger`` of every frame) and
 :class:`FakeMotorBus` (an in-process C610 trio, no threads). The simulated back end lives in ``hil``
-(``hil.sim.drives.SimMotorBus``), which builds it around its plant.
+(``hil.canbus.SimMotorBus``), which builds it around its plant.
 
 Facts: C610 command id 0x200 carries motors 1-4 as big-endian int16, -10000..10000 = -10..10 A; motor n
 answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``). CAN bus at 1 Mbit/s.

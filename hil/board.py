@@ -43,11 +43,11 @@ from controller.firmware import Firmware
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import Transport
 from hil import recording
+from hil.canbus import SimMotorBus
 from hil.errors import HilError
 from hil.faults import Fault, FaultSet
 from hil.radio import RadioScript, VirtualRadio
 from hil.recording import Recorder
-from hil.sim.drives import SimMotorBus
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PlantConfig

@@ -1,19 +1,20 @@
-"""The one lockstep loop: an environment that owns the virtual board, and a task that owns the question.
+"""The one lockstep loop: an environment that owns the virtual board, and an episode that owns the question.
 
 In the spirit of dm_control's ``rl/control.py``: :class:`Environment` builds the virtual board (firmware,
 plant, radio, wire) and the scripted host on the board link, and advances them one control period per
 :meth:`Environment.step`, in this order::
 
-    task.before_tick   the task acts on the world (moves an object, sends a command)
-    drone              a scripted drone motion sets the acceleration due (:mod:`hil.sim.drone_motion`)
-    host.before_tick   the host writes what is due (heartbeat, scripted messages)
-    board.tick         physics, delivery, the firmware's due tasks, the command to the ESCs
-    host.after_tick    the host takes what the board sent
-    sample             the run record samples the firmware and the plant (when one is kept)
-    task.after_tick    the task looks at the result
+    episode.before_tick   the episode acts on the world (moves an object, sends a command)
+    drone                 a scripted drone motion sets the acceleration due (:mod:`hil.sim.drone_motion`)
+    host.before_tick      the host writes what is due (heartbeat, scripted messages)
+    board.tick            physics, delivery, the firmware's due tasks, the command to the ESCs
+    host.after_tick       the host takes what the board sent
+    sample                the run record samples the firmware and the plant (when one is kept)
+    episode.after_tick    the episode looks at the result
 
-A :class:`Task` is a scenario, an experiment's trial or a benchmark: it never owns a loop. Scenarios,
-experiments, the benchmark and the tests all step through this one loop; what differs is the task.
+An :class:`Episode` is a scenario, an experiment's trial or a benchmark: it never owns a loop (dm_control
+calls it a task; here that word is the firmware scheduler's). Scenarios, experiments, the benchmark and the
+tests all step through this one loop; what differs is the episode.
 """
 
 from __future__ import annotations
@@ -34,11 +35,12 @@ from hil.sim.drone_motion import DroneMotion, DroneMotionPlayer
 from protocol.messages import Event, Message, RawRc, Telemetry
 from protocol.stream import MessageStream
 
-__all__ = ["Environment", "Task"]
+__all__ = ["Environment", "Episode"]
 
 
-class Task:
-    """What a run does and asks; every hook is optional (the defaults do nothing)."""
+class Episode:
+    """What a run does and asks, as hooks around the loop's ticks; every hook is optional (the defaults do
+    nothing)."""
 
     def initialize(self, env: Environment) -> None:
         """Called once, after the board is built and before the first tick."""
@@ -51,11 +53,11 @@ class Task:
 
 
 class Environment:
-    """A virtual board in lockstep, a scripted host on its link, and a task.
+    """A virtual board in lockstep, a scripted host on its link, and an episode.
 
     Args:
         config: the board to build.
-        task: the task whose hooks run around every tick (default: none).
+        episode: the episode whose hooks run around every tick (default: none).
         faults: faults to inject (windows in board time).
         radio: the pilot's stick and lever script (``config.rc == "radio"``).
         host_script: messages the host sends, as (time, message).
@@ -73,7 +75,7 @@ class Environment:
         self,
         config: BoardConfig | None = None,
         *,
-        task: Task | None = None,
+        episode: Episode | None = None,
         faults: Sequence[Fault] = (),
         radio: RadioScript | None = None,
         host_script: Sequence[tuple[int, Message]] = (),
@@ -82,7 +84,7 @@ class Environment:
         record_ticks: int = 0,
         drone: DroneMotion | None = None,
     ) -> None:
-        self.task = task if task is not None else Task()
+        self.episode = episode if episode is not None else Episode()
         self.recorder = recorder
         config = config if config is not None else BoardConfig()
         # Refused before the board exists, so a bad motion leaves nothing open.
@@ -104,13 +106,13 @@ class Environment:
             self._board_tx = wire.tx_tap = bytearray()
         self._telemetry_written = 0
         self.ticks = 0
-        # Hooks the task does not override are not called: the loop stays as lean as the board's tick.
-        kind = type(self.task)
-        self._before_tick = self.task.before_tick if kind.before_tick is not Task.before_tick else None
-        self._after_tick = self.task.after_tick if kind.after_tick is not Task.after_tick else None
-        self.task.initialize(self)
+        # Hooks the episode does not override are not called: the loop stays as lean as the board's tick.
+        kind = type(self.episode)
+        self._before_tick = self.episode.before_tick if kind.before_tick is not Episode.before_tick else None
+        self._after_tick = self.episode.after_tick if kind.after_tick is not Episode.after_tick else None
+        self.episode.initialize(self)
 
-    # --- what tasks look at -----------------------------------------------------------------------
+    # --- what episodes look at -----------------------------------------------------------------------
 
     @property
     def now_us(self) -> int:

@@ -13,15 +13,15 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 from controller.clock import zero_ns
 from controller.config import FirmwareConfig
 from controller.firmware import Firmware
-from controller.motorbus import MotorBus
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from hil import recording
 from hil.board import WireEnd, poses_message
+from hil.canbus import ReplayBus
 from hil.errors import HilError
 from hil.radio import MemoryUart
 from hil.recording import (
@@ -34,31 +34,9 @@ from hil.recording import (
     read_records,
     recording_format,
 )
-from protocol.c610 import CURRENT_RAW_MAX
 
 _INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
 _OUTPUTS = frozenset({recording.CAN_TX, recording.LINK_TX})
-
-
-class ReplayBus(MotorBus):
-    """A motor bus whose feedback comes from a recording and whose commands are collected.
-
-    It reports itself as simulated, as the recorded board's bus was (telemetry carries that flag).
-    """
-
-    simulated: ClassVar[bool] = True
-
-    def __init__(self, current_limit_raw: int = CURRENT_RAW_MAX) -> None:
-        super().__init__(current_limit_raw=current_limit_raw, motor_count=3)
-        self.inbox: list[tuple[int, bytes]] = []
-        self.sent: list[bytes] = []
-
-    def _send_frame(self, can_id: int, data: bytes) -> None:
-        self.sent.append(recording.pack_can(can_id, data))
-
-    def _recv_frames(self) -> list[tuple[int, bytes]]:
-        frames, self.inbox = self.inbox, []
-        return frames
 
 
 @dataclass(frozen=True)

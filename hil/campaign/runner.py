@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from hil.campaign.spec import CampaignError, Run, build_design, build_firmware
+from hil.trial.grasp import GraspSetup, grasp_trial
 
 __all__ = [
     "MAX_RETRIES_N",
@@ -72,8 +73,6 @@ def run_one(run: Run) -> dict[str, Any]:
 
 
 def _grasp(run: Run) -> dict[str, Any]:
-    from hil.experiments import GraspSetup, grasp_trial
-
     i = run.inputs
     design, model = build_design(i, physics="fine")
     optional = {
@@ -99,7 +98,7 @@ def _grasp(run: Run) -> dict[str, Any]:
 
 def _scenario(run: Run) -> dict[str, Any]:
     from hil.faults import Fault
-    from hil.scenarios import run_scenario
+    from hil.scenarios import run_scenario  # the catalogue imports every scenario: only for a scenario run
 
     i = run.inputs
     design, model = build_design(i)

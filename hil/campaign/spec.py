@@ -31,6 +31,8 @@ from hil.faults import Fault
 from hil.sim.config import PHYSICS_STEPS_S, ModelConfig
 from hil.sim.presets import PRESETS
 from hil.sim.spiral import SpiralDesign, b_from_taper, taper_from_b
+from hil.sim.variants import Variant
+from hil.trial.grasp import grasp_firmware
 
 __all__ = [
     "KINDS",
@@ -47,7 +49,7 @@ __all__ = [
 ]
 
 KINDS = ("grasp", "scenario")
-"""What one run is: a grasp trial (:func:`hil.experiments.grasp_trial`) or a scenario
+"""What one run is: a grasp trial (:func:`hil.trial.grasp.grasp_trial`) or a scenario
 (:func:`hil.scenarios.run_scenario`)."""
 
 MAX_RUNS_N = 1_000_000
@@ -480,7 +482,11 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
         arm = replace(chosen.model.arm, **{k: v for k, v in arm_changes.items() if v is not None})
         model = replace(chosen.model, arm=arm).with_physics(PHYSICS_STEPS_S[physics])
         if "variant" in d:
-            model = _variant(d["variant"]).apply(model)
+            try:
+                variant = Variant.parse(d["variant"])
+            except ValueError as exc:
+                raise CampaignError(f"design.variant: {exc}") from None
+            model = variant.apply(model)
         model.validate()
     except CampaignError:
         raise
@@ -488,26 +494,6 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
         given = ", ".join(f"{k}={v}" for k, v in d.items())
         raise CampaignError(f"design {given or name}: {exc}") from None
     return design, model
-
-
-def _variant(text: str) -> Any:
-    """``design.variant``: one of the sensitivity experiment's model variants, ``"PARAMETER xFACTOR"``
-    (``"spool inertia x0.5"``) or ``"baseline"`` (:data:`hil.experiments.sensitivity.PARAMETERS`)."""
-    from hil.experiments.sensitivity import BASELINE, PARAMETERS, Variant
-
-    name, _, factor = text.strip().rpartition(" x")
-    if text.strip() == BASELINE:
-        return Variant(BASELINE, 1.0)
-    try:
-        value = float(factor)
-    except ValueError:
-        value = math.nan
-    if name not in PARAMETERS or not (math.isfinite(value) and value > 0):
-        raise CampaignError(
-            f"design.variant: {text!r} is not 'baseline' or 'PARAMETER xFACTOR' with PARAMETER one of "
-            f"{', '.join(PARAMETERS)} and FACTOR > 0"
-        )
-    return Variant(name, value)
 
 
 def _physical_design(d: Mapping[str, Any]) -> SpiralDesign:
@@ -527,14 +513,12 @@ def _physical_design(d: Mapping[str, Any]) -> SpiralDesign:
 
 
 def build_firmware(inputs: Mapping[str, Any]) -> FirmwareConfig:
-    """The firmware of a grasp run: the grasp experiments' (:func:`hil.experiments.grasp.grasp_firmware`)
+    """The firmware of a grasp run: the grasp experiments' (:func:`hil.trial.grasp.grasp_firmware`)
     with the run's ``controller.*`` firmware keys changed.
 
     Raises:
         CampaignError: a value the firmware refuses.
     """
-    from hil.experiments import grasp_firmware
-
     changes = {
         k.partition(".")[2]: v
         for k, v in inputs.items()

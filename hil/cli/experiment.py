@@ -19,8 +19,8 @@ from rich.table import Table
 from controller.cli_kit import EXIT_OK, finite_float, seed, writable_dir
 from controller.config import CONTROL_PERIOD_US
 from hil.cli.design import add_design_arguments, design_from_args, model_from_args
-from hil.experiments import EXPERIMENTS, SIZES, run_experiment
-from hil.experiments.common import PHYSICS
+from hil.experiments.catalogue import EXPERIMENTS, run_experiment
+from hil.experiments.common import PHYSICS, SIZES
 
 __all__ = ["EXPERIMENT_HELP", "MAX_JOBS_N", "configure_experiment", "run_experiment_command"]
 
@@ -115,12 +115,12 @@ def run_experiment_command(args: argparse.Namespace) -> int:
     figure = None
     if args.report is not None:
         try:
-            figure = exp.plot(result, args.report)
+            figure = result.figure(args.report)
         except OSError as exc:
             raise ValueError(f"cannot write into {args.report}: {exc.strerror or exc}") from exc
     if args.json:
         out = result.as_dict()
-        out["samples"] = exp.samples(result)
+        out["samples"] = result.describe_samples()
         out["size"] = args.size
         out["preset"] = args.preset
         out["timestep_s"] = model.solver.timestep_s
@@ -135,12 +135,12 @@ def run_experiment_command(args: argparse.Namespace) -> int:
     table.add_column("quantity")
     table.add_column("this model", justify="right")
     table.add_column("paper")
-    for quantity, ours, paper in exp.rows(result):
+    for quantity, ours, paper in result.table_rows():
         table.add_row(quantity, ours, paper)
     console = Console()
     console.print(table)
     console.print(
-        f"samples: {exp.samples(result)}; preset {args.preset or 'prototype'}; "
+        f"samples: {result.describe_samples()}; preset {args.preset or 'prototype'}; "
         f"step {model.solver.timestep_s * 1000:g} ms (contacts {model.contact.timeconst_s * 1000:g} ms, "
         f"limits {model.arm.limit_timeconst_s * 1000:g} ms); seed {args.seed}; "
         f"size {args.size}; {elapsed:.0f} s"

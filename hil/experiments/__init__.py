@@ -1,12 +1,15 @@
 """Experiments that reproduce the paper's simulation results with the plant and the firmware (issue 8).
 
-Each experiment is a pure function of ``(design, params, seed, model)`` (``model``: the plant's
-:class:`~hil.sim.config.ModelConfig`, a preset or a variant) that runs the virtual board in
-lockstep (firmware + plant, :class:`hil.board.VirtualBoard`) and returns a frozen, picklable result with
-``as_dict()``; a ``progress(done, total)`` callback reports how far it is. Each experiment is one module
-(its parameters, its run, its table rows and its figure); the rig, the grasp trial, the geometry and the
-parallel map they share have their own. ``spirob-hil experiment NAME`` (:mod:`hil.cli.experiment`)
-prints each number next to the paper's prediction and, with ``--report DIR``, writes a PNG.
+Each experiment is one module with one shape (:mod:`hil.experiments.base`): its parameters per size, its
+run, a pure function of ``(params, conditions)`` (the conditions: the design, the plant's
+:class:`~hil.sim.config.ModelConfig` (a preset or a variant), the seed, the workers, a
+``progress(done, total)`` callback) that runs the virtual board in lockstep (firmware + plant,
+:class:`hil.board.VirtualBoard`), and its result: frozen, picklable, with ``as_dict()``, the worst physics of
+its trials, its table rows and its figure. :mod:`hil.experiments.catalogue` lists them. The geometry, the
+statistics, the parallel map and the grasp experiments' outcomes they share have modules of their own, and
+the trial code they share with campaigns (the rig, the grasp trial, the 45 cm arm) is :mod:`hil.trial`.
+``spirob-hil experiment NAME`` (:mod:`hil.cli.experiment`) prints each number next to the paper's
+prediction and, with ``--report DIR``, writes a PNG.
 
 =============  ==========================================  =============================================
 name           paper                                       what runs through the firmware
@@ -32,51 +35,11 @@ dynamic        Fig. S11: 0.06 s grasp, 120 ms capture      45 cm arm: a current 
                                                            length (HOLD_LENGTHS) or at a tension; Wilson
 sensitivity    which conclusions survive ±50 % on the      packing, dynamic and strategy re-run per
                model's uncertain parameters                variant of the model; holds / fails table
+convergence    (not in the paper: is the step fine?)       the bare plant, no firmware: packing tension,
+                                                           a pen's half wrap, penetrations and tension
+                                                           extremes at 1, 0.5 and 0.25 ms physics steps
 =============  ==========================================  =============================================
 
-Geometry: the drone sits at (0, 0, 1) m and the arm's base (its mount) 20 mm below it; the arm hangs
-along −z and cable 0 is on its +x side. Object positions are given relative to the base, in the x-z
-plane (the plane cable 0 bends the arm in).
+Geometry: :mod:`hil.trial.scene` (the arm hangs along −z under the drone, cable 0 on its +x side; object
+positions are relative to the arm's base, in the x-z plane).
 """
-
-from __future__ import annotations
-
-from hil.experiments.catalogue import EXPERIMENTS, Experiment, run_experiment
-from hil.experiments.common import SIZES, Progress
-from hil.experiments.dynamic import DynamicParams, DynamicResult
-from hil.experiments.geometry import Envelope, base_first_tip_curve, fit_log_spiral
-from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial
-from hil.experiments.grasp_range import GraspRangeParams, GraspRangeResult
-from hil.experiments.load import LoadParams, LoadResult
-from hil.experiments.packing import PackingParams, PackingResult
-from hil.experiments.rig import Rig
-from hil.experiments.strategy import StrategyParams, StrategyResult
-from hil.experiments.workspace import WorkspaceParams, WorkspaceResult
-
-__all__ = [
-    "EXPERIMENTS",
-    "SIZES",
-    "DynamicParams",
-    "DynamicResult",
-    "Envelope",
-    "Experiment",
-    "GraspOutcome",
-    "GraspRangeParams",
-    "GraspRangeResult",
-    "GraspSetup",
-    "LoadParams",
-    "LoadResult",
-    "PackingParams",
-    "PackingResult",
-    "Progress",
-    "Rig",
-    "StrategyParams",
-    "StrategyResult",
-    "WorkspaceParams",
-    "WorkspaceResult",
-    "base_first_tip_curve",
-    "fit_log_spiral",
-    "grasp_firmware",
-    "grasp_trial",
-    "run_experiment",
-]

@@ -1,4 +1,5 @@
-"""What every experiment shares: units, the scene's geometry, the sizes, and the table and figure helpers."""
+"""What every experiment shares: the plant model it runs on, the sizes, and the table and figure helpers (the
+scene and its units are :mod:`hil.trial.scene`'s)."""
 
 from __future__ import annotations
 
@@ -15,25 +16,8 @@ Progress = Callable[[int, int], None]
 
 T = TypeVar("T")
 
-MS = 1000
-"""Microseconds per millisecond (board time is in µs)."""
-S = 1_000_000
-"""Microseconds per second."""
 G = 9.80665
 """Standard gravity [m/s²]."""
-DRONE_Z_M = 1.0
-BASE_Z_M = DRONE_Z_M - 0.02  # the mount is 20 mm under the drone (DroneConfig.mount_offset_m)
-FAR_M = (0.6, 0.0, 0.4)  # where an object waits, out of reach, until its trial places it
-OBJ = "target"
-"""Name of the one object of a trial in the plant's scene."""
-HELD_DROP_MM = 60.0
-"""A released object counts as held if it ends up less than this below where it was let go (the wrap
-settles and swings it by a few centimetres; a dropped object falls far more) ..."""
-HELD_SPEED_M_S = 0.05
-"""... and is not moving faster than this at the end (not slipping out)."""
-SUCCESS_WRAP_DEG = 180.0
-"""A grasp succeeds if the object is held and the arm's contacts span at least half its circumference
-(fixed before the strategy experiment was run; eq. 15's "half way around")."""
 
 BOARD_MODEL = ModelConfig()
 """The plant's default model as the real-time board runs it: a 1 ms step (one per control tick), contacts

@@ -24,27 +24,16 @@ from typing import Any
 
 import numpy as np
 
-from hil.experiments.common import (
-    DEFAULT_MODEL,
-    OBJ,
-    Progress,
-    Row,
-    S,
-    extremes_rows,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from hil.experiments.grasp import GraspSetup, grasp_firmware, grasp_rig
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import Row, extremes_rows, pyplot, save_figure, worst_extremes
 from hil.experiments.parallel import parallel_map
-from hil.experiments.rig import world_m
 from hil.experiments.stats import bootstrap_interval, wilson_interval
 from hil.experiments.strategy import TINY, StrategyParams, placements
-from hil.sim.config import ModelConfig
 from hil.sim.objects import contact_units
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspSetup, grasp_firmware, grasp_rig
+from hil.trial.scene import OBJ, S, world_m
 from protocol.messages import GraspState
 
 OLD_DETECTOR = {
@@ -127,7 +116,7 @@ def reach_trial(args: tuple[GraspSetup, str, SpiralDesign]) -> ReachTrial:
 
 @dataclass(frozen=True)
 class ContactResult:
-    """Every placement reached with the old and the new detector."""
+    """Every placement reached with the old and the new detector (a :class:`~hil.experiments.base.Result`)."""
 
     params: ContactParams
     seed: int
@@ -171,53 +160,68 @@ class ContactResult:
             "params": dataclasses.asdict(self.params),
         }
 
+    def table_rows(self) -> list[Row]:
+        """Precision, recall and delay of the old and the new detector (the paper states none)."""
+        rows: list[Row] = []
+        for det in ("old", "new"):
+            s = self.summary(det)
+            precision, recall, delay = _fmt(s)
+            rows += [
+                (f"{det} detector: precision (Wilson 95 %)", precision, "-"),
+                (f"{det} detector: recall (Wilson 95 %)", recall, "-"),
+                (f"{det} detector: delay after true contact, median (bootstrap 95 %)", delay, "-"),
+            ]
+        rows.extend(extremes_rows(self.extremes))
+        return rows
 
-def contact_jobs(
-    design: SpiralDesign, params: ContactParams, seed: int, model: ModelConfig = DEFAULT_MODEL
-) -> list[tuple[GraspSetup, str, SpiralDesign]]:
+    def describe_samples(self) -> str:
+        """Placements and detectors, in words."""
+        n = len(self.trials) // 2
+        sp = self.params.placements
+        return (
+            f"{n} placements (the strategy's: {len(sp.diameters_m)} diameters, {sp.grid[0]} x {sp.grid[1]} "
+            f"jittered cells x {sp.seeds} seeds, clear of the packed coil), each reached with the old and "
+            "the new detector"
+        )
+
+    def figure(self, out: Path) -> Path:
+        """Write the figure into the directory ``out``; returns its path (``contact.png``): detection time
+        against the first true contact, per detector."""
+        plt = pyplot()
+        fig, ax = plt.subplots(figsize=(5, 4))
+        for det, marker in (("old", "x"), ("new", "o")):
+            sel = [t for t in self.trials if t.detector == det]
+            ax.scatter(
+                [t.true_s for t in sel],
+                [t.detected_s for t in sel],
+                marker=marker,
+                label=f"{det} detector",
+                facecolors="none" if marker == "o" else None,
+            )
+        lim = max([0.1] + [v for t in self.trials for v in (t.true_s, t.detected_s) if not math.isnan(v)])
+        ax.plot([0, lim], [0, lim], "k:", lw=0.8, label="detected = true contact")
+        ax.set_xlabel("first true contact after REACH [s]")
+        ax.set_ylabel("detected contact after REACH [s]")
+        ax.legend()
+        return save_figure(fig, out / "contact.png")
+
+
+def contact_jobs(p: ContactParams, on: Conditions) -> list[tuple[GraspSetup, str, SpiralDesign]]:
     """The reaches of :func:`contact`: each of the strategy's placements (:func:`.strategy.placements`,
     in its order), with the old then the new detector."""
-    sp = params.placements
+    sp = p.placements
     return [
-        (GraspSetup(x, z, d, mass_kg=sp.mass_kg, model=model, seed=seed), det, design)
-        for x, z, d in placements(design, sp, seed, model)
+        (GraspSetup(x, z, d, mass_kg=sp.mass_kg, model=on.model, seed=on.seed), det, on.design)
+        for x, z, d in placements(on.design, sp, on.seed, on.model)
         for det in ("old", "new")
     ]
 
 
-def contact(
-    design: SpiralDesign | None = None,
-    params: ContactParams | None = None,
-    seed: int = 0,
-    progress: Progress | None = None,
-    jobs: int = 1,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> ContactResult:
+def contact(p: ContactParams, on: Conditions) -> ContactResult:
     """Reach every placement of the strategy experiment with the old and the new detector, on the plant
-    ``model``, and compare with the true contact."""
-    design = design or SpiralDesign.paper_prototype()
-    p = params or ContactParams()
-    trials = parallel_map(reach_trial, contact_jobs(design, p, seed, model), jobs, progress)
-    return ContactResult(p, seed, tuple(trials))
-
-
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``: the
-    strategy experiment's placements at the same size (``tiny``: its one reference placement)."""
-    p = sized(
-        size,
-        ContactParams(TINY),
-        ContactParams(),
-        ContactParams(StrategyParams(grid=(6, 6))),
-    )
-    return contact(design, p, seed, progress, jobs, model)
+    ``on.model``, and compare with the true contact."""
+    trials = parallel_map(reach_trial, contact_jobs(p, on), on.jobs, on.progress)
+    return ContactResult(p, on.seed, tuple(trials))
 
 
 def _fmt(s: dict[str, Any]) -> tuple[str, str, str]:
@@ -230,49 +234,11 @@ def _fmt(s: dict[str, Any]) -> tuple[str, str, str]:
     return share(s["precision"], s["precision_ci95"]), share(s["recall"], s["recall_ci95"]), d
 
 
-def table_rows(r: ContactResult) -> list[Row]:
-    """Precision, recall and delay of the old and the new detector (the paper states none)."""
-    rows: list[Row] = []
-    for det in ("old", "new"):
-        s = r.summary(det)
-        precision, recall, delay = _fmt(s)
-        rows += [
-            (f"{det} detector: precision (Wilson 95 %)", precision, "-"),
-            (f"{det} detector: recall (Wilson 95 %)", recall, "-"),
-            (f"{det} detector: delay after true contact, median (bootstrap 95 %)", delay, "-"),
-        ]
-    rows.extend(extremes_rows(r.extremes))
-    return rows
-
-
-def describe_samples(r: ContactResult) -> str:
-    """The sample counts, in words."""
-    n = len(r.trials) // 2
-    sp = r.params.placements
-    return (
-        f"{n} placements (the strategy's: {len(sp.diameters_m)} diameters, {sp.grid[0]} x {sp.grid[1]} "
-        f"jittered cells x {sp.seeds} seeds, clear of the packed coil), each reached with the old and "
-        "the new detector"
-    )
-
-
-def plot_figure(r: ContactResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``contact.png``): detection time
-    against the first true contact, per detector."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(5, 4))
-    for det, marker in (("old", "x"), ("new", "o")):
-        sel = [t for t in r.trials if t.detector == det]
-        ax.scatter(
-            [t.true_s for t in sel],
-            [t.detected_s for t in sel],
-            marker=marker,
-            label=f"{det} detector",
-            facecolors="none" if marker == "o" else None,
-        )
-    lim = max([0.1] + [v for t in r.trials for v in (t.true_s, t.detected_s) if not math.isnan(v)])
-    ax.plot([0, lim], [0, lim], "k:", lw=0.8, label="detected = true contact")
-    ax.set_xlabel("first true contact after REACH [s]")
-    ax.set_ylabel("detected contact after REACH [s]")
-    ax.legend()
-    return save_figure(fig, out / "contact.png")
+EXPERIMENT = Experiment(
+    "contact",
+    "the firmware's contact detector, old and new, vs. the true contact: precision, recall, delay",
+    # the strategy experiment's placements at the same size (tiny: its one reference placement)
+    Sizes(ContactParams(TINY), ContactParams(), ContactParams(StrategyParams(grid=(6, 6)))),
+    contact,
+)
+"""The contact experiment (:mod:`hil.experiments.catalogue`)."""

@@ -22,26 +22,15 @@ from typing import Any
 
 import numpy as np
 
-from hil.experiments.common import (
-    BOARD_MODEL,
-    FAR_M,
-    MS,
-    OBJ,
-    Progress,
-    Row,
-    extremes_rows,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import BOARD_MODEL, Row, extremes_rows, pyplot, save_figure, worst_extremes
 from hil.experiments.parallel import parallel_map
-from hil.experiments.rig import world_m
 from hil.sim.config import ModelConfig, ObjectConfig
 from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes, PlantConfig
+from hil.trial.scene import MS, OBJ, target_object, world_m
 
 
 @dataclass(frozen=True)
@@ -57,7 +46,6 @@ class ConvergenceParams:
     throw_speeds_m_s: speeds of the thrown object.
     throw_ms: how long each throw is watched.
     random_ms: length of the random-current run.
-    model: the plant's model; only its physics step is changed per column.
     """
 
     timesteps_s: tuple[float, ...] = (0.001, 0.0005, 0.00025)
@@ -71,7 +59,6 @@ class ConvergenceParams:
     throw_speeds_m_s: tuple[float, ...] = (1.0, 2.0, 3.0, 4.0)
     throw_ms: int = 300
     random_ms: int = 10_000
-    model: ModelConfig = dataclasses.field(default_factory=ModelConfig)
 
 
 WRAP_MS = 300
@@ -95,7 +82,7 @@ class StepFigures:
 
 @dataclass(frozen=True)
 class ConvergenceResult:
-    """Every step's numbers."""
+    """Every step's numbers (a :class:`~hil.experiments.base.Result`)."""
 
     params: ConvergenceParams
     seed: int
@@ -127,12 +114,61 @@ class ConvergenceResult:
             "seed": self.seed,
             "steps": [dataclasses.asdict(s) for s in self.steps],
             "extremes": self.extremes.as_dict(),
-            "params": {k: v for k, v in dataclasses.asdict(self.params).items() if k != "model"},
+            "params": dataclasses.asdict(self.params),
         }
 
+    def table_rows(self) -> list[Row]:
+        """One row per number: its values at every step side by side (the paper has none of these)."""
+        steps = self.steps
+        head = " | ".join(f"{s.timestep_s * 1e3:g} ms" for s in steps)
+        rows: list[Row] = [("physics step", head, "")]
 
-def _plant(p: ConvergenceParams, timestep_s: float, seed: int, *objects: ObjectConfig) -> Plant:
-    model = dataclasses.replace(p.model, solver=dataclasses.replace(p.model.solver, timestep_s=timestep_s))
+        def row(name: str, fmt: Any, values: list[float]) -> None:
+            rows.append((name, " | ".join(fmt(v) for v in values), ""))
+
+        row("packing tension, cable 0", lambda v: f"{v:.1f} N", [s.packing_tension_n for s in steps])
+        row(f"pen, {self.params.step_a:g} A step -> half wrap", _ms, [s.pen_half_wrap_ms for s in steps])
+        row("pen penetration while wrapping", _mm, [s.wrap_penetration_m for s in steps])
+        row("pen penetration while pressing", _mm, [s.press_penetration_m for s in steps])
+        for i, v in enumerate(self.params.throw_speeds_m_s):
+            row(f"throw at {v:g} m/s: penetration", _mm, [s.throw_penetration_m[i] for s in steps])
+        row("random currents: largest tension", lambda v: f"{v:.0f} N", [s.random_tension_n for s in steps])
+        row(
+            "random currents: limit overshoot",
+            lambda v: f"{math.degrees(v):.2f}°",
+            [s.random_overshoot_rad for s in steps],
+        )
+        rows.extend(extremes_rows(self.extremes))
+        return rows
+
+    def describe_samples(self) -> str:
+        """Physics steps and the runs at each, in words."""
+        p = self.params
+        return (
+            f"{len(self.steps)} physics steps; per step a {p.ramp_ms} ms ramp, a {p.pen_ms} ms pen run, "
+            f"{len(p.throw_speeds_m_s)} throws of {p.throw_ms} ms, "
+            f"{p.random_ms / 1000:g} s of random currents"
+        )
+
+    def figure(self, out: Path) -> Path:
+        """Penetration against the physics step (one line per measurement); returns ``convergence.png``."""
+        plt = pyplot()
+        fig, ax = plt.subplots(figsize=(6, 4))
+        h = [s.timestep_s * 1e3 for s in self.steps]
+        ax.plot(h, [s.wrap_penetration_m * 1e3 for s in self.steps], "o-", label="pen, wrapping")
+        ax.plot(h, [s.press_penetration_m * 1e3 for s in self.steps], "s-", label="pen, pressing")
+        for i, v in enumerate(self.params.throw_speeds_m_s):
+            ax.plot(h, [s.throw_penetration_m[i] * 1e3 for s in self.steps], "^--", label=f"throw {v:g} m/s")
+        ax.axhline(1.0, color="r", ls=":", lw=0.8, label="goal: 1 mm")
+        ax.set_xscale("log")
+        ax.set_xlabel("physics step [ms]")
+        ax.set_ylabel("largest penetration [mm]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        return save_figure(fig, out / "convergence.png")
+
+
+def _plant(model: ModelConfig, seed: int, *objects: ObjectConfig) -> Plant:
     if objects:
         model = model.with_objects(*objects)
     return Plant(SpiralDesign.paper_prototype(), PlantConfig(model=model), rng=np.random.default_rng(seed))
@@ -142,9 +178,9 @@ def _amps(plant: Plant, cable0_a: float) -> list[int]:
     return [round(cable0_a * 1000)] + [0] * (plant.cables - 1)
 
 
-def packing_tension_n(p: ConvergenceParams, timestep_s: float, seed: int) -> float:
+def packing_tension_n(p: ConvergenceParams, model: ModelConfig, seed: int) -> float:
     """Cable 0's tension when the last joint reaches its limit on a slow current ramp (NaN: never)."""
-    plant = _plant(p, timestep_s, seed)
+    plant = _plant(model, seed)
     limit = plant.design.dtheta_rad - math.radians(0.5)
     for k in range(p.ramp_ms):
         plant.apply_currents(_amps(plant, p.ramp_to_a * (k + 1) / p.ramp_ms))
@@ -154,10 +190,10 @@ def packing_tension_n(p: ConvergenceParams, timestep_s: float, seed: int) -> flo
     return math.nan
 
 
-def pen_figures(p: ConvergenceParams, timestep_s: float, seed: int) -> tuple[float, float, float, float]:
+def pen_figures(p: ConvergenceParams, model: ModelConfig, seed: int) -> tuple[float, float, float, float]:
     """Half-wrap time [ms], wrap penetration [m], press penetration [m] and its ratio to the radius."""
-    pen = ObjectConfig(OBJ, radius_m=p.pen_radius_m, length_m=0.14, pos_m=FAR_M, mass_kg=p.pen_mass_kg)
-    plant = _plant(p, timestep_s, seed, pen)
+    pen = target_object(p.pen_radius_m, 0.14, p.pen_mass_kg)
+    plant = _plant(model, seed, pen)
     plant.hold_object(OBJ, world_m(*p.pen))
     plant.run(200 * MS)
     plant.reset_extremes()
@@ -174,10 +210,10 @@ def pen_figures(p: ConvergenceParams, timestep_s: float, seed: int) -> tuple[flo
     return half, wrap, press.penetration_m, press.penetration_ratio
 
 
-def throw_penetration_m(p: ConvergenceParams, timestep_s: float, seed: int, speed_m_s: float) -> float:
+def throw_penetration_m(p: ConvergenceParams, model: ModelConfig, seed: int, speed_m_s: float) -> float:
     """Largest penetration of a 10 mm-radius, 10 g object thrown at the hanging arm."""
-    obj = ObjectConfig(OBJ, radius_m=0.01, length_m=0.06, pos_m=FAR_M, mass_kg=0.01)
-    plant = _plant(p, timestep_s, seed, obj)
+    obj = target_object(0.01, 0.06, 0.01)
+    plant = _plant(model, seed, obj)
     plant.hold_object(OBJ)
     plant.run(300 * MS)
     plant.hold_object(OBJ, world_m(0.04, -0.12))
@@ -188,9 +224,9 @@ def throw_penetration_m(p: ConvergenceParams, timestep_s: float, seed: int, spee
     return plant.extremes().penetration_m
 
 
-def random_extremes(p: ConvergenceParams, timestep_s: float, seed: int) -> tuple[float, float]:
+def random_extremes(p: ConvergenceParams, model: ModelConfig, seed: int) -> tuple[float, float]:
     """Largest tension [N] and limit overshoot [rad] under random currents up to the limit."""
-    plant = _plant(p, timestep_s, seed)
+    plant = _plant(model, seed)
     rng = np.random.default_rng(seed + 1)
     limit = round(plant.config.model.motor.current_limit_a * 1000)
     next_change = 0
@@ -203,48 +239,21 @@ def random_extremes(p: ConvergenceParams, timestep_s: float, seed: int) -> tuple
     return e.tension_n, e.limit_overshoot_rad
 
 
-def _one_step(args: tuple[ConvergenceParams, float, int]) -> StepFigures:
-    p, h, seed = args
-    half, wrap, press, ratio = pen_figures(p, h, seed)
-    throws = tuple(throw_penetration_m(p, h, seed, v) for v in p.throw_speeds_m_s)
-    tension, over = random_extremes(p, h, seed)
-    return StepFigures(h, packing_tension_n(p, h, seed), half, wrap, press, ratio, throws, tension, over)
+def _one_step(args: tuple[ConvergenceParams, ModelConfig, float, int]) -> StepFigures:
+    p, model, h, seed = args
+    at_h = dataclasses.replace(model, solver=dataclasses.replace(model.solver, timestep_s=h))
+    half, wrap, press, ratio = pen_figures(p, at_h, seed)
+    throws = tuple(throw_penetration_m(p, at_h, seed, v) for v in p.throw_speeds_m_s)
+    tension, over = random_extremes(p, at_h, seed)
+    return StepFigures(h, packing_tension_n(p, at_h, seed), half, wrap, press, ratio, throws, tension, over)
 
 
-def convergence(
-    params: ConvergenceParams | None = None, seed: int = 0, progress: Progress | None = None, jobs: int = 1
-) -> ConvergenceResult:
-    """Measure the headline numbers at each physics step (one step per job)."""
-    p = params or ConvergenceParams()
-    items = [(p, h, seed) for h in p.timesteps_s]
-    return ConvergenceResult(p, seed, tuple(parallel_map(_one_step, items, jobs, progress)))
-
-
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = BOARD_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` on ``model`` (the prototype's design always: the numbers are the
-    plant's, not a design's; only the physics step changes between columns, the constraints' time
-    constants stay the model's, so the board's model by default: its 2 ms allow the 1 ms column)."""
-    p = sized(
-        size,
-        ConvergenceParams(
-            timesteps_s=(0.001, 0.0005),
-            ramp_ms=300,
-            pen_ms=WRAP_MS + 20,
-            throw_speeds_m_s=(3.0,),
-            throw_ms=60,
-            random_ms=300,
-        ),
-        ConvergenceParams(),
-        ConvergenceParams(throw_speeds_m_s=(1.0, 2.0, 3.0, 4.0, 6.0), random_ms=60_000),
-    )
-    return convergence(dataclasses.replace(p, model=model), seed, progress, jobs)
+def convergence(p: ConvergenceParams, on: Conditions) -> ConvergenceResult:
+    """Measure the headline numbers at each physics step (one step per job) on the prototype (whatever
+    ``on.design`` is: the numbers are the plant's, not a design's), on ``on.model`` with only its physics
+    step changed: the constraints' time constants stay the model's."""
+    items = [(p, on.model, h, on.seed) for h in p.timesteps_s]
+    return ConvergenceResult(p, on.seed, tuple(parallel_map(_one_step, items, on.jobs, on.progress)))
 
 
 def _ms(x: float) -> str:
@@ -255,65 +264,23 @@ def _mm(x: float) -> str:
     return f"{x * 1000:.2f} mm"
 
 
-def table_rows(r: ConvergenceResult) -> list[Row]:
-    """One row per number: its values at every step side by side (the paper has none of these)."""
-    steps = r.steps
-    head = " | ".join(f"{s.timestep_s * 1e3:g} ms" for s in steps)
-    rows: list[Row] = [("physics step", head, "")]
-
-    def row(name: str, fmt: Any, values: list[float]) -> None:
-        rows.append((name, " | ".join(fmt(v) for v in values), ""))
-
-    row("packing tension, cable 0", lambda v: f"{v:.1f} N", [s.packing_tension_n for s in steps])
-    row(f"pen, {r.params.step_a:g} A step -> half wrap", _ms, [s.pen_half_wrap_ms for s in steps])
-    row("pen penetration while wrapping", _mm, [s.wrap_penetration_m for s in steps])
-    row("pen penetration while pressing", _mm, [s.press_penetration_m for s in steps])
-    for i, v in enumerate(r.params.throw_speeds_m_s):
-        row(f"throw at {v:g} m/s: penetration", _mm, [s.throw_penetration_m[i] for s in steps])
-    row("random currents: largest tension", lambda v: f"{v:.0f} N", [s.random_tension_n for s in steps])
-    row(
-        "random currents: limit overshoot",
-        lambda v: f"{math.degrees(v):.2f}°",
-        [s.random_overshoot_rad for s in steps],
-    )
-    rows.extend(extremes_rows(r.extremes))
-    return rows
-
-
-def describe_samples(r: ConvergenceResult) -> str:
-    """The result's sample counts, in words."""
-    p = r.params
-    return (
-        f"{len(r.steps)} physics steps; per step a {p.ramp_ms} ms ramp, a {p.pen_ms} ms pen run, "
-        f"{len(p.throw_speeds_m_s)} throws of {p.throw_ms} ms, {p.random_ms / 1000:g} s of random currents"
-    )
-
-
-def plot_figure(r: ConvergenceResult, out: Path) -> Path:
-    """Penetration against the physics step (one line per measurement); returns ``convergence.png``."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4))
-    h = [s.timestep_s * 1e3 for s in r.steps]
-    ax.plot(h, [s.wrap_penetration_m * 1e3 for s in r.steps], "o-", label="pen, wrapping")
-    ax.plot(h, [s.press_penetration_m * 1e3 for s in r.steps], "s-", label="pen, pressing")
-    for i, v in enumerate(r.params.throw_speeds_m_s):
-        ax.plot(h, [s.throw_penetration_m[i] * 1e3 for s in r.steps], "^--", label=f"throw {v:g} m/s")
-    ax.axhline(1.0, color="r", ls=":", lw=0.8, label="goal: 1 mm")
-    ax.set_xscale("log")
-    ax.set_xlabel("physics step [ms]")
-    ax.set_ylabel("largest penetration [mm]")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    return save_figure(fig, out / "convergence.png")
-
-
-__all__ = [
-    "ConvergenceParams",
-    "ConvergenceResult",
-    "StepFigures",
+EXPERIMENT = Experiment(
     "convergence",
-    "describe_samples",
-    "plot_figure",
-    "run_at_size",
-    "table_rows",
-]
+    "packing tension, a pen's half wrap, penetration and tension extremes at 1, 0.5, 0.25 ms steps",
+    Sizes(
+        ConvergenceParams(
+            timesteps_s=(0.001, 0.0005),
+            ramp_ms=300,
+            pen_ms=WRAP_MS + 20,
+            throw_speeds_m_s=(3.0,),
+            throw_ms=60,
+            random_ms=300,
+        ),
+        ConvergenceParams(),
+        ConvergenceParams(throw_speeds_m_s=(1.0, 2.0, 3.0, 4.0, 6.0), random_ms=60_000),
+    ),
+    convergence,
+    # the board's model: only the step changes between the columns, and its 2 ms constraints allow 1 ms
+    BOARD_MODEL,
+)
+"""The convergence experiment (:mod:`hil.experiments.catalogue`)."""

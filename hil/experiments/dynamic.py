@@ -30,28 +30,18 @@ import mujoco
 import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
-from hil.experiments.common import (
-    DEFAULT_MODEL,
-    FAR_M,
-    MS,
-    OBJ,
-    G,
-    Progress,
-    Row,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from hil.experiments.dynamic_rig import paper_arm_45cm, scaled_model, with_contact_timeconst, with_timestep
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import G, Row, pyplot, save_figure, worst_extremes
 from hil.experiments.parallel import parallel_map
-from hil.experiments.rig import direct_rig, world_m
 from hil.experiments.stats import wilson_interval
-from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.config import ModelConfig
 from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.arm_45cm import paper_arm_45cm, scaled_model, with_contact_timeconst, with_timestep
+from hil.trial.rig import direct_rig
+from hil.trial.scene import MS, OBJ, target_object, world_m
 from protocol.messages import CommandCode
 
 CAPTURE_MS = 120.0
@@ -175,7 +165,8 @@ def worst(runs: tuple[DynamicRun, ...] | list[DynamicRun]) -> PhysicsExtremes:
 
 @dataclass(frozen=True)
 class DynamicResult:
-    """Fig. S11 on the 45 cm arm: how fast a step grasps a pen, whether a thrown object is captured."""
+    """Fig. S11 on the 45 cm arm: how fast a step grasps a pen, whether a thrown object is captured (a
+    :class:`~hil.experiments.base.Result`)."""
 
     params: DynamicParams
     seed: int
@@ -216,6 +207,11 @@ class DynamicResult:
         k = sum(r.success for r in runs)
         return k, len(runs), wilson_interval(k, len(runs))
 
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every run."""
+        return worst(self.runs)
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         base = self.params.timesteps_s[0]
@@ -243,10 +239,106 @@ class DynamicResult:
             "pen_carried": any(r.success for r in pens),
             "capture": capture,
             "convergence": [self.headline(ts) for ts in self.params.timesteps_s],
-            "extremes": worst(self.runs).as_dict(),
+            "extremes": self.extremes.as_dict(),
             "runs": [r.as_dict() for r in self.runs],
             "params": dataclasses.asdict(self.params),
         }
+
+    def table_rows(self) -> list[Row]:
+        """The result's numbers next to the paper's, one row each."""
+        a = self.arm
+        rows: list[Row] = [
+            (
+                "arm (Fig. S11: 2 cables, 45 cm)",
+                f"{a['units']:.0f} units, {100 * a['length_m']:.1f} cm, "
+                f"tip {1000 * a['tip_width_m']:.0f} mm, "
+                f"{1000 * a['mass_kg']:.0f} g, k_base {a['base_stiffness_nm_per_rad']:.1f} N·m/rad",
+                "45 cm, 2 cables",
+            )
+        ]
+        base = self.params.timesteps_s[0]
+        for run in self.at(base, "pen"):
+            rows.append(
+                (
+                    f"pen, step to {run.value:g} N: step -> half wrap",
+                    _ms(run.half_wrap_ms),
+                    "0.06 s to grasp and bring to the base (Fig. S11A)",
+                )
+            )
+            carried = "n/a" if math.isnan(run.toward_base_m) else f"{1000 * run.toward_base_m:+.0f} mm"
+            rows.append(
+                (
+                    "  pen carried toward the base once let go",
+                    f"{'yes' if run.success else 'no'} ({carried})",
+                    "moved to the base",
+                )
+            )
+            rows.append(("  penetration, tension, limit overshoot", _extremes(run.extremes), ""))
+        for hold in self.params.holds:
+            label = _hold_label(hold, self.params)
+            for v in self.params.throw_speeds_m_s:
+                k, n, (lo, hi) = self.capture(hold, v)
+                runs = [x for x in self.at(base, "throw", hold) if x.value == v]
+                rows.append(
+                    (
+                        f"thrown at {v:g} m/s, {label}: captured (Wilson 95 %)",
+                        _rate(k, n, lo, hi),
+                        f"captured within {CAPTURE_MS:.0f} ms (Fig. S11B: cable at constant length)",
+                    )
+                )
+                rows.append(("  worst penetration, tension, limit overshoot", _extremes(worst(runs)), ""))
+            k, n, (lo, hi) = self.capture(hold)
+            rows.append((f"all throws, {label}: captured (Wilson 95 %)", _rate(k, n, lo, hi), ""))
+        for h in (self.headline(ts) for ts in self.params.timesteps_s):
+            captured = ", ".join(f"{hold} {h['captured_' + hold]}" for hold in self.params.holds)
+            rows.append(
+                (
+                    f"headline at a {1000 * h['timestep_s']:g} ms physics step",
+                    f"pen {_ms(h['pen_half_wrap_ms'])}, captured ({captured})/{h['throws_per_hold']}, "
+                    f"penetration {1000 * h['penetration_m']:.1f} mm",
+                    "converged: the same at every step",
+                )
+            )
+        return rows
+
+    def describe_samples(self) -> str:
+        """Pen steps, throws and physics steps, in words."""
+        base = self.params.timesteps_s[0]
+        pens, throws = len(self.at(base, "pen")), len(self.at(base, "throw"))
+        steps = ", ".join(f"{1000 * ts:g}" for ts in self.params.timesteps_s)
+        holds = " and ".join(self.params.holds)
+        return (
+            f"{pens} pen steps and {throws} throws (cable 0 held by {holds}), "
+            f"{self.params.window_ms} ms each; "
+            f"headline repeated at {steps} ms physics steps ({len(self.runs)} runs)"
+        )
+
+    def figure(self, out: Path) -> Path:
+        """Write the figure into the directory ``out``; returns its path (``dynamic.png``)."""
+        plt = pyplot()
+        fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+        base = self.params.timesteps_s[0]
+        for run in self.runs:
+            if run.kind == "throw" and run.timestep_s == base and run.position > 0:
+                continue  # the jittered throws count in the rate; the figure shows one per speed
+            ax = a if run.kind == "pen" else b
+            t = np.arange(1, len(run.wrap_trace) + 1)
+            what = f"{run.value:g} N step" if run.kind == "pen" else f"{run.value:g} m/s, {run.hold}"
+            style = "-" if run.timestep_s == base else ":"
+            ax.plot(t, run.wrap_trace, style, lw=1, label=f"{what}, {1000 * run.timestep_s:g} ms")
+        a.axvline(60, color="k", ls=":", label="paper: 0.06 s")
+        b.axvline(CAPTURE_MS, color="k", ls=":", label=f"paper: {CAPTURE_MS:.0f} ms")
+        for ax, title in (
+            (a, "pen beside the tip: current step on cable 0"),
+            (b, "object thrown at the arm, cable 0 held at length or at a tension"),
+        ):
+            ax.axhline(HALF_WRAP_DEG, color="r", ls="--", lw=0.8)
+            ax.set_xlabel("time [ms]" + (" from the step" if ax is a else " from the throw"))
+            ax.set_ylabel("wrap angle of the contacts [°]")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=6)
+            ax.set_title(title, fontsize=9)
+        return save_figure(fig, out / "dynamic.png")
 
 
 _Item = tuple[str, float, float, int, str, DynamicParams, ModelConfig, int]
@@ -296,23 +388,9 @@ def _trial(item: _Item) -> DynamicRun:
     # contact-friction variant must change both.
     friction = arm_model.arm.geom_friction
     if pen:
-        obj = ObjectConfig(
-            OBJ,
-            radius_m=p.pen_diameter_m / 2,
-            length_m=p.pen_length_m,
-            pos_m=FAR_M,
-            mass_kg=p.pen_mass_kg,
-            friction=friction,
-        )
+        obj = target_object(p.pen_diameter_m / 2, p.pen_length_m, p.pen_mass_kg, friction)
     else:
-        obj = ObjectConfig(
-            OBJ,
-            radius_m=p.object_diameter_m / 2,
-            length_m=p.object_length_m,
-            pos_m=FAR_M,
-            mass_kg=p.object_mass_kg,
-            friction=friction,
-        )
+        obj = target_object(p.object_diameter_m / 2, p.object_length_m, p.object_mass_kg, friction)
     # A step, not a ramp: the slew limiter opened, the ceiling at the 3 A current limit.
     fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=54.0, slew_n_per_s=100_000.0))
     model = with_contact_timeconst(with_timestep(arm_model, timestep_s), p.contact_s)
@@ -421,32 +499,22 @@ def arm_summary(model: ModelConfig) -> dict[str, float]:
     }
 
 
-def dynamic(
-    params: DynamicParams | None = None,
-    seed: int = 0,
-    progress: Progress | None = None,
-    jobs: int = 1,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> DynamicResult:
-    """Fig. S11 on the paper's 45 cm 2-cable arm (:func:`~hil.experiments.dynamic_rig.paper_arm_45cm`).
+def dynamic(p: DynamicParams, on: Conditions) -> DynamicResult:
+    """Fig. S11 on the paper's 45 cm 2-cable arm (:func:`~hil.trial.arm_45cm.paper_arm_45cm`), whatever
+    ``on.design`` is.
 
-    Args:
-        params: the trials.
-        seed: seed of the board and of the throws' jitter.
-        progress: ``progress(done, total)`` in trials.
-        jobs: worker processes.
-        model: the plant model as set for the prototype (a preset or a sensitivity variant); its arm is
-            scaled to the 45 cm arm (:func:`~hil.experiments.dynamic_rig.scaled_model`).
+    ``on.model`` is the plant model as set for the prototype (a preset or a sensitivity variant); its arm is
+    scaled to the 45 cm arm (:func:`~hil.trial.arm_45cm.scaled_model`). ``on.seed`` seeds the board and the
+    throws' jitter; progress counts trials.
 
     Raises:
         ValueError: a hold outside :data:`HOLDS`.
     """
-    p = params or DynamicParams()
     if not p.holds or not set(p.holds) <= set(HOLDS):
         raise ValueError(f"holds must be a non-empty subset of {HOLDS}, got {p.holds}")
-    arm_model = scaled_model(model, paper_arm_45cm(), SpiralDesign.paper_prototype())
-    runs = parallel_map(_trial, _items(p, arm_model, seed), jobs, progress)
-    return DynamicResult(p, seed, arm_summary(arm_model), tuple(runs))
+    arm_model = scaled_model(on.model, paper_arm_45cm(), SpiralDesign.paper_prototype())
+    runs = parallel_map(_trial, _items(p, arm_model, on.seed), on.jobs, on.progress)
+    return DynamicResult(p, on.seed, arm_summary(arm_model), tuple(runs))
 
 
 TINY = DynamicParams(
@@ -459,19 +527,10 @@ TINY = DynamicParams(
 )
 """The smoke-test size: one pen step, one throw per hold, at 0.25 and 0.125 ms (contacts 0.5 ms)."""
 
-
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model`` scaled to
-    the 45 cm arm. Fig. S11's arm is the 45 cm one, whatever ``design`` is."""
-    p = sized(
-        size,
+EXPERIMENT = Experiment(
+    "dynamic",
+    "45 cm arm: a current step grasps a pen; throws, one cable held at length or tension (Fig. S11)",
+    Sizes(
         TINY,
         DynamicParams(),
         DynamicParams(
@@ -479,8 +538,10 @@ def run_at_size(
             throw_speeds_m_s=(0.5, 1.0, 2.0, 3.0, 4.0, 6.0),
             throw_positions=12,
         ),
-    )
-    return dynamic(p, seed, progress, jobs, model)
+    ),
+    dynamic,
+)
+"""The dynamic experiment (:mod:`hil.experiments.catalogue`)."""
 
 
 def _ms(x: float) -> str:
@@ -502,100 +563,3 @@ def _hold_label(hold: str, p: DynamicParams) -> str:
 
 def _rate(k: int, n: int, lo: float, hi: float) -> str:
     return f"{k}/{n} (n/a)" if n == 0 else f"{k}/{n} ({100 * lo:.0f}-{100 * hi:.0f} %)"
-
-
-def table_rows(r: DynamicResult) -> list[Row]:
-    """The result's numbers next to the paper's, one row each."""
-    a = r.arm
-    rows: list[Row] = [
-        (
-            "arm (Fig. S11: 2 cables, 45 cm)",
-            f"{a['units']:.0f} units, {100 * a['length_m']:.1f} cm, tip {1000 * a['tip_width_m']:.0f} mm, "
-            f"{1000 * a['mass_kg']:.0f} g, k_base {a['base_stiffness_nm_per_rad']:.1f} N·m/rad",
-            "45 cm, 2 cables",
-        )
-    ]
-    base = r.params.timesteps_s[0]
-    for run in r.at(base, "pen"):
-        rows.append(
-            (
-                f"pen, step to {run.value:g} N: step -> half wrap",
-                _ms(run.half_wrap_ms),
-                "0.06 s to grasp and bring to the base (Fig. S11A)",
-            )
-        )
-        carried = "n/a" if math.isnan(run.toward_base_m) else f"{1000 * run.toward_base_m:+.0f} mm"
-        rows.append(
-            (
-                "  pen carried toward the base once let go",
-                f"{'yes' if run.success else 'no'} ({carried})",
-                "moved to the base",
-            )
-        )
-        rows.append(("  penetration, tension, limit overshoot", _extremes(run.extremes), ""))
-    for hold in r.params.holds:
-        label = _hold_label(hold, r.params)
-        for v in r.params.throw_speeds_m_s:
-            k, n, (lo, hi) = r.capture(hold, v)
-            runs = [x for x in r.at(base, "throw", hold) if x.value == v]
-            rows.append(
-                (
-                    f"thrown at {v:g} m/s, {label}: captured (Wilson 95 %)",
-                    _rate(k, n, lo, hi),
-                    f"captured within {CAPTURE_MS:.0f} ms (Fig. S11B: cable at constant length)",
-                )
-            )
-            rows.append(("  worst penetration, tension, limit overshoot", _extremes(worst(runs)), ""))
-        k, n, (lo, hi) = r.capture(hold)
-        rows.append((f"all throws, {label}: captured (Wilson 95 %)", _rate(k, n, lo, hi), ""))
-    for h in (r.headline(ts) for ts in r.params.timesteps_s):
-        captured = ", ".join(f"{hold} {h['captured_' + hold]}" for hold in r.params.holds)
-        rows.append(
-            (
-                f"headline at a {1000 * h['timestep_s']:g} ms physics step",
-                f"pen {_ms(h['pen_half_wrap_ms'])}, captured ({captured})/{h['throws_per_hold']}, "
-                f"penetration {1000 * h['penetration_m']:.1f} mm",
-                "converged: the same at every step",
-            )
-        )
-    return rows
-
-
-def describe_samples(r: DynamicResult) -> str:
-    """The result's sample counts, in words."""
-    base = r.params.timesteps_s[0]
-    pens, throws = len(r.at(base, "pen")), len(r.at(base, "throw"))
-    steps = ", ".join(f"{1000 * ts:g}" for ts in r.params.timesteps_s)
-    holds = " and ".join(r.params.holds)
-    return (
-        f"{pens} pen steps and {throws} throws (cable 0 held by {holds}), {r.params.window_ms} ms each; "
-        f"headline repeated at {steps} ms physics steps ({len(r.runs)} runs)"
-    )
-
-
-def plot_figure(r: DynamicResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``dynamic.png``)."""
-    plt = pyplot()
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
-    base = r.params.timesteps_s[0]
-    for run in r.runs:
-        if run.kind == "throw" and run.timestep_s == base and run.position > 0:
-            continue  # the jittered throws count in the rate; the figure shows one per speed
-        ax = a if run.kind == "pen" else b
-        t = np.arange(1, len(run.wrap_trace) + 1)
-        what = f"{run.value:g} N step" if run.kind == "pen" else f"{run.value:g} m/s, {run.hold}"
-        style = "-" if run.timestep_s == base else ":"
-        ax.plot(t, run.wrap_trace, style, lw=1, label=f"{what}, {1000 * run.timestep_s:g} ms")
-    a.axvline(60, color="k", ls=":", label="paper: 0.06 s")
-    b.axvline(CAPTURE_MS, color="k", ls=":", label=f"paper: {CAPTURE_MS:.0f} ms")
-    for ax, title in (
-        (a, "pen beside the tip: current step on cable 0"),
-        (b, "object thrown at the arm, cable 0 held at length or at a tension"),
-    ):
-        ax.axhline(HALF_WRAP_DEG, color="r", ls="--", lw=0.8)
-        ax.set_xlabel("time [ms]" + (" from the step" if ax is a else " from the throw"))
-        ax.set_ylabel("wrap angle of the contacts [°]")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=6)
-        ax.set_title(title, fontsize=9)
-    return save_figure(fig, out / "dynamic.png")

@@ -8,11 +8,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from hil.experiments.common import BASE_Z_M
 from hil.sim.config import ModelConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PlantConfig
+from hil.trial.scene import BASE_Z_M
 
 
 def fit_log_spiral(points: npt.NDArray[np.complex128]) -> tuple[float, complex, float]:
@@ -190,6 +190,25 @@ class ArmFootprint:
             dist = math.hypot(x_m - (x0 + t * dx), z_m - (z0 + t * dz))
             gap = min(gap, dist - half - radius_m)
         return gap
+
+
+def gap_depth_placements(
+    foot: ArmFootprint,
+    diameter_m: float,
+    gap_range_m: tuple[float, float],
+    depth_range_m: tuple[float, float],
+    grid: tuple[int, int],
+    clearance_m: float,
+    seed: int,
+) -> list[tuple[float, float]]:
+    """:func:`jittered_placements` of an object given by the gap between the arm's axis and its near
+    surface (``gap_range_m``) and the depth of its top below the base (``depth_range_m``), low and high;
+    the jitter seeded by ``seed`` and the diameter."""
+    d = diameter_m
+    rng = np.random.default_rng([seed, round(d * 1e6)])
+    xs = (gap_range_m[0] + d / 2, gap_range_m[1] + d / 2)
+    zs = (-(depth_range_m[1] + d / 2), -(depth_range_m[0] + d / 2))
+    return jittered_placements(foot, d, xs, zs, grid, rng, clearance_m)
 
 
 def jittered_placements(

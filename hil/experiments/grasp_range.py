@@ -18,24 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from hil.experiments.common import (
-    DEFAULT_MODEL,
-    Progress,
-    Row,
-    extremes_rows,
-    mm,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
-from hil.experiments.parallel import parallel_map
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import Row, extremes_rows, mm, pyplot, save_figure
+from hil.experiments.geometry import ArmFootprint, gap_depth_placements
+from hil.experiments.outcomes import GraspOutcomes, grasp_trials
 from hil.experiments.stats import bootstrap_interval
-from hil.sim.config import ModelConfig
-from hil.sim.spiral import SpiralDesign
-from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware
 
 PULL_DIR = (1.0, 0.0, 0.0)
 """The pull-out force's direction: horizontal, away from the arm's axis (+x, the object's side)."""
@@ -71,8 +59,9 @@ class GraspRangeParams:
 
 
 @dataclass(frozen=True)
-class GraspRangeResult:
-    """Pull-out force per diameter with its bootstrap interval, against d_min and d_max."""
+class GraspRangeResult(GraspOutcomes):
+    """Pull-out force per diameter with its bootstrap interval, against d_min and d_max (a
+    :class:`~hil.experiments.base.Result`)."""
 
     params: GraspRangeParams
     seed: int
@@ -118,11 +107,6 @@ class GraspRangeResult:
         ok = self._held_range()
         return max(ok) if ok else math.nan
 
-    @property
-    def extremes(self) -> PhysicsExtremes:
-        """The worst physics over every trial."""
-        return worst_extremes(o.extremes for o in self.outcomes)
-
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {
@@ -135,11 +119,83 @@ class GraspRangeResult:
             "d_max_sim_m": self.d_max_sim_m,
             "per_diameter": self.per_diameter(),
             "penetration_m": self.extremes.penetration_m,
-            "extremes": self.extremes.as_dict(),
-            "trials": len(self.outcomes),
-            "outcomes": [o.as_dict() for o in self.outcomes],
+            **self.outcomes_dict(),
             "params": dataclasses.asdict(self.params),
         }
+
+    def table_rows(self) -> list[Row]:
+        """The result's numbers next to the paper's, one row each."""
+        rows: list[Row] = [
+            (
+                "smallest diameter pulled out only by a force > 0 (95 % CI)",
+                mm(self.d_min_sim_m),
+                f"d_min = {mm(self.d_min_paper_m)} (eq. 14: the packed spiral's hole)",
+            ),
+            (
+                "largest such diameter",
+                mm(self.d_max_sim_m),
+                f"d_max = {mm(self.d_max_paper_m)} (eq. 15: whole length wraps half way)",
+            ),
+        ]
+        for row in self.per_diameter():
+            d = row["diameter_m"]
+            lo, hi = row["pull_out_ci95_n"]
+            where = (
+                "< d_min" if d < self.d_min_paper_m else "> d_max" if d > self.d_max_paper_m else "in range"
+            )
+            rows.append(
+                (
+                    f"  {d * 1000:g} mm: mean pull-out force (95 % CI); held, wrapped / n",
+                    f"{row['pull_out_mean_n']:.2f} N ({lo:.2f}-{hi:.2f}); "
+                    f"{row['held']}, {row['wrapped']} / {row['n']}",
+                    where,
+                )
+            )
+        rows.extend(extremes_rows(self.extremes))
+        return rows
+
+    def describe_samples(self) -> str:
+        """Diameters, placements and grasps, the pull and the bootstrap, in words."""
+        p = self.params
+        return (
+            f"{len(p.diameters_m)} diameters x {p.grid[0] * p.grid[1]} placements = "
+            f"{len(self.outcomes)} grasps (strategy on, {p.wrap_n:g} N wrap), pulled along +x at "
+            f"{p.pull_rate_n_per_s:g} N/s up to {p.pull_cap_n:g} N; "
+            f"bootstrap {p.resamples} resamples"
+        )
+
+    def figure(self, out: Path) -> Path:
+        """Write the figure into the directory ``out``; returns its path (``grasp-range.png``)."""
+        plt = pyplot()
+        fig, ax = plt.subplots(figsize=(6.5, 4.2))
+        ax.plot(
+            [o.setup.diameter_m * 1000 for o in self.outcomes],
+            [pull_out_n(o) for o in self.outcomes],
+            "o",
+            alpha=0.4,
+            label="each placement (0 N: not held)",
+        )
+        rows = self.per_diameter()
+        ds = np.array([row["diameter_m"] * 1000 for row in rows])
+        mean = np.array([row["pull_out_mean_n"] for row in rows])
+        lo = np.array([row["pull_out_ci95_n"][0] for row in rows])
+        hi = np.array([row["pull_out_ci95_n"][1] for row in rows])
+        ax.errorbar(
+            ds, mean, yerr=[mean - lo, hi - mean], fmt="k-", capsize=3, label="mean, bootstrap 95 % CI"
+        )
+        ax.axvline(
+            self.d_min_paper_m * 1000, color="g", ls=":", label=f"d_min = {self.d_min_paper_m * 1000:.1f} mm"
+        )
+        ax.axvline(
+            self.d_max_paper_m * 1000, color="m", ls=":", label=f"d_max = {self.d_max_paper_m * 1000:.0f} mm"
+        )
+        ax.set_xscale("log")
+        ax.set_xlabel("cylinder diameter [mm]")
+        ax.set_ylabel("pull-out force along +x [N]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+        ax.set_title("grasp range: force that pulls a grasped object out", fontsize=10)
+        return save_figure(fig, out / "grasp-range.png")
 
 
 def pull_out_n(o: GraspOutcome) -> float:
@@ -147,134 +203,44 @@ def pull_out_n(o: GraspOutcome) -> float:
     return 0.0 if math.isnan(o.load_n) else o.load_n
 
 
-def grasp_range(
-    design: SpiralDesign | None = None,
-    params: GraspRangeParams | None = None,
-    seed: int = 0,
-    progress: Progress | None = None,
-    jobs: int = 1,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> GraspRangeResult:
+def grasp_range(p: GraspRangeParams, on: Conditions) -> GraspRangeResult:
     """Free cylinders of many diameters, each at jittered placements clear of the packed and straight arm,
     grasped with the strategy on, released, then pulled out along +x (see the module); on the plant
-    ``model``; against the paper's d_min (eq. 14) and d_max (eq. 15)."""
-    design = design or SpiralDesign.paper_prototype()
-    p = params or GraspRangeParams()
+    ``on.model``; against the paper's d_min (eq. 14) and d_max (eq. 15)."""
+    design, model, seed = on.design, on.model, on.seed
     fw = grasp_firmware(grasp_wrap_n=p.wrap_n)
     foot = ArmFootprint.of(design, model)
-    setups = []
+    setups: list[GraspSetup] = []
     for d in p.diameters_m:
-        rng = np.random.default_rng([seed, round(d * 1e6)])
-        xs = (p.gap_range_m[0] + d / 2, p.gap_range_m[1] + d / 2)
-        zs = (-(p.depth_range_m[1] + d / 2), -(p.depth_range_m[0] + d / 2))
-        for x, z in jittered_placements(foot, d, xs, zs, p.grid, rng, p.clearance_m):
-            setups.append(
-                GraspSetup(
-                    x,
-                    z,
-                    d,
-                    strategy_on=True,
-                    mass_kg=p.mass_kg,
-                    hold_s=p.hold_s,
-                    load_rate_n_per_s=p.pull_rate_n_per_s,
-                    load_cap_n=p.pull_cap_n,
-                    load_dir=PULL_DIR,
-                    firmware=fw,
-                    model=model,
-                    seed=seed,
-                )
-            )
-    outcomes = parallel_map(grasp_trial_job, [(s, design) for s in setups], jobs, progress)
-    return GraspRangeResult(p, seed, design.d_min_m, design.d_max_m, tuple(outcomes))
+        pull = GraspSetup(  # strategy on; placed at each spot below
+            x_m=math.nan,
+            z_m=math.nan,
+            diameter_m=d,
+            mass_kg=p.mass_kg,
+            hold_s=p.hold_s,
+            load_rate_n_per_s=p.pull_rate_n_per_s,
+            load_cap_n=p.pull_cap_n,
+            load_dir=PULL_DIR,
+            firmware=fw,
+            model=model,
+            seed=seed,
+        )
+        spots = gap_depth_placements(foot, d, p.gap_range_m, p.depth_range_m, p.grid, p.clearance_m, seed)
+        setups += [dataclasses.replace(pull, x_m=x, z_m=z) for x, z in spots]
+    return GraspRangeResult(p, seed, design.d_min_m, design.d_max_m, grasp_trials(setups, on))
 
 
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``.
-
-    ``tiny``: one 20 mm cylinder, one placement; ``default``: 10 diameters x 6 placements; ``large``:
-    x 12 placements."""
-    p = sized(
-        size,
+EXPERIMENT = Experiment(
+    "grasp-range",
+    "pull-out force against diameter (bootstrap intervals) vs. d_min, d_max (eq. 14, 15)",
+    # tiny: one 20 mm cylinder, one placement; default: 10 diameters x 6 placements; large: x 12 placements
+    Sizes(
         GraspRangeParams(
             diameters_m=(0.02,), gap_range_m=(0.03, 0.03), depth_range_m=(0.1, 0.1), grid=(1, 1)
         ),
         GraspRangeParams(),
         GraspRangeParams(grid=(4, 3)),
-    )
-    return grasp_range(design, p, seed, progress, jobs, model)
-
-
-def table_rows(r: GraspRangeResult) -> list[Row]:
-    """The result's numbers next to the paper's, one row each."""
-    rows: list[Row] = [
-        (
-            "smallest diameter pulled out only by a force > 0 (95 % CI)",
-            mm(r.d_min_sim_m),
-            f"d_min = {mm(r.d_min_paper_m)} (eq. 14: the packed spiral's hole)",
-        ),
-        (
-            "largest such diameter",
-            mm(r.d_max_sim_m),
-            f"d_max = {mm(r.d_max_paper_m)} (eq. 15: whole length wraps half way)",
-        ),
-    ]
-    for row in r.per_diameter():
-        d = row["diameter_m"]
-        lo, hi = row["pull_out_ci95_n"]
-        where = "< d_min" if d < r.d_min_paper_m else "> d_max" if d > r.d_max_paper_m else "in range"
-        rows.append(
-            (
-                f"  {d * 1000:g} mm: mean pull-out force (95 % CI); held, wrapped / n",
-                f"{row['pull_out_mean_n']:.2f} N ({lo:.2f}-{hi:.2f}); "
-                f"{row['held']}, {row['wrapped']} / {row['n']}",
-                where,
-            )
-        )
-    rows.extend(extremes_rows(r.extremes))
-    return rows
-
-
-def describe_samples(r: GraspRangeResult) -> str:
-    """The result's sample counts, in words."""
-    p = r.params
-    cells = p.grid[0] * p.grid[1]
-    return (
-        f"{len(p.diameters_m)} diameters x {cells} placements = {len(r.outcomes)} grasps (strategy on, "
-        f"{p.wrap_n:g} N wrap), pulled along +x at {p.pull_rate_n_per_s:g} N/s up to {p.pull_cap_n:g} N; "
-        f"bootstrap {p.resamples} resamples"
-    )
-
-
-def plot_figure(r: GraspRangeResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``grasp-range.png``)."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    ax.plot(
-        [o.setup.diameter_m * 1000 for o in r.outcomes],
-        [pull_out_n(o) for o in r.outcomes],
-        "o",
-        alpha=0.4,
-        label="each placement (0 N: not held)",
-    )
-    rows = r.per_diameter()
-    ds = np.array([row["diameter_m"] * 1000 for row in rows])
-    mean = np.array([row["pull_out_mean_n"] for row in rows])
-    lo = np.array([row["pull_out_ci95_n"][0] for row in rows])
-    hi = np.array([row["pull_out_ci95_n"][1] for row in rows])
-    ax.errorbar(ds, mean, yerr=[mean - lo, hi - mean], fmt="k-", capsize=3, label="mean, bootstrap 95 % CI")
-    ax.axvline(r.d_min_paper_m * 1000, color="g", ls=":", label=f"d_min = {r.d_min_paper_m * 1000:.1f} mm")
-    ax.axvline(r.d_max_paper_m * 1000, color="m", ls=":", label=f"d_max = {r.d_max_paper_m * 1000:.0f} mm")
-    ax.set_xscale("log")
-    ax.set_xlabel("cylinder diameter [mm]")
-    ax.set_ylabel("pull-out force along +x [N]")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
-    ax.set_title("grasp range: force that pulls a grasped object out", fontsize=10)
-    return save_figure(fig, out / "grasp-range.png")
+    ),
+    grasp_range,
+)
+"""The grasp-range experiment (:mod:`hil.experiments.catalogue`)."""

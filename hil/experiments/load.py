@@ -19,24 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from hil.experiments.common import (
-    DEFAULT_MODEL,
-    G,
-    Progress,
-    Row,
-    extremes_rows,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
-from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job
-from hil.experiments.parallel import parallel_map
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import G, Row, extremes_rows, pyplot, save_figure
+from hil.experiments.geometry import ArmFootprint, gap_depth_placements
+from hil.experiments.outcomes import GraspOutcomes, grasp_trials
 from hil.experiments.stats import Slope, ols_slope
-from hil.sim.config import ModelConfig
-from hil.sim.spiral import SpiralDesign
-from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware
 
 
 @dataclass(frozen=True)
@@ -81,8 +69,9 @@ def held_kg(o: GraspOutcome) -> float:
 
 
 @dataclass(frozen=True)
-class LoadResult:
-    """Held mass against wrap force per friction, its slope, and eq. (16)'s."""
+class LoadResult(GraspOutcomes):
+    """Held mass against wrap force per friction, its slope, and eq. (16)'s (a
+    :class:`~hil.experiments.base.Result`)."""
 
     params: LoadParams
     seed: int
@@ -118,11 +107,6 @@ class LoadResult:
                 )
         return out
 
-    @property
-    def extremes(self) -> PhysicsExtremes:
-        """The worst physics over every trial."""
-        return worst_extremes(o.extremes for o in self.outcomes)
-
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         return {
@@ -132,73 +116,111 @@ class LoadResult:
             "slopes": [{"friction": mu, **self.slope(mu).as_dict()} for mu in self.params.frictions],
             "rows": self.rows(),
             "penetration_m": self.extremes.penetration_m,
-            "extremes": self.extremes.as_dict(),
-            "trials": len(self.outcomes),
-            "outcomes": [o.as_dict() for o in self.outcomes],
+            **self.outcomes_dict(),
             "params": dataclasses.asdict(self.params),
         }
 
+    def table_rows(self) -> list[Row]:
+        """The result's numbers next to the paper's, one row each."""
+        bound = self.bound_slope_kg_per_n * 1000
+        rows: list[Row] = []
+        for mu in self.params.frictions:
+            s = self.slope(mu)
+            rows.append(
+                (
+                    f"μ = {mu:g}: slope of held mass vs wrap force (95 % CI), n held",
+                    f"{s.slope * 1000:.1f} g/N ({s.low * 1000:.1f} to {s.high * 1000:.1f}), {s.n}",
+                    f"dM/dF = {bound:.1f} g/N (eq. 16, an upper bound)",
+                )
+            )
+            for row in self.rows():
+                if row["friction"] != mu:
+                    continue
+                rows.append(
+                    (
+                        f"  F = {row['force_n']:g} N: mean held mass, held / n",
+                        f"{_g(row['held_kg_mean'])}, {row['held']} / {row['n']}",
+                        f"M <= {row['bound_kg'] * 1000:.0f} g",
+                    )
+                )
+        rows.extend(extremes_rows(self.extremes))
+        return rows
 
-def load(
-    design: SpiralDesign | None = None,
-    params: LoadParams | None = None,
-    seed: int = 0,
-    progress: Progress | None = None,
-    jobs: int = 1,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> LoadResult:
+    def describe_samples(self) -> str:
+        """Wrap forces, frictions, placements and grasps, in words."""
+        p = self.params
+        return (
+            f"{len(p.forces_n)} wrap forces x {len(p.frictions)} frictions x {p.grid[0] * p.grid[1]} "
+            "placements = "
+            f"{len(self.outcomes)} grasps of a {p.diameter_m * 1000:g} mm cylinder, "
+            "load growing to twice the bound "
+            f"in {p.ramp_s:g} s"
+        )
+
+    def figure(self, out: Path) -> Path:
+        """Write the figure into the directory ``out``; returns its path (``load.png``)."""
+        plt = pyplot()
+        fig, ax = plt.subplots(figsize=(6.5, 4.2))
+        ff = np.linspace(0.0, max(self.params.forces_n) * 1.05, 50)
+        ax.plot(ff, self.bound_slope_kg_per_n * ff * 1000, "k--", lw=1, label="bound M(φ, d, F) (eq. 16)")
+        for k, mu in enumerate(self.params.frictions):
+            colour = f"C{k}"
+            sel = [o for o in self.outcomes if _friction(o) == mu and not math.isnan(o.load_n)]
+            ax.plot([_force(o) for o in sel], [held_kg(o) * 1000 for o in sel], "o", color=colour, alpha=0.5)
+            s = self.slope(mu)
+            if not math.isnan(s.slope):
+                ax.plot(
+                    ff, (s.intercept + s.slope * ff) * 1000, "-", color=colour, label=f"μ = {mu:g}: OLS fit"
+                )
+        ax.set_xlabel("wrap force F [N]")
+        ax.set_ylabel("mass held [g]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        ax.set_title(f"load: mass held vs wrap force, d = {self.params.diameter_m * 1000:g} mm", fontsize=10)
+        return save_figure(fig, out / "load.png")
+
+
+def load(p: LoadParams, on: Conditions) -> LoadResult:
     """Grasp (strategy on) a cylinder at each wrap force and friction, at jittered placements, remove its
-    support, then grow a downward force on it until it comes out (see the module); on the plant ``model``
-    with its friction replaced by each μ."""
-    design = design or SpiralDesign.paper_prototype()
-    p = params or LoadParams()
+    support, then grow a downward force on it until it comes out (see the module); on the plant
+    ``on.model`` with its friction replaced by each μ."""
+    design, model, seed = on.design, on.model, on.seed
     d = p.diameter_m
     bound_slope = design.max_load_kg(d, 1.0)  # eq. (16) is proportional to F
-    rng = np.random.default_rng([seed, round(d * 1e6)])
-    xs = (p.gap_range_m[0] + d / 2, p.gap_range_m[1] + d / 2)
-    zs = (-(p.depth_range_m[1] + d / 2), -(p.depth_range_m[0] + d / 2))
-    spots = jittered_placements(ArmFootprint.of(design, model), d, xs, zs, p.grid, rng, p.clearance_m)
-    setups = []
+    foot = ArmFootprint.of(design, model)
+    spots = gap_depth_placements(foot, d, p.gap_range_m, p.depth_range_m, p.grid, p.clearance_m, seed)
+    setups: list[GraspSetup] = []
     for mu in p.frictions:
         variant = dataclasses.replace(model, arm=dataclasses.replace(model.arm, geom_friction=mu))
         for f in p.forces_n:
-            fw = grasp_firmware(grasp_wrap_n=f)
             cap_n = 2.0 * bound_slope * f * G
-            for x, z in spots:
-                setups.append(
-                    GraspSetup(
-                        x,
-                        z,
-                        d,
-                        strategy_on=True,
-                        mass_kg=p.mass_kg,
-                        hold_s=p.hold_s,
-                        load_rate_n_per_s=cap_n / p.ramp_s,
-                        load_cap_n=cap_n,
-                        object_friction=mu,
-                        firmware=fw,
-                        model=variant,
-                        seed=seed,
-                    )
-                )
-    outcomes = parallel_map(grasp_trial_job, [(s, design) for s in setups], jobs, progress)
-    return LoadResult(p, seed, bound_slope, tuple(outcomes))
+            weigh = GraspSetup(  # strategy on; placed at each spot below
+                x_m=math.nan,
+                z_m=math.nan,
+                diameter_m=d,
+                mass_kg=p.mass_kg,
+                hold_s=p.hold_s,
+                load_rate_n_per_s=cap_n / p.ramp_s,
+                load_cap_n=cap_n,
+                object_friction=mu,
+                firmware=grasp_firmware(grasp_wrap_n=f),
+                model=variant,
+                seed=seed,
+            )
+            setups += [dataclasses.replace(weigh, x_m=x, z_m=z) for x, z in spots]
+    return LoadResult(p, seed, bound_slope, grasp_trials(setups, on))
 
 
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``.
+def _g(kg: float) -> str:
+    return "not held" if math.isnan(kg) else f"{kg * 1000:.0f} g"
 
-    ``tiny``: 2 forces at μ = 0.8, one placement; ``default``: 4 forces x 3 frictions x 4 placements;
-    ``large``: 9 placements."""
-    p = sized(
-        size,
+
+EXPERIMENT = Experiment(
+    "load",
+    "held mass against wrap force 2.5-20 N at three frictions: slope and interval vs. eq. 16",
+    # tiny: 2 forces at μ = 0.8, one placement; default: 4 forces x 3 frictions x 4 placements; large: 9
+    # placements
+    Sizes(
         LoadParams(
             forces_n=(5.0, 10.0),
             frictions=(0.8,),
@@ -208,68 +230,7 @@ def run_at_size(
         ),
         LoadParams(),
         LoadParams(grid=(3, 3)),
-    )
-    return load(design, p, seed, progress, jobs, model)
-
-
-def _g(kg: float) -> str:
-    return "not held" if math.isnan(kg) else f"{kg * 1000:.0f} g"
-
-
-def table_rows(r: LoadResult) -> list[Row]:
-    """The result's numbers next to the paper's, one row each."""
-    bound = r.bound_slope_kg_per_n * 1000
-    rows: list[Row] = []
-    for mu in r.params.frictions:
-        s = r.slope(mu)
-        rows.append(
-            (
-                f"μ = {mu:g}: slope of held mass vs wrap force (95 % CI), n held",
-                f"{s.slope * 1000:.1f} g/N ({s.low * 1000:.1f} to {s.high * 1000:.1f}), {s.n}",
-                f"dM/dF = {bound:.1f} g/N (eq. 16, an upper bound)",
-            )
-        )
-        for row in r.rows():
-            if row["friction"] != mu:
-                continue
-            rows.append(
-                (
-                    f"  F = {row['force_n']:g} N: mean held mass, held / n",
-                    f"{_g(row['held_kg_mean'])}, {row['held']} / {row['n']}",
-                    f"M <= {row['bound_kg'] * 1000:.0f} g",
-                )
-            )
-    rows.extend(extremes_rows(r.extremes))
-    return rows
-
-
-def describe_samples(r: LoadResult) -> str:
-    """The result's sample counts, in words."""
-    p = r.params
-    cells = p.grid[0] * p.grid[1]
-    return (
-        f"{len(p.forces_n)} wrap forces x {len(p.frictions)} frictions x {cells} placements = "
-        f"{len(r.outcomes)} grasps of a {p.diameter_m * 1000:g} mm cylinder, load growing to twice the bound "
-        f"in {p.ramp_s:g} s"
-    )
-
-
-def plot_figure(r: LoadResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``load.png``)."""
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    ff = np.linspace(0.0, max(r.params.forces_n) * 1.05, 50)
-    ax.plot(ff, r.bound_slope_kg_per_n * ff * 1000, "k--", lw=1, label="bound M(φ, d, F) (eq. 16)")
-    for k, mu in enumerate(r.params.frictions):
-        colour = f"C{k}"
-        sel = [o for o in r.outcomes if _friction(o) == mu and not math.isnan(o.load_n)]
-        ax.plot([_force(o) for o in sel], [held_kg(o) * 1000 for o in sel], "o", color=colour, alpha=0.5)
-        s = r.slope(mu)
-        if not math.isnan(s.slope):
-            ax.plot(ff, (s.intercept + s.slope * ff) * 1000, "-", color=colour, label=f"μ = {mu:g}: OLS fit")
-    ax.set_xlabel("wrap force F [N]")
-    ax.set_ylabel("mass held [g]")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    ax.set_title(f"load: mass held vs wrap force, d = {r.params.diameter_m * 1000:g} mm", fontsize=10)
-    return save_figure(fig, out / "load.png")
+    ),
+    load,
+)
+"""The load experiment (:mod:`hil.experiments.catalogue`)."""

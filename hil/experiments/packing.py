@@ -11,21 +11,12 @@ from typing import Any
 import numpy as np
 
 from controller.config import FirmwareConfig, MappingConfig
-from hil.experiments.common import (
-    BASE_Z_M,
-    DEFAULT_MODEL,
-    Progress,
-    Row,
-    extremes_rows,
-    pyplot,
-    save_figure,
-    sized,
-)
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import Row, extremes_rows, pyplot, save_figure
 from hil.experiments.geometry import fit_log_spiral, joint_points_xz
-from hil.experiments.rig import direct_rig
-from hil.sim.config import ModelConfig
-from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.rig import direct_rig
+from hil.trial.scene import BASE_Z_M
 
 
 @dataclass(frozen=True)
@@ -47,7 +38,8 @@ class PackingParams:
 
 @dataclass(frozen=True)
 class PackingResult:
-    """Ramp one cable until the arm packs: the tension and current it took, the fitted spiral, the order."""
+    """Ramp one cable until the arm packs: the tension and current it took, the fitted spiral, the order
+    (a :class:`~hil.experiments.base.Result`)."""
 
     params: PackingParams
     seed: int
@@ -89,22 +81,84 @@ class PackingResult:
             "params": dataclasses.asdict(self.params),
         }
 
+    def table_rows(self) -> list[Row]:
+        """The result's numbers next to the paper's, one row each."""
+        order = (
+            "tip first"
+            if self.order_correlation < -0.8
+            else "base first"
+            if self.order_correlation > 0.8
+            else "mixed"
+        )
+        return [
+            (
+                "fitted spiral b of the packed joints",
+                f"{self.b_fit:.4f} (design {self.b_design:.4f}, "
+                f"{100 * (self.b_fit / self.b_design - 1):+.1f} %)",
+                "packed = the design's log spiral (Fig. S5)",
+            ),
+            ("turn per joint when packed", f"{self.turn_fit_deg:.1f}°", f"Δθ = {self.turn_design_deg:g}°"),
+            ("every joint at its limit", "yes" if self.packed else "no", "yes (tight packing)"),
+            (
+                "cable 0 tension / current that packed it",
+                f"{self.pack_tension_n:.1f} N / {self.pack_current_a:.2f} A",
+                "a minimum force exists (Fig. S3C; no value for this arm)",
+            ),
+            (
+                "curl order (rank correlation joint index vs. closing tension)",
+                f"{order} ({self.order_correlation:+.2f})",
+                "curls from the tip (Fig. S5C, Note S4)",
+            ),
+            *extremes_rows(self.extremes),
+        ]
 
-def packing(
-    design: SpiralDesign | None = None,
-    params: PackingParams | None = None,
-    seed: int = 0,
-    progress: Progress | None = None,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> PackingResult:
-    """Ramp cable 0's tension through the firmware (DIRECT) until every joint is at its limit Δθ; fit a
-    logarithmic spiral to the joints; record in which order the joints closed (Note S3, Fig. S5C).
+    def describe_samples(self) -> str:
+        """The ramp and the joints, in words."""
+        return f"1 ramp of {self.params.ramp_s:g} s to {self.params.tension_end_n:g} N, {self.joints} joints"
 
-    ``model`` is the plant's model (a preset or a sensitivity variant)."""
-    design = design or SpiralDesign.paper_prototype()
-    p = params or PackingParams()
+    def figure(self, out: Path) -> Path:
+        """Write the figure into the directory ``out``; returns its path (``packing.png``)."""
+        plt = pyplot()
+        fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.5))
+        pts = np.array(self.joint_points)
+        pole = complex(*self.pole)
+        a.plot((pts[:, 0]) * 1000, (pts[:, 1] - BASE_Z_M) * 1000, "o-", ms=3, label="joints (packed)")
+        w = pts[:, 0] + 1j * pts[:, 1] - pole
+        ang = np.unwrap(np.angle(w))
+        th = np.linspace(ang.min(), ang.max(), 300)
+        r0 = abs(w[0])
+        for bb, style, lab in ((self.b_design, "r--", "design b"), (self.b_fit, "g:", "fitted b")):
+            rho = r0 * np.exp(bb * np.sign(ang[0] - ang[-1]) * (th - ang[0]))
+            z = pole + rho * np.exp(1j * th)
+            a.plot(z.real * 1000, (z.imag - BASE_Z_M) * 1000, style, lw=1, label=f"{lab} = {bb:.4f}")
+        a.set_aspect("equal")
+        a.grid(alpha=0.3)
+        a.legend(fontsize=7)
+        a.set_title("packed arm vs. the design spiral", fontsize=9)
+        a.set_xlabel("x [mm]", fontsize=8)
+        a.set_ylabel("z above the base [mm]", fontsize=8)
+        b.plot(self.ramp_tension_n, self.closed_count, "-", lw=1.2)
+        b.set_xlabel("cable 0 tension [N]", fontsize=8)
+        b.set_ylabel("joints at their limit", fontsize=8)
+        b2 = b.twinx()
+        joints = np.arange(1, self.joints + 1)
+        b2.plot(self.close_tension_n, joints, "r.", ms=5)
+        b2.set_ylabel("joint (1 = base) by the tension that closed it", fontsize=8, color="r")
+        b.set_title(
+            f"packs at {self.pack_tension_n:.1f} N ({self.pack_current_a:.2f} A), curling from the tip",
+            fontsize=9,
+        )
+        b.grid(alpha=0.3)
+        return save_figure(fig, out / "packing.png")
+
+
+def packing(p: PackingParams, on: Conditions) -> PackingResult:
+    """Ramp cable 0's tension through the firmware (DIRECT) until every joint of ``on.design`` is at its
+    limit Δθ; fit a logarithmic spiral to the joints; record in which order the joints closed (Note S3,
+    Fig. S5C)."""
+    design, seed, progress = on.design, on.seed, on.progress
     fw = FirmwareConfig(mapping=MappingConfig(tension_max_n=max(20.0, p.tension_end_n)))
-    rig = direct_rig(design, fw, seed=seed, model=model)
+    rig = direct_rig(design, fw, seed=seed, model=on.model)
     plant = rig.plant
     limit = design.dtheta_rad - math.radians(p.limit_tol_deg)
     n_joints = design.joints
@@ -174,81 +228,10 @@ def packing(
     )
 
 
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``."""
-    p = sized(size, PackingParams(ramp_s=1.5, hold_s=0.1), PackingParams(), PackingParams(ramp_s=16.0))
-    return packing(design, p, seed, progress, model)
-
-
-def table_rows(r: PackingResult) -> list[Row]:
-    """The result\'s numbers next to the paper\'s, one row each."""
-    order = (
-        "tip first" if r.order_correlation < -0.8 else "base first" if r.order_correlation > 0.8 else "mixed"
-    )
-    return [
-        (
-            "fitted spiral b of the packed joints",
-            f"{r.b_fit:.4f} (design {r.b_design:.4f}, {100 * (r.b_fit / r.b_design - 1):+.1f} %)",
-            "packed = the design's log spiral (Fig. S5)",
-        ),
-        ("turn per joint when packed", f"{r.turn_fit_deg:.1f}°", f"Δθ = {r.turn_design_deg:g}°"),
-        ("every joint at its limit", "yes" if r.packed else "no", "yes (tight packing)"),
-        (
-            "cable 0 tension / current that packed it",
-            f"{r.pack_tension_n:.1f} N / {r.pack_current_a:.2f} A",
-            "a minimum force exists (Fig. S3C; no value for this arm)",
-        ),
-        (
-            "curl order (rank correlation joint index vs. closing tension)",
-            f"{order} ({r.order_correlation:+.2f})",
-            "curls from the tip (Fig. S5C, Note S4)",
-        ),
-        *extremes_rows(r.extremes),
-    ]
-
-
-def describe_samples(r: PackingResult) -> str:
-    """The result\'s sample counts, in words."""
-    return f"1 ramp of {r.params.ramp_s:g} s to {r.params.tension_end_n:g} N, {r.joints} joints"
-
-
-def plot_figure(r: PackingResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``packing.png``)."""
-    plt = pyplot()
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4.5))
-    pts = np.array(r.joint_points)
-    pole = complex(*r.pole)
-    a.plot((pts[:, 0]) * 1000, (pts[:, 1] - BASE_Z_M) * 1000, "o-", ms=3, label="joints (packed)")
-    w = pts[:, 0] + 1j * pts[:, 1] - pole
-    ang = np.unwrap(np.angle(w))
-    th = np.linspace(ang.min(), ang.max(), 300)
-    r0 = abs(w[0])
-    for bb, style, lab in ((r.b_design, "r--", "design b"), (r.b_fit, "g:", "fitted b")):
-        rho = r0 * np.exp(bb * np.sign(ang[0] - ang[-1]) * (th - ang[0]))
-        z = pole + rho * np.exp(1j * th)
-        a.plot(z.real * 1000, (z.imag - BASE_Z_M) * 1000, style, lw=1, label=f"{lab} = {bb:.4f}")
-    a.set_aspect("equal")
-    a.grid(alpha=0.3)
-    a.legend(fontsize=7)
-    a.set_title("packed arm vs. the design spiral", fontsize=9)
-    a.set_xlabel("x [mm]", fontsize=8)
-    a.set_ylabel("z above the base [mm]", fontsize=8)
-    b.plot(r.ramp_tension_n, r.closed_count, "-", lw=1.2)
-    b.set_xlabel("cable 0 tension [N]", fontsize=8)
-    b.set_ylabel("joints at their limit", fontsize=8)
-    b2 = b.twinx()
-    joints = np.arange(1, r.joints + 1)
-    b2.plot(r.close_tension_n, joints, "r.", ms=5)
-    b2.set_ylabel("joint (1 = base) by the tension that closed it", fontsize=8, color="r")
-    b.set_title(
-        f"packs at {r.pack_tension_n:.1f} N ({r.pack_current_a:.2f} A), curling from the tip", fontsize=9
-    )
-    b.grid(alpha=0.3)
-    return save_figure(fig, out / "packing.png")
+EXPERIMENT = Experiment(
+    "packing",
+    "one cable's tension ramped until the arm packs: current, fitted b, curl order (Note S3)",
+    Sizes(PackingParams(ramp_s=1.5, hold_s=0.1), PackingParams(), PackingParams(ramp_s=16.0)),
+    packing,
+)
+"""The packing experiment (:mod:`hil.experiments.catalogue`)."""

@@ -1,9 +1,10 @@
 """sensitivity: which conclusions survive ±50 % on the model's uncertain parameters, one at a time.
 
-The varied parameters (:data:`PARAMETERS`) are the ones with no datasheet behind them: the base joint's
-stiffness, the joints' damping ratio, the spool's (rotor) inertia, the drive's output friction and the
-contact friction (arm and objects together: MuJoCo takes the larger of a pair's two coefficients). Each
-variant re-runs every :data:`MEASURES` entry, a function ``(design, model, size, seed, jobs) -> dict``, and
+The varied parameters (:data:`hil.sim.variants.PARAMETERS`) are the ones with no datasheet behind them:
+the base joint's stiffness, the joints' damping ratio, the spool's (rotor) inertia, the drive's output
+friction and the contact friction (arm and objects together: MuJoCo takes the larger of a pair's two
+coefficients). Each variant re-runs every :data:`MEASURES` entry, a function ``(size, conditions) -> dict``,
+and
 each of a measure's :class:`Conclusion` s says whether it still holds, with its number and sample size.
 The variants scale the model the experiment is given (the default model or a preset); a new measure is
 one more entry of :data:`MEASURES`.
@@ -18,80 +19,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from hil.experiments.common import (
-    DEFAULT_MODEL,
-    Progress,
-    Row,
-    extremes_rows,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import Row, extremes_rows, pyplot, save_figure, sized, worst_extremes
 from hil.experiments.dynamic import TINY, DynamicParams, dynamic
-from hil.experiments.packing import PackingParams, packing
+from hil.experiments.packing import EXPERIMENT as PACKING
 from hil.experiments.parallel import parallel_map
 from hil.experiments.strategy import TINY as STRATEGY_TINY
 from hil.experiments.strategy import StrategyParams, strategy
-from hil.sim.config import ModelConfig
-from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.sim.variants import BASELINE, PARAMETERS, Variant
 
 FACTORS = (0.5, 1.5)
 """Each parameter is multiplied by these (±50 %)."""
-
-
-def _base_stiffness(m: ModelConfig, f: float) -> ModelConfig:
-    k = m.arm.base_stiffness_nm_per_rad * f
-    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, base_stiffness_nm_per_rad=k))
-
-
-def _damping_ratio(m: ModelConfig, f: float) -> ModelConfig:
-    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, damping_ratio=m.arm.damping_ratio * f))
-
-
-def _spool_inertia(m: ModelConfig, f: float) -> ModelConfig:
-    j = m.motor.rotor_inertia_kg_m2 * f
-    return dataclasses.replace(m, motor=dataclasses.replace(m.motor, rotor_inertia_kg_m2=j))
-
-
-def _drive_friction(m: ModelConfig, f: float) -> ModelConfig:
-    t = m.motor.output_friction_nm * f
-    return dataclasses.replace(m, motor=dataclasses.replace(m.motor, output_friction_nm=t))
-
-
-def _contact_friction(m: ModelConfig, f: float) -> ModelConfig:
-    return dataclasses.replace(m, arm=dataclasses.replace(m.arm, geom_friction=m.arm.geom_friction * f))
-
-
-PARAMETERS: dict[str, Callable[[ModelConfig, float], ModelConfig]] = {
-    "base stiffness": _base_stiffness,
-    "damping ratio": _damping_ratio,
-    "spool inertia": _spool_inertia,
-    "drive friction": _drive_friction,
-    "contact friction": _contact_friction,
-}
-"""The varied parameters: name -> ``(model, factor) -> model``. The contact friction's objects follow the
-arm's (see :func:`hil.experiments.dynamic.dynamic`)."""
-
-BASELINE = "baseline"
-
-
-@dataclass(frozen=True)
-class Variant:
-    """One model: the baseline, or one parameter scaled by ``factor``."""
-
-    parameter: str
-    factor: float
-
-    @property
-    def label(self) -> str:
-        """``baseline`` or e.g. ``base stiffness x0.5``."""
-        return BASELINE if self.parameter == BASELINE else f"{self.parameter} x{self.factor:g}"
-
-    def apply(self, model: ModelConfig) -> ModelConfig:
-        """The variant of ``model``."""
-        return model if self.parameter == BASELINE else PARAMETERS[self.parameter](model, self.factor)
 
 
 def variants(size: str = "default") -> tuple[Variant, ...]:
@@ -116,17 +55,14 @@ class Conclusion:
     number: Callable[[dict[str, Any]], str]
 
 
-Measure = Callable[[SpiralDesign, ModelConfig, str, int, int], dict[str, Any]]
-"""``measure(design, model, size, seed, jobs) -> dict`` of JSON-ready numbers, with the worst physics of
-its trials as ``extremes`` (:meth:`~hil.sim.types.PhysicsExtremes.as_dict`)."""
+Measure = Callable[[str, Conditions], dict[str, Any]]
+"""``measure(size, conditions) -> dict`` of JSON-ready numbers, with the worst physics of its trials as
+``extremes`` (:meth:`~hil.sim.types.PhysicsExtremes.as_dict`)."""
 
 
-def packing_measure(
-    design: SpiralDesign, model: ModelConfig, size: str, seed: int, jobs: int
-) -> dict[str, Any]:
-    """The packing ramp (Note S3) on ``design``: curl order and packing tension."""
-    params = sized(size, PackingParams(ramp_s=1.5, hold_s=0.1), PackingParams(), PackingParams(ramp_s=16.0))
-    r = packing(design, params, seed, model=model)
+def packing_measure(size: str, on: Conditions) -> dict[str, Any]:
+    """The packing experiment (Note S3) on ``on.design`` at ``size``: curl order and packing tension."""
+    r = PACKING.run_at_size(size, on)
     return {
         "order_correlation": r.order_correlation,
         "packed": r.packed,
@@ -136,10 +72,8 @@ def packing_measure(
     }
 
 
-def dynamic_measure(
-    design: SpiralDesign, model: ModelConfig, size: str, seed: int, jobs: int
-) -> dict[str, Any]:
-    """Fig. S11 on the 45 cm arm (whatever ``design`` is), at the dynamic experiment's first step only
+def dynamic_measure(size: str, on: Conditions) -> dict[str, Any]:
+    """Fig. S11 on the 45 cm arm (whatever ``on.design`` is), at the dynamic experiment's first step only
     (0.25 ms with 0.5 ms contacts: where its penetration meets the goal), throws with cable 0 held at length
     (the paper's setup)."""
     first = DynamicParams().timesteps_s[:1]
@@ -149,7 +83,7 @@ def dynamic_measure(
         DynamicParams(throw_positions=3, timesteps_s=first, holds=("length",)),
         DynamicParams(timesteps_s=first, holds=("length",)),
     )
-    r = dynamic(params, seed, None, jobs, model)
+    r = dynamic(params, on)
     d = r.as_dict()
     return {
         "pen_half_wrap_ms": d["pen_half_wrap_ms"],
@@ -160,9 +94,7 @@ def dynamic_measure(
     }
 
 
-def strategy_measure(
-    design: SpiralDesign, model: ModelConfig, size: str, seed: int, jobs: int
-) -> dict[str, Any]:
+def strategy_measure(size: str, on: Conditions) -> dict[str, Any]:
     """Paired grasps (strategy off / on / on with the true-contact oracle) at a few placements of one
     diameter: per arm, successes and trials (the strategy experiment's success criterion)."""
     params = sized(
@@ -171,7 +103,7 @@ def strategy_measure(
         StrategyParams(diameters_m=(0.024,), grid=(2, 2), seeds=1),
         StrategyParams(diameters_m=(0.024,), grid=(4, 4), seeds=1),
     )
-    r = strategy(design, params, seed, None, jobs, model)
+    r = strategy(params, on)
     out: dict[str, Any] = {}
     for arm in ("off", "on", "oracle"):
         rate = r.rate(arm)
@@ -247,7 +179,8 @@ MEASURES: dict[str, tuple[Measure, tuple[Conclusion, ...]]] = {
 
 @dataclass(frozen=True)
 class SensitivityResult:
-    """Every measure on every variant, and each conclusion's verdict.
+    """Every measure on every variant, and each conclusion's verdict (a
+    :class:`~hil.experiments.base.Result`).
 
     Attributes:
         size: the measures' size.
@@ -299,90 +232,76 @@ class SensitivityResult:
             "measured": self.measured,
         }
 
+    def table_rows(self) -> list[Row]:
+        """Per conclusion, the baseline's verdict, then per parameter the verdicts at x0.5 / x1.5."""
+        rows: list[Row] = []
+        index = {v: i for i, v in enumerate(self.variants)}
+        for name, cells in self.verdicts():
+            survives = "survives every variant" if all(h for h, _ in cells) else "fails in some variant"
+            rows.append((name, f"baseline: {_cell(cells[0])}", survives))
+            for p in PARAMETERS:
+                labels = [Variant(p, f).label for f in FACTORS]
+                if not any(lab in index for lab in labels):
+                    continue
+                verdicts = " / ".join(_cell(cells[index[lab]]) for lab in labels if lab in index)
+                rows.append((f"  {p} x{' / x'.join(f'{f:g}' for f in FACTORS)}", verdicts, ""))
+        rows.extend(extremes_rows(self.extremes))
+        return rows
 
-def _run_one(item: tuple[str, Variant, SpiralDesign, ModelConfig, str, int]) -> dict[str, Any]:
-    name, variant, design, model, size, seed = item
-    return MEASURES[name][0](design, variant.apply(model), size, seed, 1)
+    def describe_samples(self) -> str:
+        """Models, measures and the strategy's placements, in words."""
+        text = (
+            f"{len(self.variants)} models (baseline, {(len(self.variants) - 1) // len(FACTORS)} parameters x "
+            f"{len(FACTORS)}) x "
+            f"{len(self.measured)} measures ({', '.join(self.measured)}) at size {self.size}"
+        )
+        strat = self.measured.get("strategy", {}).get(BASELINE)
+        if strat is not None:
+            text += f"; strategy: {strat['n']} placements x 3 arms per model"
+        return text
+
+    def figure(self, out: Path) -> Path:
+        """Write the figure into the directory ``out``; returns its path (``sensitivity.png``)."""
+        plt = pyplot()
+        verdicts = self.verdicts()
+        fig, ax = plt.subplots(figsize=(2 + 1.0 * len(self.variants), 1.5 + 0.5 * len(verdicts)))
+        grid = [[1.0 if h else 0.0 for h, _ in cells] for _, cells in verdicts]
+        ax.imshow(grid, cmap="RdYlGn", vmin=0.0, vmax=1.0, aspect="auto")
+        for i, (_, cells) in enumerate(verdicts):
+            for j, (_, number) in enumerate(cells):
+                ax.text(j, i, number, ha="center", va="center", fontsize=7)
+        ax.set_xticks(range(len(self.variants)), self.variants, rotation=40, ha="right", fontsize=7)
+        ax.set_yticks(range(len(verdicts)), [name for name, _ in verdicts], fontsize=7)
+        ax.set_title("which conclusions survive ±50 % (green: holds, red: fails)", fontsize=9)
+        return save_figure(fig, out / "sensitivity.png")
 
 
-def sensitivity(
-    design: SpiralDesign | None = None,
-    size: str = "default",
-    seed: int = 0,
-    progress: Progress | None = None,
-    jobs: int = 1,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> SensitivityResult:
-    """Run every measure on the baseline ``model`` and on each ±50 % variant of it (variants fan out over
-    ``jobs``)."""
-    design = design or SpiralDesign.paper_prototype()
+def _run_one(item: tuple[str, Variant, str, Conditions]) -> dict[str, Any]:
+    name, variant, size, on = item
+    return MEASURES[name][0](size, dataclasses.replace(on, model=variant.apply(on.model)))
+
+
+def sensitivity(size: str, on: Conditions) -> SensitivityResult:
+    """Run every measure at ``size`` on the baseline ``on.model`` and on each ±50 % variant of it (the
+    measures fan out over ``on.jobs``, each on one worker)."""
     vs = variants(size)
-    items = [(name, v, design, model, size, seed) for v in vs for name in MEASURES]
-    out = parallel_map(_run_one, items, jobs, progress)
+    alone = dataclasses.replace(on, jobs=1, progress=None)
+    items = [(name, v, size, alone) for v in vs for name in MEASURES]
+    out = parallel_map(_run_one, items, on.jobs, on.progress)
     measured: dict[str, dict[str, dict[str, Any]]] = {name: {} for name in MEASURES}
     for (name, v, *_), d in zip(items, out, strict=True):
         measured[name][v.label] = d
-    return SensitivityResult(size, seed, tuple(v.label for v in vs), measured)
-
-
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) around ``model``."""
-    sized(size, 0, 0, 0)
-    return sensitivity(design, size, seed, progress, jobs, model)
+    return SensitivityResult(size, on.seed, tuple(v.label for v in vs), measured)
 
 
 def _cell(cell: tuple[bool, str]) -> str:
     return f"{'holds' if cell[0] else 'FAILS'} ({cell[1]})"
 
 
-def table_rows(r: SensitivityResult) -> list[Row]:
-    """Per conclusion, the baseline's verdict, then per parameter the verdicts at x0.5 / x1.5."""
-    rows: list[Row] = []
-    index = {v: i for i, v in enumerate(r.variants)}
-    for name, cells in r.verdicts():
-        survives = "survives every variant" if all(h for h, _ in cells) else "fails in some variant"
-        rows.append((name, f"baseline: {_cell(cells[0])}", survives))
-        for p in PARAMETERS:
-            labels = [Variant(p, f).label for f in FACTORS]
-            if not any(lab in index for lab in labels):
-                continue
-            verdicts = " / ".join(_cell(cells[index[lab]]) for lab in labels if lab in index)
-            rows.append((f"  {p} x{' / x'.join(f'{f:g}' for f in FACTORS)}", verdicts, ""))
-    rows.extend(extremes_rows(r.extremes))
-    return rows
-
-
-def describe_samples(r: SensitivityResult) -> str:
-    """The result's sample counts, in words."""
-    text = (
-        f"{len(r.variants)} models (baseline, {(len(r.variants) - 1) // len(FACTORS)} parameters x "
-        f"{len(FACTORS)}) x "
-        f"{len(r.measured)} measures ({', '.join(r.measured)}) at size {r.size}"
-    )
-    strat = r.measured.get("strategy", {}).get(BASELINE)
-    if strat is not None:
-        text += f"; strategy: {strat['n']} placements x 3 arms per model"
-    return text
-
-
-def plot_figure(r: SensitivityResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``sensitivity.png``)."""
-    plt = pyplot()
-    verdicts = r.verdicts()
-    fig, ax = plt.subplots(figsize=(2 + 1.0 * len(r.variants), 1.5 + 0.5 * len(verdicts)))
-    grid = [[1.0 if h else 0.0 for h, _ in cells] for _, cells in verdicts]
-    ax.imshow(grid, cmap="RdYlGn", vmin=0.0, vmax=1.0, aspect="auto")
-    for i, (_, cells) in enumerate(verdicts):
-        for j, (_, number) in enumerate(cells):
-            ax.text(j, i, number, ha="center", va="center", fontsize=7)
-    ax.set_xticks(range(len(r.variants)), r.variants, rotation=40, ha="right", fontsize=7)
-    ax.set_yticks(range(len(verdicts)), [name for name, _ in verdicts], fontsize=7)
-    ax.set_title("which conclusions survive ±50 % (green: holds, red: fails)", fontsize=9)
-    return save_figure(fig, out / "sensitivity.png")
+EXPERIMENT = Experiment(
+    "sensitivity",
+    "±50 % on stiffness, damping, spool inertia, drive and contact friction: what survives",
+    Sizes("tiny", "default", "large"),  # the measures' own size
+    sensitivity,
+)
+"""The sensitivity experiment (:mod:`hil.experiments.catalogue`)."""

@@ -19,25 +19,15 @@ from typing import Any
 
 import numpy as np
 
-from hil.experiments.common import (
-    DEFAULT_MODEL,
-    SUCCESS_WRAP_DEG,
-    Progress,
-    Row,
-    extremes_rows,
-    pct,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import DEFAULT_MODEL, Row, extremes_rows, pct, pyplot, save_figure
 from hil.experiments.geometry import ArmFootprint, jittered_placements
-from hil.experiments.grasp import GraspOutcome, GraspSetup, grasp_trial_job
-from hil.experiments.parallel import parallel_map
+from hil.experiments.outcomes import GraspOutcomes, grasp_trials
 from hil.experiments.stats import mcnemar_exact, wilson_interval
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
-from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspOutcome, GraspSetup
+from hil.trial.scene import SUCCESS_WRAP_DEG
 
 ARMS = ("off", "on", "oracle")
 """The three arms: strategy off; on with the firmware's contact detector; on with the true contact."""
@@ -101,8 +91,8 @@ def placements(
 
 
 @dataclass(frozen=True)
-class StrategyResult:
-    """Every placement grasped by each arm (:data:`ARMS`)."""
+class StrategyResult(GraspOutcomes):
+    """Every placement grasped by each arm (:data:`ARMS`; a :class:`~hil.experiments.base.Result`)."""
 
     params: StrategyParams
     seed: int
@@ -157,11 +147,6 @@ class StrategyResult:
         """:meth:`paired` of every strategy-on arm against off."""
         return [self.paired(a) for a in self.arms() if a != "off"]
 
-    @property
-    def extremes(self) -> PhysicsExtremes:
-        """The worst physics over every trial."""
-        return worst_extremes(o.extremes for o in self.outcomes)
-
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
         arms = self.arms()
@@ -180,70 +165,118 @@ class StrategyResult:
             ],
             "penetration_m": e.penetration_m,
             "penetration_ratio": e.penetration_ratio,
-            "extremes": e.as_dict(),
-            "trials": len(self.outcomes),
-            "outcomes": [o.as_dict() for o in self.outcomes],
+            **self.outcomes_dict(),
             "params": dataclasses.asdict(self.params),
         }
+
+    def table_rows(self) -> list[Row]:
+        """The result's numbers next to the paper's, one row each."""
+        arms = self.arms()
+        label = {
+            "off": ("strategy off (plain ramp)", "only objects near the tip (Fig. S6A)"),
+            "on": ("strategy on, firmware's contact detector", "wider range than off (Fig. S6B, 3C)"),
+            "oracle": ("strategy on, true contact (oracle)", "wider range than off"),
+        }
+        rows: list[Row] = [(f"success: {label[a][0]}", _rate_text(self.rate(a)), label[a][1]) for a in arms]
+        for c in self.paired_all():
+            rows.append(
+                (
+                    f"  {c['arm']} vs off: only {c['arm']} / only off; McNemar p",
+                    f"{c['only_' + c['arm']]} / {c['only_off']}; p = {c['p_value']:.3g}",
+                    "on > off",
+                )
+            )
+        for d in self.params.diameters_m:
+            rows.append(
+                (
+                    f"  diameter {d * 1000:g} mm: " + " / ".join(arms),
+                    " / ".join(pct(self.rate(a, d)["rate"]) for a in arms),
+                    "",
+                )
+            )
+        rows.extend(extremes_rows(self.extremes))
+        return rows
+
+    def describe_samples(self) -> str:
+        """Diameters, placements, arms and grasps, in words."""
+        p = self.params
+        per_d = p.grid[0] * p.grid[1] * p.seeds
+        return (
+            f"{len(p.diameters_m)} diameters x {per_d} placements ({p.grid[0]} x {p.grid[1]} cells x "
+            f"{p.seeds} seeds) x {len(self.arms())} arms = {len(self.outcomes)} grasps "
+            f"({1000 * p.mass_kg:g} g objects; success "
+            f"= held {p.hold_s:g} s after release and wrapped >= {SUCCESS_WRAP_DEG:g}°)"
+        )
+
+    def figure(self, out: Path) -> Path:
+        """Write the figure into the directory ``out``; returns its path (``strategy.png``): per diameter,
+        each placement's outcome with the strategy on (firmware detector) against off."""
+        plt = pyplot()
+        ds = self.params.diameters_m
+        fig, axes = plt.subplots(1, len(ds), figsize=(3.8 * len(ds), 4.6), squeeze=False)
+        off = {_key(o): o.success for o in self.outcomes if arm_of(o) == "off"}
+        style = {
+            (True, True): ("o", "tab:green"),
+            (True, False): ("^", "tab:blue"),
+            (False, True): ("v", "tab:orange"),
+            (False, False): ("x", "0.6"),
+        }
+        for ax, d in zip(axes[0], ds, strict=True):
+            for o in self.outcomes:
+                s = o.setup
+                if s.diameter_m != d or arm_of(o) != "on":
+                    continue
+                marker, colour = style[(o.success, off.get(_key(o), False))]
+                ax.plot(s.x_m * 1000, s.z_m * 1000, marker=marker, color=colour, ms=7, ls="")
+                ax.add_patch(
+                    plt.Circle((s.x_m * 1000, s.z_m * 1000), d * 500, fill=False, color=colour, lw=0.5)
+                )
+            ax.plot([0, 0], [0, -223], "k-", lw=3, alpha=0.3)
+            rates = ", ".join(f"{a} {pct(self.rate(a, d)['rate'])}" for a in self.arms())
+            ax.set_title(f"d = {d * 1000:g} mm: {rates}", fontsize=8)
+            ax.set_aspect("equal")
+            ax.set_xlim(-15, 125)
+            ax.set_ylim(-235, 10)
+            ax.grid(alpha=0.3)
+            ax.set_xlabel("object centre from the arm's axis [mm]", fontsize=8)
+            ax.set_ylabel("object centre below the base [mm]", fontsize=8)
+        handles = [
+            plt.Line2D([], [], marker=m, color=c, ls="", label=lab)
+            for (m, c), lab in zip(
+                style.values(), ("both", "strategy on only", "strategy off only", "neither"), strict=True
+            )
+        ]
+        axes[0][0].legend(handles=handles, fontsize=7, loc="lower left")
+        fig.suptitle(
+            "strategy on (firmware detector) vs off: held, wrapped >= 180° (arm in grey)", fontsize=10
+        )
+        return save_figure(fig, out / "strategy.png")
 
 
 def _key(o: GraspOutcome) -> tuple[float, float, float]:
     return (o.setup.x_m, o.setup.z_m, o.setup.diameter_m)
 
 
-def strategy(
-    design: SpiralDesign | None = None,
-    params: StrategyParams | None = None,
-    seed: int = 0,
-    progress: Progress | None = None,
-    jobs: int = 1,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> StrategyResult:
+def strategy(p: StrategyParams, on: Conditions) -> StrategyResult:
     """Every placement (:func:`placements`) grasped through the firmware's GRASP mode by each arm
-    (strategy off, on, on with the contact oracle), on the plant ``model`` (Note S4, Fig. S6, Fig. 3C)."""
-    design = design or SpiralDesign.paper_prototype()
-    p = params or StrategyParams()
+    (strategy off, on, on with the contact oracle), on the plant ``on.model`` (Note S4, Fig. S6, Fig. 3C)."""
     arms = [(False, False), (True, False)] + ([(True, True)] if p.oracle else [])
     setups = [
         GraspSetup(
             x,
             z,
             d,
-            strategy_on=on,
+            strategy_on=strategy_on,
             contact_oracle=oracle,
             mass_kg=p.mass_kg,
             hold_s=p.hold_s,
-            model=model,
-            seed=seed,
+            model=on.model,
+            seed=on.seed,
         )
-        for x, z, d in placements(design, p, seed, model)
-        for on, oracle in arms
+        for x, z, d in placements(on.design, p, on.seed, on.model)
+        for strategy_on, oracle in arms
     ]
-    return StrategyResult(
-        p, seed, tuple(parallel_map(grasp_trial_job, [(s, design) for s in setups], jobs, progress))
-    )
-
-
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``.
-
-    ``tiny``: the one reference placement (a 20 mm object 40 mm out, 110 mm below the base), three arms.
-    ``default``: 3 diameters x 48 placements (4 x 4 cells x 3 seeds) x 3 arms. ``large``: 6 x 6 cells.
-    """
-    p = sized(
-        size,
-        TINY,
-        StrategyParams(),
-        StrategyParams(grid=(6, 6)),
-    )
-    return strategy(design, p, seed, progress, jobs, model)
+    return StrategyResult(p, on.seed, grasp_trials(setups, on))
 
 
 def _rate_text(r: dict[str, Any]) -> str:
@@ -251,82 +284,12 @@ def _rate_text(r: dict[str, Any]) -> str:
     return f"{pct(r['rate'])} ({r['successes']}/{r['n']}; 95 % CI {pct(lo)}-{pct(hi)})"
 
 
-def table_rows(r: StrategyResult) -> list[Row]:
-    """The result's numbers next to the paper's, one row each."""
-    arms = r.arms()
-    label = {
-        "off": ("strategy off (plain ramp)", "only objects near the tip (Fig. S6A)"),
-        "on": ("strategy on, firmware's contact detector", "wider range than off (Fig. S6B, 3C)"),
-        "oracle": ("strategy on, true contact (oracle)", "wider range than off"),
-    }
-    rows: list[Row] = [(f"success: {label[a][0]}", _rate_text(r.rate(a)), label[a][1]) for a in arms]
-    for c in r.paired_all():
-        rows.append(
-            (
-                f"  {c['arm']} vs off: only {c['arm']} / only off; McNemar p",
-                f"{c['only_' + c['arm']]} / {c['only_off']}; p = {c['p_value']:.3g}",
-                "on > off",
-            )
-        )
-    for d in r.params.diameters_m:
-        rows.append(
-            (
-                f"  diameter {d * 1000:g} mm: " + " / ".join(arms),
-                " / ".join(pct(r.rate(a, d)["rate"]) for a in arms),
-                "",
-            )
-        )
-    rows.extend(extremes_rows(r.extremes))
-    return rows
-
-
-def describe_samples(r: StrategyResult) -> str:
-    """The result's sample counts, in words."""
-    p = r.params
-    per_d = p.grid[0] * p.grid[1] * p.seeds
-    return (
-        f"{len(p.diameters_m)} diameters x {per_d} placements ({p.grid[0]} x {p.grid[1]} cells x {p.seeds} "
-        f"seeds) x {len(r.arms())} arms = {len(r.outcomes)} grasps ({1000 * p.mass_kg:g} g objects; success "
-        f"= held {p.hold_s:g} s after release and wrapped >= {SUCCESS_WRAP_DEG:g}°)"
-    )
-
-
-def plot_figure(r: StrategyResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``strategy.png``): per diameter, each
-    placement's outcome with the strategy on (firmware detector) against off."""
-    plt = pyplot()
-    ds = r.params.diameters_m
-    fig, axes = plt.subplots(1, len(ds), figsize=(3.8 * len(ds), 4.6), squeeze=False)
-    off = {_key(o): o.success for o in r.outcomes if arm_of(o) == "off"}
-    style = {
-        (True, True): ("o", "tab:green"),
-        (True, False): ("^", "tab:blue"),
-        (False, True): ("v", "tab:orange"),
-        (False, False): ("x", "0.6"),
-    }
-    for ax, d in zip(axes[0], ds, strict=True):
-        for o in r.outcomes:
-            s = o.setup
-            if s.diameter_m != d or arm_of(o) != "on":
-                continue
-            marker, colour = style[(o.success, off.get(_key(o), False))]
-            ax.plot(s.x_m * 1000, s.z_m * 1000, marker=marker, color=colour, ms=7, ls="")
-            ax.add_patch(plt.Circle((s.x_m * 1000, s.z_m * 1000), d * 500, fill=False, color=colour, lw=0.5))
-        ax.plot([0, 0], [0, -223], "k-", lw=3, alpha=0.3)
-        rates = ", ".join(f"{a} {pct(r.rate(a, d)['rate'])}" for a in r.arms())
-        ax.set_title(f"d = {d * 1000:g} mm: {rates}", fontsize=8)
-        ax.set_aspect("equal")
-        ax.set_xlim(-15, 125)
-        ax.set_ylim(-235, 10)
-        ax.grid(alpha=0.3)
-        ax.set_xlabel("object centre from the arm's axis [mm]", fontsize=8)
-        ax.set_ylabel("object centre below the base [mm]", fontsize=8)
-    handles = [
-        plt.Line2D([], [], marker=m, color=c, ls="", label=lab)
-        for (m, c), lab in zip(
-            style.values(), ("both", "strategy on only", "strategy off only", "neither"), strict=True
-        )
-    ]
-    axes[0][0].legend(handles=handles, fontsize=7, loc="lower left")
-    fig.suptitle("strategy on (firmware detector) vs off: held, wrapped >= 180° (arm in grey)", fontsize=10)
-    return save_figure(fig, out / "strategy.png")
+EXPERIMENT = Experiment(
+    "strategy",
+    "paired grasps, strategy off / on / on with true contact: Wilson intervals, McNemar (Note S4)",
+    # tiny: the one reference placement, three arms; default: 3 diameters x 48 placements (4 x 4 cells x 3
+    # seeds) x 3 arms; large: 6 x 6 cells
+    Sizes(TINY, StrategyParams(), StrategyParams(grid=(6, 6))),
+    strategy,
+)
+"""The strategy experiment (:mod:`hil.experiments.catalogue`)."""

@@ -12,24 +12,15 @@ import numpy as np
 import numpy.typing as npt
 
 from controller.config import FirmwareConfig, MappingConfig, MotorDriveConfig
-from hil.experiments.common import (
-    BASE_Z_M,
-    DEFAULT_MODEL,
-    Progress,
-    Row,
-    extremes_rows,
-    pct,
-    pyplot,
-    save_figure,
-    sized,
-    worst_extremes,
-)
+from hil.experiments.base import Conditions, Experiment, Sizes
+from hil.experiments.common import Row, extremes_rows, pct, pyplot, save_figure, worst_extremes
 from hil.experiments.geometry import Envelope
 from hil.experiments.parallel import parallel_map
-from hil.experiments.rig import direct_rig
 from hil.sim.config import ActuatorConfig, ModelConfig
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.rig import direct_rig
+from hil.trial.scene import BASE_Z_M
 
 
 @dataclass(frozen=True)
@@ -125,7 +116,8 @@ class WorkspaceRun:
 
 @dataclass(frozen=True)
 class WorkspaceResult:
-    """All designs: the share of tip samples inside ρw, and the covered share of its area."""
+    """All designs: the share of tip samples inside ρw, and the covered share of its area (a
+    :class:`~hil.experiments.base.Result`)."""
 
     params: WorkspaceParams
     seed: int
@@ -160,6 +152,95 @@ class WorkspaceResult:
             ],
             "params": dataclasses.asdict(self.params),
         }
+
+    def table_rows(self) -> list[Row]:
+        """The result's numbers next to the paper's, one row each."""
+        n = sum(x.samples for x in self.runs)
+        exact = sum(x.inside_share_exact * x.samples for x in self.runs) / n if n else math.nan
+        rows: list[Row] = [
+            ("tip samples inside ρw (all designs)", pct(self.inside_share), "reachable points lie inside ρw"),
+            ("  inside the real tip's base-first curve", pct(exact), "(ρw is for the virtual tip)"),
+        ]
+        for run in self.runs:
+            rows.append(
+                (
+                    f"taper {run.taper_deg:g}° (b = {run.b:.3f}), {run.cables} cables, {run.variant}: "
+                    "area inside ρw / exact",
+                    f"{run.envelope_area_m2 * 1e4:.0f} / {run.exact_area_m2 * 1e4:.0f} cm²",
+                    "shrinks as b grows",
+                )
+            )
+            rows.append(
+                (
+                    "  share of that area the tip reached (ρw / exact)",
+                    f"{pct(run.coverage)} / {pct(run.coverage_exact)} ({run.covered_area_m2 * 1e4:.0f} cm²)",
+                    "every point inside is reachable",
+                )
+            )
+            rows.append(
+                (
+                    "  drive time; coverage saturated",
+                    f"{run.duration_s:.0f} s; {'yes' if run.saturated else 'no (time limit)'}",
+                    "-",
+                )
+            )
+        rows.extend(extremes_rows(self.extremes))
+        return rows
+
+    def describe_samples(self) -> str:
+        """Designs, plant variants, drive time and tip samples, in words."""
+        return (
+            f"{len(self.runs)} design/plant variants x up to {self.params.duration_s:g} s of random tensions "
+            f"(until coverage saturates), "
+            f"{sum(x.samples for x in self.runs)} tip samples (every {self.params.sample_ms} ms)"
+        )
+
+    def figure(self, out: Path) -> Path:
+        """Write the figure into the directory ``out``; returns its path (``workspace.png``)."""
+        plt = pyplot()
+        rows_of = sorted({(x.cables, x.variant) for x in self.runs})
+        tapers = sorted({x.taper_deg for x in self.runs})
+        # One row of tip clouds per (cables, variant), one column per taper; the last row: coverage against
+        # time.
+        fig = plt.figure(figsize=(3.6 * len(tapers), 4.2 * len(rows_of) + 3.0))
+        grid = fig.add_gridspec(len(rows_of) + 1, len(tapers), height_ratios=[4.2] * len(rows_of) + [3.0])
+        axes = [[fig.add_subplot(grid[i, j]) for j in range(len(tapers))] for i in range(len(rows_of))]
+        cov = fig.add_subplot(grid[len(rows_of), :])
+        for run in self.runs:
+            cov.plot(
+                np.arange(1, len(run.coverage_trace) + 1),
+                100 * np.array(run.coverage_trace),
+                lw=1.0,
+                label=f"{run.cables} cables, {run.variant}, taper {run.taper_deg:g}°",
+            )
+        cov.set_xlabel("drive time [s]", fontsize=7)
+        cov.set_ylabel("share of the exact envelope reached [%]", fontsize=7)
+        cov.grid(alpha=0.3)
+        cov.legend(fontsize=6, ncol=3)
+        cov.tick_params(labelsize=7)
+        for run in self.runs:
+            ax = axes[rows_of.index((run.cables, run.variant))][tapers.index(run.taper_deg)]
+            b = np.array(run.boundary)
+            ax.plot(np.array(run.u_m) * 1000, (np.array(run.z_m) - BASE_Z_M) * 1000, ".", ms=1.2, alpha=0.5)
+            ax.plot(b[:, 0] * 1000, (b[:, 1] - BASE_Z_M) * 1000, "r-", lw=1.2, label="ρw (Table S1)")
+            e = np.array(run.exact_boundary)
+            ax.plot(e[:, 0] * 1000, (e[:, 1] - BASE_Z_M) * 1000, "g-", lw=1.0, label="real tip, base first")
+            ax.plot([0], [0], "k^", ms=6, label="base")
+            ax.set_title(
+                f"taper {run.taper_deg:g}°, b={run.b:.3f}, {run.cables} cables, {run.variant}\n"
+                f"inside ρw {pct(run.inside_share)}, exact {pct(run.inside_share_exact)}; "
+                f"reached {pct(run.coverage_exact)} of the exact area",
+                fontsize=8,
+            )
+            ax.set_aspect("equal")
+            ax.set_xlim(-20, 280)
+            ax.grid(alpha=0.3)
+            ax.set_xlabel("distance from the arm's axis [mm]", fontsize=7)
+            ax.set_ylabel("height above the base [mm]", fontsize=7)
+            ax.tick_params(labelsize=7)
+        axes[0][0].legend(fontsize=7, loc="lower right")
+        fig.suptitle("workspace: tip samples under random cable tensions vs. the envelope ρw", fontsize=10)
+        return save_figure(fig, out / "workspace.png")
 
 
 def _random_tensions(rng: np.random.Generator, p: WorkspaceParams) -> npt.NDArray[np.float64]:
@@ -276,132 +357,31 @@ def _workspace_run(args: tuple[float, int, str, WorkspaceParams, int, ModelConfi
     )
 
 
-def workspace(
-    params: WorkspaceParams | None = None,
-    seed: int = 0,
-    progress: Progress | None = None,
-    jobs: int = 1,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> WorkspaceResult:
-    """Random per-cable tensions through the firmware (DIRECT mode) on arms of three taper angles, on the
-    plant ``model`` and its variants (Fig. 2E: a 2-cable arm with gravity off), each until its coverage of
-    the exact envelope saturates; tip samples against the involute envelope ρw (Note S2, Fig. 2E / S4).
+def workspace(p: WorkspaceParams, on: Conditions) -> WorkspaceResult:
+    """Random per-cable tensions through the firmware (DIRECT mode) on arms of three taper angles (not
+    ``on.design``), on the plant ``on.model`` and its variants (Fig. 2E: a 2-cable arm with gravity off), each
+    until its coverage of the exact envelope saturates; tip samples against the involute envelope ρw
+    (Note S2, Fig. 2E / S4).
 
     Raises:
         ValueError: an unknown variant.
     """
-    p = params or WorkspaceParams()
+    seed, model = on.seed, on.model
     for v in p.variants:
         variant_model(model, v)
     items = [(taper, c, v, p, seed, model) for taper in p.tapers_deg for c in p.cables for v in p.variants]
-    runs = parallel_map(_workspace_run, items, jobs, progress)
+    runs = parallel_map(_workspace_run, items, on.jobs, on.progress)
     return WorkspaceResult(p, seed, tuple(runs))
 
 
-def run_at_size(
-    design: SpiralDesign,
-    size: str,
-    seed: int,
-    progress: Progress | None,
-    jobs: int,
-    model: ModelConfig = DEFAULT_MODEL,
-) -> Any:
-    """Run the experiment at ``size`` (see :data:`~hil.experiments.common.SIZES`) on ``model``."""
-    p = sized(
-        size,
+EXPERIMENT = Experiment(
+    "workspace",
+    "random cable tensions on 2- and 3-cable arms of three tapers vs. the envelope ρw (Note S2)",
+    Sizes(
         WorkspaceParams(tapers_deg=(6.5,), duration_s=2.0, variants=("gravity-off",), saturate_window_s=1.0),
         WorkspaceParams(),
         WorkspaceParams(cables=(2, 3), duration_s=600.0, saturate_gain=0.005),
-    )
-    return workspace(p, seed, progress, jobs, model)
-
-
-def table_rows(r: WorkspaceResult) -> list[Row]:
-    """The result\'s numbers next to the paper\'s, one row each."""
-    n = sum(x.samples for x in r.runs)
-    exact = sum(x.inside_share_exact * x.samples for x in r.runs) / n if n else math.nan
-    rows: list[Row] = [
-        ("tip samples inside ρw (all designs)", pct(r.inside_share), "reachable points lie inside ρw"),
-        ("  inside the real tip's base-first curve", pct(exact), "(ρw is for the virtual tip)"),
-    ]
-    for run in r.runs:
-        rows.append(
-            (
-                f"taper {run.taper_deg:g}° (b = {run.b:.3f}), {run.cables} cables, {run.variant}: "
-                "area inside ρw / exact",
-                f"{run.envelope_area_m2 * 1e4:.0f} / {run.exact_area_m2 * 1e4:.0f} cm²",
-                "shrinks as b grows",
-            )
-        )
-        rows.append(
-            (
-                "  share of that area the tip reached (ρw / exact)",
-                f"{pct(run.coverage)} / {pct(run.coverage_exact)} ({run.covered_area_m2 * 1e4:.0f} cm²)",
-                "every point inside is reachable",
-            )
-        )
-        rows.append(
-            (
-                "  drive time; coverage saturated",
-                f"{run.duration_s:.0f} s; {'yes' if run.saturated else 'no (time limit)'}",
-                "-",
-            )
-        )
-    rows.extend(extremes_rows(r.extremes))
-    return rows
-
-
-def describe_samples(r: WorkspaceResult) -> str:
-    """The result\'s sample counts, in words."""
-    return (
-        f"{len(r.runs)} design/plant variants x up to {r.params.duration_s:g} s of random tensions "
-        f"(until coverage saturates), "
-        f"{sum(x.samples for x in r.runs)} tip samples (every {r.params.sample_ms} ms)"
-    )
-
-
-def plot_figure(r: WorkspaceResult, out: Path) -> Path:
-    """Write the figure into the directory ``out``; returns its path (``workspace.png``)."""
-    plt = pyplot()
-    rows_of = sorted({(x.cables, x.variant) for x in r.runs})
-    tapers = sorted({x.taper_deg for x in r.runs})
-    # One row of tip clouds per (cables, variant), one column per taper; the last row: coverage against time.
-    fig = plt.figure(figsize=(3.6 * len(tapers), 4.2 * len(rows_of) + 3.0))
-    grid = fig.add_gridspec(len(rows_of) + 1, len(tapers), height_ratios=[4.2] * len(rows_of) + [3.0])
-    axes = [[fig.add_subplot(grid[i, j]) for j in range(len(tapers))] for i in range(len(rows_of))]
-    cov = fig.add_subplot(grid[len(rows_of), :])
-    for run in r.runs:
-        cov.plot(
-            np.arange(1, len(run.coverage_trace) + 1),
-            100 * np.array(run.coverage_trace),
-            lw=1.0,
-            label=f"{run.cables} cables, {run.variant}, taper {run.taper_deg:g}°",
-        )
-    cov.set_xlabel("drive time [s]", fontsize=7)
-    cov.set_ylabel("share of the exact envelope reached [%]", fontsize=7)
-    cov.grid(alpha=0.3)
-    cov.legend(fontsize=6, ncol=3)
-    cov.tick_params(labelsize=7)
-    for run in r.runs:
-        ax = axes[rows_of.index((run.cables, run.variant))][tapers.index(run.taper_deg)]
-        b = np.array(run.boundary)
-        ax.plot(np.array(run.u_m) * 1000, (np.array(run.z_m) - BASE_Z_M) * 1000, ".", ms=1.2, alpha=0.5)
-        ax.plot(b[:, 0] * 1000, (b[:, 1] - BASE_Z_M) * 1000, "r-", lw=1.2, label="ρw (Table S1)")
-        e = np.array(run.exact_boundary)
-        ax.plot(e[:, 0] * 1000, (e[:, 1] - BASE_Z_M) * 1000, "g-", lw=1.0, label="real tip, base first")
-        ax.plot([0], [0], "k^", ms=6, label="base")
-        ax.set_title(
-            f"taper {run.taper_deg:g}°, b={run.b:.3f}, {run.cables} cables, {run.variant}\n"
-            f"inside ρw {pct(run.inside_share)}, exact {pct(run.inside_share_exact)}; "
-            f"reached {pct(run.coverage_exact)} of the exact area",
-            fontsize=8,
-        )
-        ax.set_aspect("equal")
-        ax.set_xlim(-20, 280)
-        ax.grid(alpha=0.3)
-        ax.set_xlabel("distance from the arm's axis [mm]", fontsize=7)
-        ax.set_ylabel("height above the base [mm]", fontsize=7)
-        ax.tick_params(labelsize=7)
-    axes[0][0].legend(fontsize=7, loc="lower right")
-    fig.suptitle("workspace: tip samples under random cable tensions vs. the envelope ρw", fontsize=10)
-    return save_figure(fig, out / "workspace.png")
+    ),
+    workspace,
+)
+"""The workspace experiment (:mod:`hil.experiments.catalogue`)."""

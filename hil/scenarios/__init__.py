@@ -1,6 +1,6 @@
 """Scenarios: scripted runs of the virtual board, each with measured checks, one module each.
 
-A scenario (:class:`~hil.scenarios.base.Scenario`) is a task with a plan and checks. :func:`run_scenario`
+A scenario (:class:`~hil.scenarios.base.Scenario`) is an episode with a plan and checks. :func:`run_scenario`
 runs it in lockstep through the one loop (:class:`~hil.environment.Environment`) and is a pure function of
 (scenario name, design, seed, extra faults): picklable inputs, a picklable
 :class:`~hil.run_record.ScenarioResult` out, no global state, so campaigns can fan out over a process pool or
@@ -143,7 +143,7 @@ def run_scenario(
     try:
         env = Environment(
             config,
-            task=scenario,
+            episode=scenario,
             faults=plan.faults,
             radio=RadioScript(plan.radio),
             host_script=plan.host,

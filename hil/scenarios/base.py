@@ -1,6 +1,6 @@
-"""What every scenario is made of: a plan, a task, and checks written once for lockstep and port runs.
+"""What every scenario is made of: a plan, an episode, and checks written once for lockstep and port runs.
 
-A scenario is a :class:`~hil.environment.Task` with a :meth:`Scenario.plan` (the radio script, the host's
+A scenario is an :class:`~hil.environment.Episode` with a :meth:`Scenario.plan` (the radio script, the host's
 commands, the faults, the firmware settings, the objects in the scene) and :meth:`Scenario.checks`, which
 turn a :class:`~hil.run_record.RunRecord` into measured :class:`~hil.run_record.Check` values. The same checks
 judge a lockstep run and a run against a port: every window is taken from the plan (fault windows, radio
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar, Final
 
 from controller.config import FailsafeConfig, FirmwareConfig
-from hil.environment import Task
+from hil.environment import Episode
 from hil.faults import Fault, FaultKind
 from hil.run_record import TICK_US, Check, RunRecord
 from hil.sim.config import ObjectConfig
@@ -83,7 +83,7 @@ class Plan:
     drone: DroneMotion | None = None
 
 
-class Scenario(Task, ABC):
+class Scenario(Episode, ABC):
     """A named scenario: what it plans, what it checks, and (optionally) what it does around each tick.
 
     One instance serves one run (its hooks may keep state). Class attributes describe it in the catalogue.

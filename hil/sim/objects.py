@@ -97,10 +97,7 @@ class SceneObjects:
             KeyError: no free object of that name (fixed objects are always held).
             ValueError: bad vector.
         """
-        if name not in self.supports:
-            raise KeyError(
-                f"no free object named {name!r}; free objects: {', '.join(self.supports) or 'none'}"
-            )
+        mocap, eq = self._support(name)
         if pos_m is not None or quat_wxyz is not None:
             here = self.object_pose(name)
             pos: Sequence[float] = here.pos_m.tolist() if pos_m is None else pos_m
@@ -108,15 +105,14 @@ class SceneObjects:
             self.set_object_pose(name, pos, quat)
         else:
             mujoco.mj_kinematics(self._m, self._d)  # xpos after mj_step lags qpos by one step
-        mocap, eq = self.supports[name]
         d = self._d
         body = self.bodies[name]
         d.mocap_pos[mocap] = d.xpos[body]
         d.mocap_quat[mocap] = d.xquat[body]
         d.eq_active[eq] = 1
 
-    def release_object(self, name: str) -> None:
-        """Take a held free object off its support (it keeps its velocity, zero if it was held).
+    def _support(self, name: str) -> tuple[int, int]:
+        """The mocap body and the weld of a free object's support.
 
         Raises:
             KeyError: no free object of that name.
@@ -125,7 +121,15 @@ class SceneObjects:
             raise KeyError(
                 f"no free object named {name!r}; free objects: {', '.join(self.supports) or 'none'}"
             )
-        self._d.eq_active[self.supports[name][1]] = 0
+        return self.supports[name]
+
+    def release_object(self, name: str) -> None:
+        """Take a held free object off its support (it keeps its velocity, zero if it was held).
+
+        Raises:
+            KeyError: no free object of that name.
+        """
+        self._d.eq_active[self._support(name)[1]] = 0
 
     def object_held(self, name: str) -> bool:
         """Whether a free object is on its support (fixed objects: always True).
@@ -154,10 +158,7 @@ class SceneObjects:
             KeyError: no free object of that name.
             ValueError: bad vector.
         """
-        if name not in self.supports:
-            raise KeyError(
-                f"no free object named {name!r}; free objects: {', '.join(self.supports) or 'none'}"
-            )
+        self._support(name)
         lin = finite_vector("linear_m_s", linear_m_s, 3)
         ang = finite_vector("angular_rad_s", angular_rad_s, 3)
         m, d = self._m, self._d
@@ -175,10 +176,7 @@ class SceneObjects:
             KeyError: no free object of that name.
             ValueError: bad vector.
         """
-        if name not in self.supports:
-            raise KeyError(
-                f"no free object named {name!r}; free objects: {', '.join(self.supports) or 'none'}"
-            )
+        self._support(name)
         force = finite_vector("force_n", force_n, 3)
         self._d.xfrc_applied[self.bodies[name], :3] = force
 

@@ -1,17 +1,17 @@
-"""hil.environment: the one lockstep loop calls a task's hooks in order and keeps the run record."""
+"""hil.environment: the one lockstep loop calls an episode's hooks in order and keeps the run record."""
 
 from __future__ import annotations
 
 import pytest
 
 from hil.board import BoardConfig
-from hil.environment import Environment, Task
+from hil.environment import Environment, Episode
 from hil.radio import RadioScript
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Mode, Phase
 
 
-class _Spy(Task):
+class _Spy(Episode):
     def __init__(self) -> None:
         self.calls: list[tuple[str, int]] = []
 
@@ -31,7 +31,7 @@ def _radio() -> RadioScript:
 
 def test_hooks_run_around_every_tick_in_order() -> None:
     spy = _Spy()
-    with Environment(BoardConfig(), task=spy, radio=_radio()) as env:
+    with Environment(BoardConfig(), episode=spy, radio=_radio()) as env:
         assert env.run(3000) == 3
     assert spy.calls == [
         ("initialize", 0),

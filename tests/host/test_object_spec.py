@@ -95,12 +95,11 @@ def test_the_default_object_is_grasped_from_the_default_start() -> None:
     """The default demo, in lockstep: the arm hangs straight, the right lever goes UP (GRASP mode: the
     arm packs), the grasp is asked for 3 s later; the strategy reaches HOLD wrapped around the pole."""
     from controller.config import FirmwareConfig
-    from hil.experiments import Rig
-    from hil.experiments.common import MS, S
-    from hil.experiments.rig import rc_frame
     from hil.sim.config import ModelConfig
     from hil.sim.objects import contact_units, contact_wrap_deg
     from hil.sim.spiral import SpiralDesign
+    from hil.trial.rig import Rig, rc_frame
+    from hil.trial.scene import MS, S
     from protocol.dbus import Lever
     from protocol.messages import GraspState
 

@@ -9,51 +9,26 @@ import pickle
 import pytest
 
 from controller.config import FirmwareConfig
-from hil.experiments import DynamicParams, DynamicResult
-from hil.experiments.common import BOARD_MODEL, DEFAULT_MODEL, FAR_M, MS, OBJ
-from hil.experiments.dynamic import TINY, _clear_start_offset_m, _clearance_m, dynamic
-from hil.experiments.dynamic_rig import (
-    paper_arm_45cm,
-    scaled_model,
-    with_contact_timeconst,
-    with_timestep,
+from hil.experiments.base import Conditions
+from hil.experiments.common import BOARD_MODEL, DEFAULT_MODEL
+from hil.experiments.dynamic import (
+    TINY,
+    DynamicParams,
+    DynamicResult,
+    _clear_start_offset_m,
+    _clearance_m,
+    dynamic,
 )
-from hil.experiments.rig import direct_rig, world_m
-from hil.experiments.sensitivity import (
-    MEASURES,
-    PARAMETERS,
-    SensitivityResult,
-    Variant,
-    packing_measure,
-    sensitivity,
-    variants,
-)
+from hil.experiments.sensitivity import MEASURES, SensitivityResult, packing_measure, sensitivity, variants
 from hil.sim.config import ModelConfig, ObjectConfig
 from hil.sim.spiral import SpiralDesign
-
-
-def test_the_45cm_arm_is_the_papers_two_cable_arm() -> None:
-    d = paper_arm_45cm()
-    assert d.cables == 2
-    assert d.units == 24
-    assert abs(d.length_m - 0.45) < 0.02  # 0.45 m rounded to whole 30° units
-    assert d.tip_width_m == pytest.approx(0.010)
-    assert math.degrees(d.taper_rad) == pytest.approx(10.0)
-
-
-def test_scaling_to_the_prototype_itself_changes_nothing_and_grows_with_size() -> None:
-    proto = SpiralDesign.paper_prototype()
-    m = ModelConfig()
-    assert scaled_model(m, proto, proto) == m
-    big = scaled_model(m, paper_arm_45cm(), proto)
-    # base joint about 2.8 times as wide: stiffness x its cube; mass x the volume ratio (> 10)
-    assert big.arm.base_stiffness_nm_per_rad / m.arm.base_stiffness_nm_per_rad == pytest.approx(
-        (paper_arm_45cm().unit_widths_m()[0][1] / proto.unit_widths_m()[0][1]) ** 3
-    )
-    assert big.arm.total_mass_kg > 10 * m.arm.total_mass_kg
-    assert big.arm.damping_ratio == m.arm.damping_ratio and big.motor == m.motor
-    assert with_timestep(m, 0.00025).solver.timestep_s == 0.00025
-    assert with_contact_timeconst(m, 0.0005).contact.timeconst_s == 0.0005
+from hil.sim.variants import PARAMETERS, Variant
+from hil.trial.arm_45cm import (
+    paper_arm_45cm,
+    scaled_model,
+)
+from hil.trial.rig import direct_rig
+from hil.trial.scene import FAR_M, MS, OBJ, world_m
 
 
 def test_contacts_are_twice_the_first_step_and_the_same_at_every_step() -> None:
@@ -85,7 +60,7 @@ def test_a_throw_starts_clear_of_the_hook() -> None:
 
 @pytest.fixture(scope="module")
 def tiny_dynamic() -> DynamicResult:
-    return dynamic(TINY, seed=1)
+    return dynamic(TINY, Conditions(seed=1))
 
 
 def test_dynamic_tiny_reports_every_trial_and_the_convergence(tiny_dynamic: DynamicResult) -> None:
@@ -130,15 +105,15 @@ def test_sensitivity_variants_change_one_parameter_each() -> None:
 
 def test_packing_measure_runs_on_the_given_model() -> None:
     proto = SpiralDesign.paper_prototype()
-    soft = packing_measure(proto, Variant("base stiffness", 0.5).apply(ModelConfig()), "tiny", 0, 1)
-    stiff = packing_measure(proto, Variant("base stiffness", 1.5).apply(ModelConfig()), "tiny", 0, 1)
+    soft = packing_measure("tiny", Conditions(proto, Variant("base stiffness", 0.5).apply(ModelConfig())))
+    stiff = packing_measure("tiny", Conditions(proto, Variant("base stiffness", 1.5).apply(ModelConfig())))
     # the base joint sets the packing tension: a stiffer base needs more
     assert soft["pack_tension_n"] < stiff["pack_tension_n"]
 
 
 def test_sensitivity_tiny_table_and_json() -> None:
     # The table's and the JSON's shape, not the physics: the board's 1 ms step keeps it quick.
-    r = sensitivity(size="tiny", seed=0, jobs=1, model=BOARD_MODEL)
+    r = sensitivity("tiny", Conditions(model=BOARD_MODEL))
     r = pickle.loads(pickle.dumps(r))
     assert isinstance(r, SensitivityResult)
     d = r.as_dict()

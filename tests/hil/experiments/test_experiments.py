@@ -3,35 +3,27 @@
 from __future__ import annotations
 
 import json
-import math
 import pickle
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from controller.config import FirmwareConfig
 from hil.cli.main import main
-from hil.experiments import (
-    EXPERIMENTS,
-    GraspSetup,
-    PackingResult,
-    Rig,
-    StrategyParams,
-    StrategyResult,
-    WorkspaceResult,
-    grasp_trial,
-    run_experiment,
-)
+from hil.experiments.base import Conditions
+from hil.experiments.catalogue import EXPERIMENTS, run_experiment
 from hil.experiments.contact import ContactParams, ReachTrial, contact_jobs
-from hil.experiments.dynamic_rig import paper_arm_45cm, scaled_model
+from hil.experiments.convergence import ConvergenceResult
 from hil.experiments.geometry import ArmFootprint
-from hil.experiments.sensitivity import Variant
-from hil.experiments.strategy import arm_of, placements
-from hil.sim.config import ArmConfig, ModelConfig, ObjectConfig
+from hil.experiments.packing import PackingResult
+from hil.experiments.strategy import StrategyParams, StrategyResult, arm_of, placements
+from hil.experiments.workspace import WorkspaceResult
+from hil.sim.config import ArmConfig, ModelConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.sim.variants import Variant
+from hil.trial.arm_45cm import paper_arm_45cm, scaled_model
 
 STIFFER = ModelConfig(arm=ArmConfig(base_stiffness_nm_per_rad=1.2 * ArmConfig().base_stiffness_nm_per_rad))
 """A non-default model: every experiment must run on the model it is given."""
@@ -76,11 +68,10 @@ def test_each_experiment_runs_tiny_on_a_given_model_reports_and_plots(
     assert again.as_dict()["seed"] == 3
     d = result.as_dict()
     json.dumps(d)  # JSON-ready (NaN allowed here; the CLI maps it to null)
-    exp = EXPERIMENTS[name]
-    rows = exp.rows(result)
+    rows = result.table_rows()
     assert rows and all(len(r) == 3 for r in rows)
-    assert exp.samples(result)
-    png = exp.plot(result, tmp_path)
+    assert result.describe_samples()
+    png = result.figure(tmp_path)
     assert png.exists() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert d["extremes"]["tension_n"] > 0.0  # every experiment reports the worst physics of its trials
     assert any("penetration" in r[0] for r in rows)
@@ -160,22 +151,9 @@ def test_strategy_placements_are_jittered_paired_and_clear_of_the_packed_coil() 
     assert spots == placements(design, p, seed=0) != placements(design, p, seed=1)
 
 
-def test_the_rig_runs_the_given_model_with_the_objects_appended() -> None:
-    model = ModelConfig(arm=ArmConfig(base_stiffness_nm_per_rad=0.3))
-    obj = ObjectConfig("can", radius_m=0.01, length_m=0.05, pos_m=(0.5, 0.0, 0.5), mass_kg=0.02)
-    rig = Rig(SpiralDesign.paper_prototype(), FirmwareConfig(), [], objects=(obj,), model=model)
-    used = rig.plant.config.model
-    assert used.arm.base_stiffness_nm_per_rad == 0.3 and used.objects == (obj,)
-    rig.close()
-
-
-def test_an_object_out_of_reach_is_a_failed_grasp() -> None:
-    out = grasp_trial(GraspSetup(0.20, -0.05, 0.02, strategy_on=True))
-    assert out.state == "FAILED" and not out.held and math.isnan(out.t_hold_s)
-
-
 def test_convergence_tiny_measures_each_step_and_the_finer_step_meets_the_penetration_goal() -> None:
     r = run_experiment("convergence", size="tiny")
+    assert isinstance(r, ConvergenceResult)
     assert [s.timestep_s for s in r.steps] == [0.001, 0.0005]
     for s in r.steps:
         # the stated contacts' goal (docs/plant.md): under 1 mm for a pen pressed by a 54 N curl
@@ -185,7 +163,7 @@ def test_convergence_tiny_measures_each_step_and_the_finer_step_meets_the_penetr
     # (reported as such in docs/plant.md); the 0.5 ms step meets it.
     assert r.steps[0].wrap_penetration_m < 2e-3
     assert r.steps[1].wrap_penetration_m < 1e-3
-    rows = EXPERIMENTS["convergence"].rows(r)
+    rows = r.table_rows()
     assert rows[0][1] == "1 ms | 0.5 ms"
 
 
@@ -201,7 +179,7 @@ def test_contact_trial_kinds() -> None:
 def test_contact_reaches_at_the_strategys_placements() -> None:
     design = SpiralDesign.paper_prototype()
     spots = placements(design, StrategyParams(), seed=0)
-    jobs = contact_jobs(design, ContactParams(), seed=0)
+    jobs = contact_jobs(ContactParams(), Conditions(design, seed=0))
     assert [(s.x_m, s.z_m, s.diameter_m) for s, det, _ in jobs[::2]] == spots
     assert {det for _, det, _ in jobs} == {"old", "new"}
 

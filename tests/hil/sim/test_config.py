@@ -117,7 +117,7 @@ def test_with_physics_sets_the_step_and_the_stiffest_constraints_it_allows() -> 
 
 
 def test_experiments_run_fine_physics_but_convergence_the_boards() -> None:
-    from hil.experiments import EXPERIMENTS
+    from hil.experiments.catalogue import EXPERIMENTS
     from hil.experiments.common import BOARD_MODEL
 
     for name, exp in EXPERIMENTS.items():

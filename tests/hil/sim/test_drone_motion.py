@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hil.board import BoardConfig
-from hil.environment import Environment, Task
+from hil.environment import Environment, Episode
 from hil.sim.drone_motion import AccelSegment, DroneMotion, accelerate_and_brake
 
 MS = 1000
@@ -73,7 +73,7 @@ def test_bad_profiles_are_refused_in_one_line(make: object, message: str) -> Non
     assert message in text and "\n" not in text
 
 
-class _Gravity(Task):
+class _Gravity(Episode):
     """Records the plant's gravity in force during each tick (set before the tick's physics)."""
 
     def __init__(self) -> None:
@@ -87,7 +87,7 @@ class _Gravity(Task):
 def test_the_loop_applies_the_acceleration_in_plant_time_and_holds_the_pose() -> None:
     spy = _Gravity()
     motion = DroneMotion((AccelSegment(3 * MS, 2 * MS, (8.0, -1.0, 2.0)),))
-    with Environment(BoardConfig(), task=spy, drone=motion) as env:
+    with Environment(BoardConfig(), episode=spy, drone=motion) as env:
         pose = env.board.plant.drone_pose()
         g = tuple(float(v) for v in env.board.plant.mj_model.opt.gravity)
         env.run(7 * MS)

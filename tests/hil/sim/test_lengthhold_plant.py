@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from controller.config import FirmwareConfig
-from hil.experiments.common import MS
-from hil.experiments.rig import direct_rig
 from hil.sim.spiral import SpiralDesign
+from hil.trial.rig import direct_rig
+from hil.trial.scene import MS
 from protocol.messages import HOLD_HERE, HOLD_UNCHANGED, CommandCode
 
 # The cascade's stiffness before its integral acts is speed_kp * pos_kp + speed_ki = 4500 N/m; cable 2

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hil.errors import HilError, PlantDivergedError
-from hil.experiments import fit_log_spiral
+from hil.experiments.geometry import fit_log_spiral
 from hil.sim.config import ArmConfig, ModelConfig, MotorConfig, ObjectConfig, SolverConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import PAPER_PROTOTYPE, SpiralDesign

@@ -1,5 +1,5 @@
-"""One grasp: the firmware's GRASP state machine against one object, measured (shared by strategy,
-grasp-range and load)."""
+"""One grasp: the firmware's GRASP state machine against one object, measured (the strategy, contact,
+grasp-range and load experiments' trial, and a campaign's grasp run)."""
 
 from __future__ import annotations
 
@@ -11,12 +11,21 @@ from typing import Any
 import numpy as np
 
 from controller.config import FirmwareConfig
-from hil.experiments.common import FAR_M, HELD_DROP_MM, HELD_SPEED_M_S, MS, OBJ, SUCCESS_WRAP_DEG, S
-from hil.experiments.rig import Rig, rc_frame, world_m
-from hil.sim.config import ModelConfig, ObjectConfig
+from hil.sim.config import ModelConfig
 from hil.sim.objects import contact_units, contact_wrap_deg
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes
+from hil.trial.rig import Rig, rc_frame
+from hil.trial.scene import (
+    HELD_DROP_MM,
+    HELD_SPEED_M_S,
+    MS,
+    OBJ,
+    SUCCESS_WRAP_DEG,
+    S,
+    target_object,
+    world_m,
+)
 from protocol.dbus import Lever
 from protocol.messages import GraspState
 
@@ -87,7 +96,7 @@ class GraspOutcome:
             least 2 units, is less than :data:`HELD_DROP_MM` below its release height and slower than
             :data:`HELD_SPEED_M_S`.
         success: the grasp criterion fixed before the experiments ran: ``held`` and ``wrap_deg`` at
-            least :data:`~hil.experiments.common.SUCCESS_WRAP_DEG` (half the circumference).
+            least :data:`~hil.trial.scene.SUCCESS_WRAP_DEG` (half the circumference).
         max_current_raw: largest |current| sent to an ESC.
         extremes: the worst physics of the whole trial (:meth:`hil.sim.plant.Plant.extremes`).
         load_n: with a load ramp, the force at which the object came out (moved more than
@@ -132,14 +141,7 @@ def grasp_rig(setup: GraspSetup, design: SpiralDesign) -> Rig:
     packed if the strategy is on, the object waiting out of reach on its support."""
     fw = setup.firmware or grasp_firmware()
     fw = fw.replaced(grasp_strategy_on=setup.strategy_on, grasp_direction_deg=0.0)
-    obj = ObjectConfig(
-        OBJ,
-        radius_m=setup.diameter_m / 2,
-        length_m=setup.length_m,
-        pos_m=FAR_M,
-        mass_kg=setup.mass_kg,
-        friction=setup.object_friction,
-    )
+    obj = target_object(setup.diameter_m / 2, setup.length_m, setup.mass_kg, setup.object_friction)
     rig = Rig(
         design,
         fw,

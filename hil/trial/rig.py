@@ -1,5 +1,5 @@
-"""The rig: a virtual board (firmware + plant + radio) in lockstep with a scripted host, and what the
-experiments measure on its plant (contacts, wrap angle)."""
+"""The rig: a virtual board (firmware + plant + radio) in lockstep with a scripted host, built from what a
+trial varies, and the same rig put in DIRECT mode for a host that commands cable tensions."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ from collections.abc import Sequence
 from controller.config import FirmwareConfig
 from hil.board import BoardConfig
 from hil.environment import Environment
-from hil.experiments.common import BASE_Z_M, MS
 from hil.radio import RadioScript
 from hil.sim.config import ModelConfig, ObjectConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PlantConfig
+from hil.trial.scene import MS
 from protocol.c610 import MotorFeedback
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Command, CommandCode, Mode
@@ -45,7 +45,7 @@ class _ThreeMotors:
 
 
 class Rig(Environment):
-    """The experiments' environment: a virtual board (firmware + plant + radio) and a scripted host in
+    """A trial's environment: a virtual board (firmware + plant + radio) and a scripted host in
     the one lockstep loop, built from what an experiment varies.
 
     Args:
@@ -121,8 +121,3 @@ def direct_rig(
         if rig.firmware.mode == Mode.DIRECT:
             return rig
     raise RuntimeError("the firmware did not enter DIRECT mode")
-
-
-def world_m(x_m: float, z_m: float) -> tuple[float, float, float]:
-    """World position of a point given relative to the arm's base in the x-z plane."""
-    return (x_m, 0.0, BASE_Z_M + z_m)

@@ -1,7 +1,7 @@
 """The 45 cm arm of Fig. S11 and the model it runs on: the prototype's model scaled to it
 (:func:`scaled_model`) at a chosen physics step (:func:`with_timestep`) and contact time constant
 (:func:`with_contact_timeconst`); the dynamic experiment builds its
-rig with :func:`~hil.experiments.rig.direct_rig` on that model."""
+rig with :func:`~hil.trial.rig.direct_rig` on that model."""
 
 from __future__ import annotations
 

@@ -1,0 +1,37 @@
+"""What the grasp experiments (strategy, grasp-range, load) share: their grasps run over the workers, and
+the part of their results that is the grasp outcomes."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hil.experiments.base import Conditions
+from hil.experiments.common import worst_extremes
+from hil.experiments.parallel import parallel_map
+from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_trial_job
+
+
+def grasp_trials(setups: list[GraspSetup], on: Conditions) -> tuple[GraspOutcome, ...]:
+    """:func:`~hil.trial.grasp.grasp_trial` of every setup on ``on.design``, over ``on.jobs`` workers."""
+    return tuple(parallel_map(grasp_trial_job, [(s, on.design) for s in setups], on.jobs, on.progress))
+
+
+class GraspOutcomes:
+    """The part of a result that is its grasp outcomes (a base of the results' dataclasses)."""
+
+    outcomes: tuple[GraspOutcome, ...]
+    """Every grasp, in the order its setup was made."""
+
+    @property
+    def extremes(self) -> PhysicsExtremes:
+        """The worst physics over every grasp."""
+        return worst_extremes(o.extremes for o in self.outcomes)
+
+    def outcomes_dict(self) -> dict[str, Any]:
+        """The grasps, JSON-ready: the worst physics, how many, and each outcome (the tail of ``as_dict``)."""
+        return {
+            "extremes": self.extremes.as_dict(),
+            "trials": len(self.outcomes),
+            "outcomes": [o.as_dict() for o in self.outcomes],
+        }
