@@ -97,3 +97,48 @@ def test_readme_links_resolve() -> None:
     for target in re.findall(r"\]\(([^)#]+)\)", README):
         if "://" not in target:
             assert (ROOT / target).exists(), target
+
+
+_PACKAGES = ("protocol", "controller", "hil", "host")
+
+
+def _names_in_backticks(text: str) -> set[str]:
+    """Dotted names of the project's packages quoted in a page (``hil.sim.plant``, ``host.link.client``)."""
+    pattern = r"`((?:" + "|".join(_PACKAGES) + r")(?:\.[A-Za-z_][A-Za-z0-9_]*)+)"
+    return set(re.findall(pattern, text))
+
+
+def _resolves(dotted: str) -> bool:
+    """The longest prefix that is a module exists, and the rest names attributes of it."""
+    import importlib
+
+    parts = dotted.split(".")
+    for n in range(len(parts), 0, -1):
+        try:
+            obj: object = importlib.import_module(".".join(parts[:n]))
+        except ModuleNotFoundError:
+            continue
+        for attr in parts[n:]:
+            if not hasattr(obj, attr):
+                return False
+            obj = getattr(obj, attr)
+        return True
+    return False
+
+
+def test_the_architecture_page_names_only_what_exists_and_every_module() -> None:
+    """docs/architecture.md: every dotted name it quotes resolves, and every module of the four packages is
+    named there (by its dotted name, or by its last part in a row that groups a package's sections)."""
+    doc = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    stale = sorted(n for n in _names_in_backticks(doc) if not _resolves(n))
+    assert not stale, f"docs/architecture.md names what does not exist: {stale}"
+    missing = []
+    for package in _PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            rel = path.relative_to(ROOT).with_suffix("")
+            if rel.name in ("__init__", "__main__") or rel.parts[:2] == ("hil", "scenarios"):
+                continue
+            dotted = ".".join(rel.parts)
+            if f"`{dotted}`" not in doc and f"`{rel.name}`" not in doc and f"`{dotted}." not in doc:
+                missing.append(dotted)
+    assert not missing, f"modules docs/architecture.md does not describe: {missing}"

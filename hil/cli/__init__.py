@@ -1,0 +1,1 @@
+"""``spirob-hil``: the command line of the plant and the harness (``hil.cli.main``)."""

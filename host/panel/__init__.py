@@ -1,0 +1,1 @@
+"""The teleop panel: the guarded viser server, its sections, the control arbiter, the board's state."""
