@@ -1,1 +1,1 @@
-"""Campaigns: grids or samples of grasp trials and scenarios, on local processes or Ray (docs/campaigns.md)."""
+"""Campaigns: grids or samples of grasp trials and scenarios, on processes or on Ray (docs/campaigns.md)."""
