@@ -36,11 +36,11 @@ import os
 import re
 import select
 import struct
-import threading
 from dataclasses import dataclass
 from typing import Final
 
 from host.panel.arbiter import ControlArbiter
+from host.worker import Worker
 from protocol.dbus import CH_LIMIT, Lever
 
 __all__ = [
@@ -361,8 +361,8 @@ class Gamepad:
         self.losses_n = 0
         """Times the device went away."""
         self._fd: int | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._worker = Worker("gamepad", self._run)
+        self._stop = self._worker.stop_event
         self._requests_seen = 0
         self._pushed: tuple[tuple[int, ...], Lever, Lever] | None = None
 
@@ -374,15 +374,11 @@ class Gamepad:
         """
         self._fd = os.open(self.path, os.O_RDONLY | os.O_NONBLOCK)
         self.arbiter.request_control(self.client)
-        self._thread = threading.Thread(target=self._run, name="gamepad", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def stop(self) -> None:
         """Stop reading and close the device; safe twice."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=3.0)
-            self._thread = None
+        self._worker.stop()
         self._close()
 
     def _close(self) -> None:

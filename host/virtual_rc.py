@@ -9,11 +9,11 @@ tab that asks for control gets it (nobody at the command line can click "grant")
 from __future__ import annotations
 
 import logging
-import threading
 import time
 
 from host.panel.arbiter import CLI_CLIENT, ControlArbiter
 from host.panel.board_state import BoardState
+from host.worker import Worker
 from protocol.dbus import Lever
 
 __all__ = ["VirtualRcDriver"]
@@ -40,22 +40,16 @@ class VirtualRcDriver:
         self.arbiter = arbiter
         self.board = board
         self.lever = lever
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._worker = Worker("virtual-rc", self._run)
+        self._stop = self._worker.stop_event
 
     def start(self) -> None:
         """Start the thread (it takes control first)."""
-        if self._thread is None:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name="virtual-rc", daemon=True)
-            self._thread.start()
+        self._worker.start()
 
     def stop(self) -> None:
         """Stop the thread; safe twice (control stays where it is: the arbiter's holder)."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=3.0)
-            self._thread = None
+        self._worker.stop()
 
     def _run(self) -> None:
         a = self.arbiter

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from host.link.recording import replay_messages
 from host.link.source import BoardSource, LinkState
+from host.worker import Worker
 
 __all__ = ["ReplaySource"]
 
@@ -39,23 +40,19 @@ class ReplaySource(BoardSource):
         """Set once the whole file has been fed (or it could not be read)."""
         self.messages_n = 0
         """Messages fed so far."""
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._worker = Worker("replay", self._run)
+        self._stop = self._worker.stop_event
 
     def start(self) -> None:
         """Start playing in a thread."""
-        if self._thread is not None:
+        if self._worker.running:
             return
         self.set_state(LinkState.CONNECTED)
-        self._thread = threading.Thread(target=self._run, name="replay", daemon=True)
-        self._thread.start()
+        self._worker.start()
 
     def stop(self) -> None:
         """Stop playing; safe twice."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=3.0)
-            self._thread = None
+        self._worker.stop()
         if self._state is not LinkState.STOPPED:
             self.set_state(LinkState.STOPPED)
 

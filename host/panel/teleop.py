@@ -65,6 +65,7 @@ from host.panel.scene import (
     camera_view,
     default_hanging_pose,
 )
+from host.worker import Worker
 from protocol.messages import TelemetryFlags
 
 __all__ = ["PanelConfig", "TeleopPanel", "client_url_token", "harden"]
@@ -184,8 +185,8 @@ class TeleopPanel:
         self._params: dict[int, ParamHandles] = {}
         self._controls: dict[int, ControlHandles] = {}
         self._controls_lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._worker = Worker("teleop-panel", self._run)
+        self._stop = self._worker.stop_event
         self._last_poses = -1
         self._last_notice = 0
         self._health_cache: tuple[str, str, str, str] = ("", "", "", "")
@@ -239,17 +240,11 @@ class TeleopPanel:
 
     def start(self) -> None:
         """Start the update thread."""
-        if self._thread is None:
-            self._stop.clear()
-            self._thread = threading.Thread(target=self._run, name="teleop-panel", daemon=True)
-            self._thread.start()
+        self._worker.start()
 
     def stop(self) -> None:
         """Stop the update thread (the caller stops the server); safe twice."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=3.0)
-            self._thread = None
+        self._worker.stop()
 
     def _run(self) -> None:
         cfg = self.config
