@@ -259,11 +259,19 @@ class VirtualBoard:
         """One control period in lockstep order: physics, delivery, firmware, command delivery.
 
         Args:
-            now_us: the firmware's time for this tick (real-time drivers pass their clock); default the
-                plant's time. Loop-delay faults shift the firmware's time, never the physics.
+            now_us: the firmware's time for this tick; default the plant's time. Loop-delay faults shift
+                the firmware's time, never the physics.
         """
         self.plant.step()
-        t = self.plant.time_us if now_us is None else now_us
+        self.firmware_tick(self.plant.time_us if now_us is None else now_us)
+
+    def firmware_tick(self, t: int) -> None:
+        """The tick after its physics step: sensors and link delivered, firmware at ``t``, commands out.
+
+        Real time calls it at the deadline and steps the plant for the next tick right after it
+        (:func:`run_realtime`), so what arrived while the plant stepped is taken in at the deadline, as a
+        UART stamps a frame on arrival, never at a time read before a long physics step.
+        """
         if self.faults.faults:
             t += self.faults.tick_delay_us(t)
         self.now_us = t
@@ -335,7 +343,8 @@ def run_realtime(
     def begin(start_us: int) -> int:
         nonlocal offset, deadline
         board.firmware.clock_kind = clock.kind
-        offset = start_us - board.plant.time_us
+        board.plant.step()  # the first tick's physics (each tick steps the next one's: see step)
+        offset = start_us - (board.plant.time_us - period)
         deadline = start_us + period
         if not board.firmware.scheduler.started:
             board.firmware.start(deadline - offset)  # the firmware's task grid is this loop's grid
@@ -343,10 +352,15 @@ def run_realtime(
 
     def step(now_us: int) -> int:
         nonlocal deadline
-        board.tick(now_us - offset)
+        board.firmware_tick(now_us - offset)
+        # The next tick's physics now, not after the wake-up: the firmware runs at its deadline and takes
+        # in what arrived meanwhile at that time (stamped before a long step, a 40 ms step read as 40 ms of
+        # radio silence). The plant still steps [t, t + period] under the command of time t, as in lockstep.
+        board.plant.step()
+        done_us = clock.now_us()
         deadline += period
-        if now_us - deadline >= period:  # more than a whole period late: skip, do not burst
-            deadline += ((now_us - deadline) // period) * period
+        if done_us - deadline >= period:  # more than a whole period late: skip, do not burst
+            deadline += ((done_us - deadline) // period) * period
         return deadline
 
     try:

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import pytest
 import serial
 
+from controller.clock import LockstepClock
 from controller.config import FirmwareConfig
+from controller.transport import MemoryTransport
 from hil.board import (
     BoardConfig,
     LinkWire,
@@ -16,6 +19,7 @@ from hil.board import (
     VirtualBoardProcess,
     parse_listen,
     realtime_board,
+    run_realtime,
 )
 from hil.errors import HilError
 from hil.harness import ScriptedHost
@@ -53,8 +57,6 @@ def test_lockstep_tick_order_and_time() -> None:
 
 
 def test_control_period_mismatch_is_refused() -> None:
-    from controller.config import FirmwareConfig
-
     with pytest.raises(ValueError, match="control period"):
         VirtualBoard(
             BoardConfig(firmware=FirmwareConfig().replaced(control_period_us=2000, link_period_us=2000))
@@ -299,3 +301,64 @@ def test_link_loss_resets_direct_on_a_tcp_board() -> None:
         assert fw.link is not None and fw.link.link_changes == 2  # connected, then lost
     finally:
         transport.close()
+
+
+class _StallingClock(LockstepClock):
+    """Simulated wall time in which a sender keeps its own cadence while the board's loop is busy."""
+
+    def __init__(self, on_ms: Callable[[int], None]) -> None:
+        super().__init__()
+        self.on_ms = on_ms
+
+    def elapse_us(self, dt_us: int) -> None:
+        """Let ``dt_us`` of wall time pass, 1 ms at a time, telling the sender each millisecond."""
+        end = self.now_us() + dt_us
+        while self.now_us() < end:
+            self.advance_to(min(end, self.now_us() + 1_000))
+            self.on_ms(self.now_us())
+
+    def sleep_until_us(self, deadline_us: int) -> None:
+        if deadline_us > self.now_us():
+            self.elapse_us(deadline_us - self.now_us())
+
+
+def test_a_slow_physics_step_is_not_an_rc_loss_when_the_link_kept_sending() -> None:
+    """A frame that arrived while the plant stepped is stamped after that step, as a UART would stamp it.
+
+    The host sends ``VirtualRc`` every 14 ms of wall time whatever the board does; one physics step takes
+    40 ms (a contact-rich step on a loaded machine). Stamping what arrived during the step with the time
+    the tick *began* made the next tick see a 40 ms silence: RC_LOST mid-grasp on a board whose radio
+    never stopped.
+    """
+    host_end, board_end = MemoryTransport.pair()
+    frame = RcFrame.neutral().pack()
+    seq = iter(range(1 << 30))
+
+    def host_sends(now_us: int) -> None:
+        if now_us % 14_000 < 1_000:
+            host_end.write(encode(VirtualRc(frame), next(seq)))
+        if now_us % 100_000 < 1_000:
+            host_end.write(encode(Heartbeat(now_us, now_us // 100_000), next(seq)))
+        host_end.read()  # the board's telemetry: not needed here
+
+    clock = _StallingClock(host_sends)
+    board = VirtualBoard(BoardConfig(rc="link"), link=board_end)
+    step = board.plant.step
+    stalls = [0]
+
+    phases: list[Phase] = []
+
+    def slow_step() -> None:  # also notes the phase the firmware reached on the tick before
+        phases.append(board.firmware.phase)
+        step()
+        if board.plant.time_us == 1_000_000:  # once, 1 s in
+            stalls[0] += 1
+            clock.elapse_us(40_000)
+
+    board.plant.step = slow_step  # type: ignore[method-assign]
+    run_realtime(board, clock, duration_us=2_000_000)
+    assert stalls == [1]
+    assert Phase.OK in phases
+    first_ok = phases.index(Phase.OK)
+    assert set(phases[first_ok:]) == {Phase.OK}, f"{phases.count(Phase.RC_LOST)} ticks RC_LOST"
+    board.close()
