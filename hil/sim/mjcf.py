@@ -55,6 +55,7 @@ __all__ = [
     "cable_angles_rad",
     "cable_layout",
     "cable_stiffness_n_per_m",
+    "joint_friction_nm",
     "unit_geometry",
     "wedge_inset_ratio",
     "wedge_vertices_m",
@@ -180,6 +181,13 @@ def unit_geometry(design: SpiralDesign, arm: ArmConfig | None = None) -> UnitGeo
     rb = tuple(arm.cable_offset_ratio * 0.5 * w for w in wb)
     rt = tuple(arm.cable_offset_ratio * 0.5 * w for w in wt)
     return UnitGeometry(chords, wb, wt, masses, tuple(stiff), tuple(damp), rb, rt)
+
+
+def joint_friction_nm(arm: ArmConfig, geo: UnitGeometry) -> tuple[float, ...]:
+    """Dry friction of the joint in each unit (index 0 has none): the base joint's, scaled like stiffness."""
+    k = geo.stiffness_nm_per_rad
+    base = k[1] if len(k) > 1 and k[1] > 0 else 1.0
+    return tuple(0.0 if i == 0 else arm.joint_friction_nm * k[i] / base for i in range(len(k)))
 
 
 def wedge_inset_ratio(design: SpiralDesign) -> float:
@@ -427,6 +435,8 @@ def build_mjcf(design: SpiralDesign, cables: int | None = None, config: ModelCon
                 f'armature="{_f(arm.joint_armature_kg_m2)}" '
                 f'solreflimit="{_f(arm.limit_timeconst_s)} 1" solimplimit="{_SOLIMP}"'
             )
+            if arm.joint_friction_nm > 0:
+                common += f' frictionloss="{_f(joint_friction_nm(arm, geo)[i])}"'
             if ball:
                 add(f'{inner}<joint name="joint_{i:02d}" type="ball" range="0 {_f(dtheta)}" {common}/>')
             else:
@@ -583,7 +593,7 @@ def _actuator_xml(k: int, cfg: ModelConfig, design: SpiralDesign, lay: CableLayo
     # ctrl in amps; cable force = kt · I / r_spool. The drives apply the torque-speed line on top.
     lim = motor.current_limit_a
     return (
-        f'<motor name="motor_{k}" joint="spool_{k}" gear="{_f(motor.force_per_amp_n)}" '
+        f'<motor name="motor_{k}" joint="spool_{k}" gear="{_f(motor.delivered_force_per_amp_n)}" '
         f'ctrlrange="{_v(-lim, lim)}"/>'
     )
 
