@@ -220,9 +220,21 @@ def _quick() -> Profile:
     return Profile("quick", _chain(pieces))
 
 
-PROFILES: Final[dict[str, Profile]] = {p.name: p for p in (_standard(), _quick())}
+def _tiny() -> Profile:
+    pieces: list[tuple[str, float, tuple[int, ...]]] = [
+        ("rest", 0.8, ()),
+        ("ramp", 2.0, (0,)),
+        ("rest", 0.5, ()),
+        ("steps", 1.5, (1,)),
+        ("rest", 0.5, ()),
+    ]
+    return Profile("tiny", _chain(pieces))
+
+
+PROFILES: Final[dict[str, Profile]] = {p.name: p for p in (_standard(), _quick(), _tiny())}
 """The named profiles: ``standard`` (60 s, every segment kind on every cable; what a lab records, five
-times with the arm re-hung in between if it can) and ``quick`` (14.5 s, one of each kind; tests)."""
+times with the arm re-hung in between if it can), ``quick`` (14.5 s, one of each kind) and ``tiny`` (5.3 s,
+a ramp and steps: the test suite's)."""
 
 
 def profile(name: str, *, peak_n: float | None = None, rest_n: float | None = None) -> Profile:

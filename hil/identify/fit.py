@@ -26,10 +26,13 @@ is identifiable from the data (its half-width within :attr:`~hil.sim.uncertain.I
 from __future__ import annotations
 
 import dataclasses
+import io
+import logging
 import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Final
 
 import mujoco
@@ -49,6 +52,8 @@ from hil.sim.uncertain import ID_PARAMS, IdParam, apply, nominal
 __all__ = ["FitError", "FitOptions", "FitResult", "ParamEstimate", "Trace", "fit"]
 
 FloatArray = NDArray[np.float64]
+
+_log = logging.getLogger(__name__)
 
 SENSORS: Final = (
     "tension_0",
@@ -117,9 +122,10 @@ class ParamEstimate:
         unit: its SI unit.
         preset: the value it started from.
         value: the fitted value.
-        half_width: the 95 % interval's half-width (autocorrelation-consistent) [unit].
-        naive_half_width: the toolbox's half-width, which assumes independent residuals.
-        identifiable: the data pin it down (``half_width`` within the row's threshold).
+        interval: the 95 % interval (autocorrelation-consistent) [unit]; symmetric in the optimizer's
+            coordinate, so a relative parameter's is symmetric in its logarithm.
+        naive_interval: the toolbox's, which assumes independent residuals.
+        identifiable: the data pin it down (the interval within the row's threshold).
         why: when not identifiable, why (the interval, or the parameter it trades against).
         at_bound: the fit stopped at a search bound.
     """
@@ -128,16 +134,25 @@ class ParamEstimate:
     unit: str
     preset: float
     value: float
-    half_width: float
-    naive_half_width: float
+    interval: tuple[float, float]
+    naive_interval: tuple[float, float]
     identifiable: bool
     why: str
     at_bound: bool
 
     @property
-    def interval(self) -> tuple[float, float]:
-        """The 95 % interval."""
-        return self.value - self.half_width, self.value + self.half_width
+    def half_width(self) -> float:
+        """Half the 95 % interval's width [unit]."""
+        return 0.5 * (self.interval[1] - self.interval[0])
+
+    @property
+    def naive_half_width(self) -> float:
+        """Half the toolbox's interval's width [unit]."""
+        return 0.5 * (self.naive_interval[1] - self.naive_interval[0])
+
+    def covers(self, value: float) -> bool:
+        """``value`` lies in the 95 % interval."""
+        return self.interval[0] <= value <= self.interval[1]
 
 
 @dataclass(frozen=True, slots=True)
@@ -199,6 +214,14 @@ class FitResult:
     wall_s: float
     recordings: tuple[tuple[str, str, float], ...]
     objective: tuple[float, ...] = field(default=())
+    converged: bool = True
+
+    @property
+    def last_reduction(self) -> float:
+        """How much the last iteration lowered the objective, as a fraction of it (0: it stopped moving)."""
+        if len(self.objective) < 2 or self.objective[-2] <= 0:
+            return 0.0
+        return 1.0 - self.objective[-1] / self.objective[-2]
 
     def rms_m(self, held_out: bool, which: str = "fitted") -> float:
         """RMS length error over the fitted (or held-out) samples of every recording, of the fitted or
@@ -338,24 +361,19 @@ class _Problem:
             + [1 / options.sigma_tip_m if options.use_tip else 0.0] * 3
         )
 
-    # Parameters in optimizer units <-> SI.
+    # Parameters in the optimizer's coordinates (hil.sim.uncertain.IdParam.to_x) <-> SI.
     def params(self) -> Any:
         pd = sysid.ParameterDict()
         for p in self.rows:
             v0 = self.preset_values[p.name]
-            unit = p.unit_of(v0)
-            lo, hi = p.bounds(v0)
-            if unit <= 0:
+            if p.relative and not v0 > 0:
                 raise FitError(f"{p.name}: the preset's value {v0} cannot scale a relative search")
-            pd.add(sysid.Parameter(p.name, v0 / unit, lo / unit, hi / unit))
+            lo, hi = p.x_bounds(v0)
+            pd.add(sysid.Parameter(p.name, p.to_x(v0, v0), lo, hi))
         return pd
 
     def si_values(self, pd: Any) -> dict[str, float]:
-        out = {}
-        for p in self.rows:
-            unit = p.unit_of(self.preset_values[p.name])
-            out[p.name] = float(pd[p.name].value[0]) * unit
-        return out
+        return {p.name: p.from_x(float(pd[p.name].value[0]), self.preset_values[p.name]) for p in self.rows}
 
     def model_for(self, pd: Any) -> ModelConfig:
         return apply(self.preset, self.si_values(pd))
@@ -520,6 +538,7 @@ def fit(
     *,
     design: SpiralDesign | None = None,
     progress: ProgressFn | None = None,
+    sysid_report: Path | None = None,
 ) -> FitResult:
     """Fit the plant to the recordings.
 
@@ -529,6 +548,8 @@ def fit(
         options: how to fit.
         design: the arm (default: the one the first recording names, else the prototype).
         progress: told how far the fit has come.
+        sysid_report: write MuJoCo's own report of the fit into this folder (``report.html``; two more
+            evaluations of the residual).
 
     Raises:
         FitError: nothing to fit, or the recordings disagree on the arm.
@@ -549,9 +570,12 @@ def fit(
     say = progress or (lambda stage, frac: None)
     with RolloutPool(opts.jobs) as pool:
         problem = _Problem(design, preset, rows, chosen, opts, pool)
-        params = problem.params()
+        # A parameter whose preset sits on a bound (no joint friction, no delay) starts a little inside:
+        # Levenberg-Marquardt can stall in a corner of the box.
+        params = problem.params().move_off_bounds()
+        measured = problem.measured()
         residual_fn = sysid.build_residual_fn(
-            models_sequences=[problem.measured()],
+            models_sequences=[measured],
             build_model=problem.build_model,
             custom_rollout=problem.rollout,
             modify_residual=problem.residual,
@@ -559,6 +583,9 @@ def fit(
             resample_true=False,
         )
         objective: list[float] = []
+        # The solver's own decision to stop (its gradient or step fell under tolerance) or ours:
+        # an iteration that still lowered the objective by more than this means it had not converged.
+        converged_below = 1e-3
 
         def on_iter(trace: list[Any]) -> None:
             objective.append(float(trace[-1].objective))
@@ -573,6 +600,7 @@ def fit(
             max_iters=opts.max_iters,
             eps=opts.fd_step,
             iter_callback=on_iter,
+            output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
         )
         jac = np.asarray(result.jac, dtype=np.float64)
         x = opt_params.as_vector()
@@ -593,7 +621,10 @@ def fit(
         cond = float(np.linalg.cond(jac)) if jac.size else math.nan
         fitted_si = problem.si_values(opt_params)
         fitted_model = apply(preset, fitted_si)
-        estimates = _estimates(problem, rows, fitted_si, half, np.asarray(naive, dtype=float), corr)
+        estimates = _estimates(problem, rows, x, half, np.asarray(naive, dtype=float), corr)
+        if sysid_report is not None:
+            say("MuJoCo's report", 0.9)
+            _sysid_report(sysid_report, problem, measured, params, opt_params, residual_fn, result)
         say("measured against simulated", 0.95)
         traces = _traces(
             problem, recordings, {w.recording.name: w.end for w in chosen}, fitted_model, preset, pool
@@ -611,38 +642,68 @@ def fit(
             wall_s=time.monotonic() - t_start,
             recordings=tuple((rec.name, rec.sha256, rec.duration_s) for rec in recordings),
             objective=tuple(objective),
+            converged=len(objective) <= opts.max_iters
+            or (len(objective) >= 2 and 1.0 - objective[-1] / max(objective[-2], 1e-300) < converged_below),
         )
 
 
 def _estimates(
     problem: _Problem,
     rows: Sequence[IdParam],
-    fitted: dict[str, float],
-    half_units: FloatArray,
-    naive_units: FloatArray,
+    x: FloatArray,
+    half_x: FloatArray,
+    naive_x: FloatArray,
     corr: FloatArray,
 ) -> tuple[ParamEstimate, ...]:
+    """The fitted values and intervals in SI, from the optimizer's coordinates."""
     out = []
     for i, p in enumerate(rows):
         v0 = problem.preset_values[p.name]
-        unit = p.unit_of(v0)
-        value = fitted[p.name]
-        half = float(half_units[i]) * unit
-        naive = float(naive_units[i]) * unit if i < len(naive_units) else math.nan
+        value = p.from_x(float(x[i]), v0)
+        interval = _si_interval(p, v0, float(x[i]), float(half_x[i]))
+        naive = _si_interval(p, v0, float(x[i]), float(naive_x[i]) if i < len(naive_x) else math.nan)
+        half = 0.5 * (interval[1] - interval[0])
         limit = p.identifiable_within * (abs(value) if p.relative else 1.0)
         ok = math.isfinite(half) and half <= limit
         why = ""
         if not ok:
             partners = [rows[j].name for j in range(len(rows)) if j != i and abs(corr[i, j]) > 0.9]
-            why = f"95 % interval ±{half:.3g} {p.unit} is wider than ±{limit:.3g}".strip()
+            why = f"95 % interval ±{half:.3g} {p.unit} is wider than ±{limit:.3g}".replace("  ", " ")
             if partners:
                 why += f"; trades against {', '.join(partners)}"
-        lo, hi = p.bounds(v0)
-        at_bound = math.isclose(value, lo, rel_tol=1e-6, abs_tol=1e-12) or math.isclose(
-            value, hi, rel_tol=1e-6, abs_tol=1e-12
-        )
-        out.append(ParamEstimate(p.name, p.unit, v0, value, half, naive, ok, why, at_bound))
+        lo, hi = p.x_bounds(v0)
+        at_bound = math.isclose(float(x[i]), lo, abs_tol=1e-6) or math.isclose(float(x[i]), hi, abs_tol=1e-6)
+        out.append(ParamEstimate(p.name, p.unit, v0, value, interval, naive, ok, why, at_bound))
     return tuple(out)
+
+
+def _si_interval(p: IdParam, v0: float, x: float, half: float) -> tuple[float, float]:
+    if not math.isfinite(half):
+        return (math.nan, math.nan)
+    lo, hi = p.from_x(x - half, v0), p.from_x(x + half, v0)
+    return (min(lo, hi), max(lo, hi))
+
+
+def _sysid_report(
+    out: Path, problem: _Problem, measured: Any, initial: Any, fitted: Any, residual_fn: Any, result: Any
+) -> None:
+    """MuJoCo's own report (parameters, signals, its covariance); a failure of it is said, never fatal."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        builder = sysid.default_report(
+            [measured],
+            initial,
+            fitted,
+            residual_fn,
+            result,
+            title="SpiRob identification (mujoco.sysid)",
+            save_path=str(out),
+            build_model=problem.build_model,
+            generate_videos=False,
+        )
+        builder.save(str(out / "report.html"))
+    except Exception as exc:  # the report is a view of the fit, which stands without it
+        _log.warning("MuJoCo's own report failed: %s: %s", type(exc).__name__, exc)
 
 
 def _traces(

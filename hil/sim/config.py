@@ -68,6 +68,8 @@ class ArmConfig:
             1..4 (a fitted model's).
         joint_friction_nm: dry friction of the joint nearest the base, each joint's scaled like its
             stiffness (0: none, the default; :mod:`hil.identify` fits it).
+        stiffness_scatter: factors on the joints' stiffness, base first (a printed arm's joint-to-joint
+            variation; cycled when shorter than the arm). Empty: the power law alone (the default).
         damping_ratio: ζ of each joint against the inertia it carries (identification: about 0.13).
         cable_offset_ratio: cable hole radius as a fraction of the local half-width.
         cable_mu: capstan friction coefficient of the cable in the holes (0.25-0.4 reproduces the
@@ -104,6 +106,7 @@ class ArmConfig:
     base_stiffness_nm_per_rad: float = 0.5
     stiffness_exponent: float = 3
     joint_friction_nm: float = 0.0
+    stiffness_scatter: tuple[float, ...] = ()
     damping_ratio: float = 0.13
     cable_offset_ratio: float = 0.8
     cable_mu: float = 0.3
@@ -130,6 +133,10 @@ class ArmConfig:
         )
         _finite("damping_ratio", self.damping_ratio, allow_equal=True)
         _finite("joint_friction_nm", self.joint_friction_nm, allow_equal=True)
+        _check(
+            all(isinstance(x, int | float) and math.isfinite(x) and x > 0 for x in self.stiffness_scatter),
+            f"stiffness_scatter must hold positive factors, got {self.stiffness_scatter!r}",
+        )
         _finite("cable_offset_ratio", self.cable_offset_ratio)
         _check(
             self.cable_offset_ratio < 1.0, f"cable_offset_ratio must be < 1, got {self.cable_offset_ratio!r}"

@@ -166,6 +166,9 @@ def unit_geometry(design: SpiralDesign, arm: ArmConfig | None = None) -> UnitGeo
     wt = tuple(w[1] for w in widths)
     p = arm.stiffness_exponent
     stiff = [0.0] + [arm.base_stiffness_nm_per_rad * design.beta ** (-p * (i - 1)) for i in range(1, n)]
+    scatter = arm.stiffness_scatter
+    if scatter:
+        stiff = [0.0] + [k * scatter[(i - 1) % len(scatter)] for i, k in enumerate(stiff) if i > 0]
     radii = [0.25 * (wb[i] + wt[i]) for i in range(n)]
     damp = [0.0] * n
     for i in range(1, n):

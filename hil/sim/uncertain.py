@@ -31,8 +31,10 @@ class IdParam:
         relative: bounds are factors of the preset's value (``lo * v .. hi * v``); else absolute.
         lo: lower bound (a factor, or an absolute value).
         hi: upper bound.
-        scale: the optimizer's unit for an absolute row (one optimizer unit is this much); a relative row
-            is optimized as a factor of the preset's value.
+        scale: the optimizer's unit for an absolute row (one optimizer unit is this much). A relative
+            row is optimized as the logarithm of its factor on the preset's value: a stiffness, an
+            inertia or a friction that can only be positive, and whose effects scale together (all forces
+            times a factor is a straight line in these coordinates, which the solver follows at once).
         identifiable_within: an interval half-width above this (relative to the value for ``relative``
             rows, absolute otherwise) means the data do not pin it down.
         shown_by: what in a recording shows it (the docs and the report say so).
@@ -56,9 +58,18 @@ class IdParam:
             return self.lo * preset_value, self.hi * preset_value
         return self.lo, self.hi
 
-    def unit_of(self, preset_value: float) -> float:
-        """What one optimizer unit is worth, in this parameter's SI unit."""
-        return preset_value if self.relative else self.scale
+    def to_x(self, value: float, preset_value: float) -> float:
+        """The optimizer's coordinate: ln(value / preset) for a relative row, value / scale for others."""
+        return math.log(value / preset_value) if self.relative else value / self.scale
+
+    def from_x(self, x: float, preset_value: float) -> float:
+        """The inverse of :meth:`to_x`."""
+        return preset_value * math.exp(x) if self.relative else x * self.scale
+
+    def x_bounds(self, preset_value: float) -> tuple[float, float]:
+        """The search bounds in the optimizer's coordinate."""
+        lo, hi = self.bounds(preset_value)
+        return self.to_x(lo, preset_value), self.to_x(hi, preset_value)
 
     def read(self, model: ModelConfig) -> float:
         """This parameter's value in ``model``."""
@@ -143,11 +154,11 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         "drive_friction",
         "motor.output_friction_nm",
         "N·m",
-        False,
-        0.0,
+        True,
         0.05,
-        0.01,
-        0.004,
+        5.0,
+        1.0,
+        0.4,
         "the current needed before a spool moves; hysteresis at the spool",
         "dry friction of gearbox and bearings at the output shaft",
     ),
@@ -155,7 +166,7 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         "torque_scale",
         "motor.torque_scale",
         "",
-        False,
+        True,
         0.5,
         1.6,
         1.0,

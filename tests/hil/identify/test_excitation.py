@@ -16,7 +16,7 @@ def test_profiles_stay_between_rest_and_peak_and_start_and_end_at_rest(name: str
     assert max(flat) <= p.peak_n + 1e-12
     assert max(flat) > 0.9 * p.peak_n  # the ramps reach the peak
     assert p.segments[0].kind == "rest" and p.segments[-1].kind == "rest"
-    assert {s.kind for s in p.segments} == {"rest", "ramp", "steps", "multisine"}
+    assert {"rest", "ramp", "steps"} <= {s.kind for s in p.segments}
     assert p.tensions_n(-1.0) == (p.rest_n,) * 3 and p.tensions_n(p.duration_s + 1.0) == (p.rest_n,) * 3
 
 

@@ -26,7 +26,9 @@ def test_bounds_hold_the_preset_and_relative_rows_scale_with_it() -> None:
         v = p.read(model)
         lo, hi = p.bounds(v)
         assert lo <= v <= hi, p.name
-        assert p.unit_of(v) > 0, p.name
+        xlo, xhi = p.x_bounds(v)
+        assert xlo <= p.to_x(v, v) <= xhi, p.name
+        assert p.from_x(p.to_x(0.9 * hi, v), v) == pytest.approx(0.9 * hi), p.name
     k = by_name("base_stiffness")
     assert k.bounds(0.5) == pytest.approx((0.5 / 3, 1.5))
 
