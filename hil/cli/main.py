@@ -243,7 +243,7 @@ def _run_model(args: argparse.Namespace) -> int:
         cfg = replace(cfg, drone=replace(cfg.drone, floor=True))
     cfg = cfg.with_objects(*(_parse_object(t) for t in args.object))
     try:
-        path = write_mjcf(args.output, design, None, cfg)
+        path = write_mjcf(args.output, design, None, cfg, standalone=True)
     except OSError as exc:
         raise UsageError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
     print(f"wrote {path} ({design.cables} cables, {design.units} units)")
