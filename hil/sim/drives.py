@@ -90,6 +90,7 @@ class Drives:
         self.gear_ratio = motor.gear_ratio
         """Rotor turns per output (spool) turn."""
         self._limit_raw = round(motor.current_limit_a * RAW_PER_AMP)
+        self._limit_a = motor.current_limit_a
         self._inv_r_spool = 1.0 / motor.spool_radius_m
         self._counts_per_m = motor.gear_ratio * ANGLE_COUNTS / (2.0 * math.pi * motor.spool_radius_m)
         self._rpm_per_m_s = motor.gear_ratio * 60.0 / (2.0 * math.pi * motor.spool_radius_m)
@@ -165,10 +166,15 @@ class Drives:
     def drive(self) -> None:
         """Run the current loops for one control period: each drive's delivered current into its actuator.
 
-        Torque-speed line: in the direction of motion the drive can push at most ``I_stall·(1 − ω/ω_nl)``.
-        A tension source or a muscle gets the asked tension (pull only) in its control units; MuJoCo
-        applies its lag or activation dynamics. Plain floats over buffer views: three motors are cheaper
-        in Python than in numpy.
+        The C610's current loop on a supply of limited voltage: the command is delivered exactly while
+        the voltage it needs, ``I_cmd + I_stall·ω/ω_nl`` in amps of stall current, stays within
+        ``±I_stall``; beyond, the drive delivers what the supply allows. In the direction of motion that
+        is the torque-speed line ``I_stall·(1 − ω/ω_nl)``, and past the no-load speed it brakes (the
+        back-EMF exceeds the supply), up to the current limit: the law of MuJoCo's ``dcmotor`` actuator
+        in current mode, which the exported model uses (:mod:`hil.sim.standalone`), so the file and the
+        plant drive alike. A tension source or a muscle gets the asked tension (pull only) in its control
+        units; MuJoCo applies its lag or activation dynamics. Plain floats over buffer views: three
+        motors are cheaper in Python than in numpy.
         """
         ctrl = self._ctrl_mv
         currents: list[int] | list[float] = self._current_raw_list
@@ -187,15 +193,17 @@ class Drives:
         inv_r_spool = self._inv_r_spool
         stall_a = self._stall_a
         inv_no_load = self._inv_no_load
+        limit_a = self._limit_a
         for k in range(self._n):
             cmd = currents[k] / RAW_PER_AMP
-            if cmd == 0.0:
-                applied = 0.0
+            omega = qvel[dadr[k]] * inv_r_spool
+            need = cmd + stall_a * omega * inv_no_load  # the voltage the command needs, in stall amps
+            if -stall_a <= need <= stall_a:
+                applied = cmd
             else:
-                omega = qvel[dadr[k]] * inv_r_spool
-                sign = 1.0 if cmd > 0 else -1.0
-                avail = stall_a * (1.0 - sign * omega * inv_no_load)
-                applied = sign * min(abs(cmd), avail) if avail > 0.0 else 0.0
+                sign = 1.0 if need > 0 else -1.0
+                applied = sign * stall_a * (1.0 - sign * omega * inv_no_load)
+                applied = limit_a if applied > limit_a else -limit_a if applied < -limit_a else applied
             applied_a[k] = applied
             ctrl[k] = applied
 

@@ -46,9 +46,12 @@ def test_drive_follows_the_torque_speed_line() -> None:
     drives.drive()
     available_a = MOTOR.stall_current_a * 0.5  # 9 A in the direction of motion, below the 10 A asked
     assert ctrl.tolist() == pytest.approx([available_a, -2.0, 0.0])  # braking: the full 2 A
-    state[3] = 1.1 * omega_nl * r  # beyond no-load speed: nothing to give in that direction
+    state[3] = 1.1 * omega_nl * r  # beyond no-load speed: the back-EMF exceeds the supply, it brakes
     drives.drive()
-    assert ctrl[0] == 0.0
+    assert ctrl[0] == pytest.approx(-0.1 * MOTOR.stall_current_a)
+    state[3] = 3.0 * omega_nl * r  # dragged far past it: braking up to the current limit
+    drives.drive()
+    assert ctrl[0] == pytest.approx(-MOTOR.current_limit_a)
     assert drives.applied_currents_a().tolist() == ctrl.tolist()
 
 
