@@ -22,6 +22,7 @@ from typing import Any
 
 from controller.cli_kit import EXIT_FAILURE, EXIT_OK
 from host.errors import HostError
+from host.excite import ExcitationDriver, ExciteConfig, operator_lines
 from host.link.client import BoardClient, load_scaled_s
 from host.link.process import BoardLinkError
 from host.link.recording import LinkRecording
@@ -96,6 +97,8 @@ class HostApp:
         self.drone_link: Any = None
         self.gamepad: Any = None
         self.virtual_rc: VirtualRcDriver | None = None
+        self.excite: ExcitationDriver | None = None
+        """``--excite``: the excitation played on the board."""
         self.summary = RunSummary()
         """Modes, phases, failsafes and faults of the run (the summary at exit)."""
         self.report: SummaryReport | None = None
@@ -165,6 +168,8 @@ class HostApp:
             self._start_ui()
         if self.replay is not None:
             self.replay.start()  # after the panel: it sees the recording from its start
+        if o.excite is not None and client is not None:
+            self._start_excite(client, o.excite)  # before the radio moves: it must see the lever's way
         if o.virtual_rc is not None:
             self.virtual_rc = VirtualRcDriver(arbiter, board, o.virtual_rc)
             self.virtual_rc.start()
@@ -225,6 +230,21 @@ class HostApp:
         # The objects of the plant we asked for (free objects drawn where they start).
         self.objects.extend(scene_objects(config.plant.model.objects))
         return url
+
+    def _start_excite(self, client: BoardClient, name: str) -> None:
+        from hil.identify.excitation import profile  # type: ignore[import-not-found,unused-ignore]
+
+        def send(msg: Any, on_ack: Any) -> bool:
+            return client.send(msg, origin="excite", on_ack=on_ack)
+
+        config = ExciteConfig(direct_wait_s=load_scaled_s(2.0), telemetry_wait_s=load_scaled_s(10.0))
+        recorders = [r for r in (self.recording, self.recorder) if r is not None]
+        self.excite = ExcitationDriver(
+            profile(name), send, operator_lines(self.notices), recorders, config=config
+        )
+        client.add_listener(self.excite.on_board_message)
+        client.add_state_listener(self.excite.on_link_state)
+        self.excite.start()
 
     def _start_gamepad(self, path: str) -> None:
         from host.gamepad import Gamepad
@@ -336,7 +356,8 @@ class HostApp:
 
         Returns:
             The exit status: 1 if a ``--virtual-rc`` run ended latched in a failsafe, saw a fault or no
-            telemetry at all (:meth:`SummaryReport.failure`), else 0.
+            telemetry at all (:meth:`SummaryReport.failure`), or an ``--excite`` profile did not play to
+            its end (the run ends with it), else 0.
         """
         stop = stop or threading.Event()
         end = None if duration_s is None else time.monotonic() + duration_s
@@ -347,15 +368,22 @@ class HostApp:
                 break
             if self.replay is not None and not self.options.ui and self.replay.done.is_set():
                 break
+            if self.excite is not None and self.excite.done.is_set():
+                break  # the run ends with its excitation
             if now >= next_status:
                 next_status = now + 10.0
                 _log.info("%s", self.status_line())
             wait = 0.1 if end is None else max(0.0, min(0.1, end - now))
             stop.wait(wait)
+        excite_failed = False
+        if self.excite is not None:
+            why = "the run was interrupted" if stop.is_set() else "--duration ran out"
+            outcome = self.excite.stop(f"{why} before the profile ended")
+            excite_failed = outcome is None or not outcome.completed
         self.report = self.take_report()
         if self.options.virtual_rc is not None and self.report.failure() is not None:
             return EXIT_FAILURE
-        return EXIT_OK
+        return EXIT_FAILURE if excite_failed else EXIT_OK
 
     def take_report(self) -> SummaryReport:
         """The run's summary so far, with the virtual radio's gaps from the link (when there is one)."""
@@ -382,6 +410,8 @@ class HostApp:
 
     def close(self) -> None:
         """Stop everything in reverse order; safe twice."""
+        if self.excite is not None:  # first: its last word to the board needs the link
+            self.excite.stop("the host closed before the profile ended")
         if self.virtual_rc is not None:
             self.virtual_rc.stop()
             self.virtual_rc = None

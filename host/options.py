@@ -73,6 +73,16 @@ def _follow_servo(text: str) -> ServoFollowConfig:
     return parse_follow_servo(text)
 
 
+def _excite_profile(text: str) -> str:
+    from hil.identify.excitation import profile  # type: ignore[import-not-found,unused-ignore]
+
+    try:
+        profile(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The `spirob-host` argument parser (kept apart from :func:`main` so tests call it with argv)."""
     p = Parser(
@@ -147,6 +157,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--replay-speed", type=positive_duration, metavar="X", help="with --replay: speed factor (default 1)"
     )
     run.add_argument(
+        "--excite",
+        type=_excite_profile,
+        nargs="?",
+        const="standard",
+        metavar="PROFILE",
+        help="play an excitation profile on the board in DIRECT mode for identification (standard, 60 s, "
+        "the default; quick, 14.5 s): it starts when the right lever goes MIDDLE, stops when it goes DOWN, "
+        "and the run ends with it",
+    )
+    run.add_argument(
         "--foxglove",
         type=port_number,
         nargs="?",
@@ -215,6 +235,7 @@ class HostOptions:
             ``host.object_spec.DEFAULT_OBJECT``; ``--no-object``: none).
         gamepad: joystick device driving the virtual radio (None: none).
         gamepad_map: its mapping.
+        excite: the excitation profile to play (``host.excite``); None: none.
     """
 
     port: str | None = None
@@ -238,6 +259,7 @@ class HostOptions:
     objects: tuple[ObjectSpec, ...] = ()
     gamepad: str | None = None
     gamepad_map: GamepadMapping = DEFAULT_MAPPING
+    excite: str | None = None
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> HostOptions:
@@ -257,6 +279,8 @@ class HostOptions:
                 raise HostError("--virtual-rc needs a board; it cannot be used with --replay")
             if ns.gamepad is not None:
                 raise HostError("--gamepad needs a board; it cannot be used with --replay")
+            if ns.excite is not None:
+                raise HostError("--excite needs a board; it cannot be used with --replay")
             if not ns.replay.is_file():
                 raise HostError(f"no such recording: {ns.replay}")
             from hil.recording import is_mcap
@@ -265,6 +289,7 @@ class HostOptions:
                 raise HostError(f"{ns.replay} is not an MCAP recording")
         if ns.port is not None:
             check_board_url(ns.port)
+        _check_excite(ns)
         objects = _objects_from_args(ns)
         gamepad_map = _gamepad_from_args(ns)
         if ns.mavlink is not None:
@@ -312,6 +337,21 @@ class HostOptions:
             objects=objects,
             gamepad=ns.gamepad,
             gamepad_map=gamepad_map,
+            excite=ns.excite,
+        )
+
+
+def _check_excite(ns: argparse.Namespace) -> None:
+    """``--excite`` needs a board whose right lever can go MIDDLE.
+
+    Raises:
+        HostError: a combination that cannot work.
+    """
+    lever = VIRTUAL_RC_LEVERS.get(ns.virtual_rc or "")
+    if ns.excite is not None and lever is not None and lever != Lever.MIDDLE:
+        raise HostError(
+            f"--excite runs with the right lever MIDDLE: --virtual-rc {ns.virtual_rc} never puts it there "
+            "(use --virtual-rc manual, or the pilot's radio)"
         )
 
 
