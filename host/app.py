@@ -28,7 +28,6 @@ from host.link.process import BoardLinkError
 from host.link.recording import LinkRecording
 from host.link.replay import ReplaySource
 from host.link.source import BoardSource
-from host.object_spec import ObjectSpec, plant_objects
 from host.options import (
     HostOptions,
     check_signing_timestamp_writable,
@@ -42,7 +41,8 @@ from host.panel.board_state import BoardState
 from host.panel.guard import PanelGuard, start_guarded_server
 from host.panel.notices import Notices
 from host.panel.record import RecordingSwitch
-from host.panel.scene import DronePose, SceneObject, ned_to_scene, scene_objects
+from host.panel.scene import ArmGeometry, DronePose, SceneObject, ned_to_scene, scene_objects
+from host.plant_model import resolve_preset, shadow_plant_factory, virtual_board_config
 from host.run_summary import RunSummary, SummaryReport
 from host.shadow import ShadowPlant
 from host.virtual_rc import VirtualRcDriver
@@ -99,6 +99,10 @@ class HostApp:
         self.virtual_rc: VirtualRcDriver | None = None
         self.excite: ExcitationDriver | None = None
         """``--excite``: the excitation played on the board."""
+        self.preset: Any = None
+        """``--preset``'s ``hil.sim.presets.Preset`` (None: the default model)."""
+        self.design: Any = None
+        """The arm's ``SpiralDesign`` when the host knows it (the virtual board's, or ``--preset``'s)."""
         self.summary = RunSummary()
         """Modes, phases, failsafes and faults of the run (the summary at exit)."""
         self.report: SummaryReport | None = None
@@ -132,6 +136,7 @@ class HostApp:
         if o.ui:
             check_ui_port_free(o.ui_host, o.ui_port)
         client: BoardClient | None = None
+        self.preset = resolve_preset(o.preset)
         if o.replay is None:
             self.board_url = o.port if o.port is not None else self._start_virtual_board()
             client = self.client = BoardClient(self.board_url)
@@ -184,12 +189,18 @@ class HostApp:
         if o.port is not None and o.shadow:
             # A board that sends no SimPoses (hardware) gets its shape from a local plant driven by
             # the measured currents; it switches itself off when SimPoses arrive.
-            self.shadow = ShadowPlant(self.board_state.on_shadow_poses)
+            self.shadow = ShadowPlant(
+                self.board_state.on_shadow_poses, plant_factory=shadow_plant_factory(self.preset)
+            )
+            if self.preset is not None:
+                self.design = self.preset.spiral()
             client.add_listener(self.shadow.on_board_message)
             self.shadow.start()
         meta = {"source": "spirob-host", "port": self.board_url}
         if self.board is not None:  # the virtual board's design and firmware parameters
             meta.update(self.board_config.describe())
+        if o.preset is not None:
+            meta["preset"] = o.preset
         if o.record is not None:
             tlog = o.record.with_suffix(".tlog") if o.mavlink is not None else None
             self.recording = LinkRecording(o.record, meta, tlog=tlog)
@@ -215,13 +226,11 @@ class HostApp:
             raise HostError(
                 f"the virtual board is not available ({exc}); pass --port to use a real board"
             ) from exc
-        from hil.board import BoardConfig  # type: ignore[import-not-found,unused-ignore]
         from hil.errors import HilError  # type: ignore[import-not-found,unused-ignore]
 
-        config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
-        if self.options.objects:
-            config = _with_objects(config, self.options.objects)
+        config = virtual_board_config(self.board_config, self.preset, self.options.objects)
         self.board_config = config
+        self.design = config.design
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
             url = str(self.board.start(timeout_s=load_scaled_s(30.0)))
@@ -315,6 +324,7 @@ class HostApp:
             self.notices,
             self.board_params,
             objects=self.objects,
+            geometry=ArmGeometry.from_design(self.design) if self.design is not None else None,
             drone_pose=self._drone_pose if self.drone_link is not None else None,
             mavlink_status=self._mavlink_status if self.drone_link is not None else None,
             shadow_status=self._shadow_status if self.shadow is not None else None,
@@ -452,10 +462,3 @@ class HostApp:
             with contextlib.suppress(Exception):
                 self.board.stop()
             self.board = None
-
-
-def _with_objects(config: Any, specs: tuple[ObjectSpec, ...]) -> Any:
-    """``config`` (a ``hil.board.BoardConfig``) with the ``--object`` objects added to its plant."""
-    model = config.plant.model
-    model = model.with_objects(*plant_objects(specs, model))
-    return dataclasses.replace(config, plant=dataclasses.replace(config.plant, model=model))

@@ -142,6 +142,8 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--excite", "--replay", "x.mcap"], "--excite needs a board"),
         (["--excite", "quick", "--virtual-rc", "safe"], "--virtual-rc safe never puts it there"),
         (["--virtual-rc", "grasp", "--excite"], "--excite runs with the right lever MIDDLE"),
+        (["--preset", "authors", "--replay", "x.mcap"], "--preset is a model of the virtual board"),
+        (["--preset", "authors", "--port", "loop://", "--no-shadow"], "cannot go with --no-shadow"),
     ],
 )
 def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
