@@ -574,3 +574,37 @@ def test_excite_records_what_a_fit_reads(tmp_path: Path, capsys: pytest.CaptureF
     travel_mm = (data.length_m.max(axis=0) - data.length_m.min(axis=0)) * 1000.0
     assert travel_mm[0] > 20.0 and all(travel_mm > 5.0), travel_mm
     assert not math.isnan(data.period_s)
+
+
+@pytest.mark.realtime
+def test_the_pilot_stops_it_on_the_virtual_board_and_the_run_fails() -> None:
+    from host.app import HostApp
+    from host.options import HostOptions
+    from host.panel.arbiter import CLI_CLIENT
+
+    sent: list[tuple[bool, Message]] = []  # (the excitation had ended, what was sent)
+    with HostApp(HostOptions(ui=False, virtual_rc=Lever.MIDDLE, excite="standard")) as app:
+        app.start()
+        assert app.client is not None and app.excite is not None and app.arbiter is not None
+        driver, arbiter = app.excite, app.arbiter
+        app.client.add_sent_listener(lambda msg, origin: sent.append((driver.excitation.done, msg)))
+
+        def pilot() -> None:
+            if wait_for(lambda: driver.excitation.state is ExciteState.RUNNING, 30.0):
+                time.sleep(1.0)
+                arbiter.set_lever(CLI_CLIENT, "right", Lever.DOWN)
+
+        threading.Thread(target=pilot, daemon=True).start()
+        status = app.run(60.0)
+        outcome = driver.outcome
+    if outcome is not None and "RC_LOST" in outcome.text:
+        skip_starved(f"the board lost the virtual radio: {outcome.text}")
+    assert status == 1
+    assert outcome is not None and outcome.state is ExciteState.STOPPED, outcome
+    assert outcome.text.startswith("excitation standard stopped after")
+    assert outcome.text.endswith(": right lever DOWN (SAFE)")
+    tensions = [
+        ended for ended, msg in sent if isinstance(msg, Command) and msg.code == CommandCode.SET_TENSIONS
+    ]
+    assert len(tensions) > 20 and not any(tensions)  # none once it had stopped
+    assert not any(ended for ended, msg in sent if isinstance(msg, Command))  # nor anything else
