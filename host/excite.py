@@ -52,7 +52,6 @@ if TYPE_CHECKING:
 __all__ = [
     "COMMAND_RATE_HZ",
     "EXCITATION_SCHEMA",
-    "EXCITATION_TOPIC",
     "BoardClock",
     "Excitation",
     "ExcitationDriver",
@@ -66,9 +65,6 @@ __all__ = [
 
 COMMAND_RATE_HZ: Final = 50.0
 """``SET_TENSIONS`` commands per second while the profile plays (module notes: why 50)."""
-
-EXCITATION_TOPIC: Final = "/excitation"
-"""Where the start goes in a recording: ``hil.identify.motor_data`` reads the last message on it."""
 
 EXCITATION_SCHEMA: Final[dict[str, Any]] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -93,7 +89,8 @@ EXCITATION_SCHEMA: Final[dict[str, Any]] = {
     "required": ["name", "duration_s", "rest_n", "peak_n", "segments", "start_us"],
     "additionalProperties": False,
 }
-"""The JSON schema of the :data:`EXCITATION_TOPIC` message: ``Profile.describe()`` plus the start."""
+"""The JSON schema of the start's message (``hil.identify.motor_data.EXCITATION_TOPIC``, where the fit
+reads it): ``Profile.describe()`` plus the start."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,7 +163,7 @@ class ExciteStep:
         commands: to send, in order.
         lines: ``(level, text)`` to tell the operator: ``progress`` (the command line only), ``info``,
             ``error`` (the final line of an excitation that did not play to its end).
-        started: the :data:`EXCITATION_TOPIC` message when the profile began in this step.
+        started: the start's message (:data:`EXCITATION_SCHEMA`) when the profile began in this step.
         outcome: set in the step in which the excitation ended.
     """
 
@@ -180,7 +177,7 @@ class BoardClock:
     """The board's time on the host's clock, from the telemetry's stamps and arrival times.
 
     The offset (arrival minus board time) is the link's transit plus any host stall; its smallest value
-    over the last :attr:`window` messages is the one with the least delay, so ``host - offset`` is the
+    over the last ``window`` messages is the one with the least delay, so ``host - offset`` is the
     board's time now (short by the minimum transit, about a millisecond on USB). The window follows a
     board clock that drifts against the host's; a board restart (time going back) starts it again.
 
@@ -191,7 +188,6 @@ class BoardClock:
     def __init__(self, window: int = 128) -> None:
         self._offsets: collections.deque[int] = collections.deque(maxlen=window)
         self._last_us: int | None = None
-        self.window = window
 
     def on_telemetry(self, time_us: int, host_us: int) -> None:
         """One telemetry stamp and the host time it arrived."""
@@ -589,6 +585,9 @@ class ExcitationDriver:
 
     def _carry_out(self, step: ExciteStep) -> None:
         if step.started is not None:
+            # The topic the fit reads (hil is imported by the host only where it is used).
+            from hil.identify.motor_data import EXCITATION_TOPIC  # type: ignore[import-not-found,unused-ignore]
+
             board_s = step.started["start_us"] / 1e6
             for rec in self._recorders:
                 rec.write_json(EXCITATION_TOPIC, step.started, EXCITATION_SCHEMA)

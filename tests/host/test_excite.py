@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from hil.identify.excitation import Profile, Segment, profile
+from hil.identify.motor_data import EXCITATION_TOPIC
 from host.excite import (
     EXCITATION_SCHEMA,
-    EXCITATION_TOPIC,
     BoardClock,
     Excitation,
     ExcitationDriver,

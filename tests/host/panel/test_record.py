@@ -37,7 +37,8 @@ def test_start_mid_frame_stop_and_replay(tmp_path: Path) -> None:
 
 def test_the_hosts_own_messages_go_to_a_recording_only_while_it_runs(tmp_path: Path) -> None:
     from hil import recording
-    from host.excite import EXCITATION_SCHEMA, EXCITATION_TOPIC
+    from hil.identify.motor_data import EXCITATION_TOPIC
+    from host.excite import EXCITATION_SCHEMA
     from tests.support.foxglove_check import check_recording
 
     sw = RecordingSwitch(tmp_path / "rec", {"source": "test"})
