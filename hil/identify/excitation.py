@@ -19,8 +19,10 @@ any segment on its own from the hanging, straight arm (:mod:`hil.identify.motor_
 - ``rest``: the pretension on every cable (the arm hangs back to straight; the next segment starts here).
 
 The figures (peak tension, durations, band) are chosen for the 3-cable prototype on the M2006 (a tension of
-10 N is about 0.56 A, a fifth of the 3 A limit; the ramps wind cable at a few mm/s, far below the 0.1 m/s
-pay-in governor) and can be scaled with ``peak_n``.
+10 N is about 0.56 A, a fifth of the 3 A limit) and can be scaled with ``peak_n``. Where the arm gives way
+at once (a joint snapping shut on the prototype's ``quick`` ramp), a cable can reel in faster than the
+firmware's 0.1 m/s pay-in governor allows, and the board cuts that cable's tension back for a moment: the
+fit reads the currents the board sent, so the data stay true; the governor is the board's to apply.
 """
 
 from __future__ import annotations

@@ -209,7 +209,9 @@ def read_model_file(path: str | Path) -> ModelFile:
         raise ModelFileError(f"{p}: nested too deeply") from exc
     try:
         return _parse(doc)
-    except (KeyError, TypeError, ValueError) as exc:
+    except KeyError as exc:
+        raise ModelFileError(f"{p}: no {exc} (a model file of spirob-hil identify has it)") from exc
+    except (TypeError, ValueError) as exc:
         raise ModelFileError(f"{p}: {exc}") from exc
 
 

@@ -66,7 +66,7 @@ def test_a_model_file_is_a_preset_with_its_values_and_its_design(tmp_path: Path)
         ("not toml [", "not TOML"),
         ("format = 99\npreset = 'prototype'\n", "newer than this version"),
         ("preset = 'prototype'\n", "no 'format' number"),
-        ("format = 1\npreset = 'prototype'\n", "'design'"),
+        ("format = 1\npreset = 'prototype'\n", "no 'design'"),
     ],
 )
 def test_bad_files_are_one_line(tmp_path: Path, text: str, why: str) -> None:
