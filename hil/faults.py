@@ -55,6 +55,9 @@ class FaultKind(StrEnum):
     """Motor ``motor`` (or all) reports a random angle, speed and current."""
     CAN_BUS_OFF = "can-bus-off"
     """No frame crosses the CAN bus in either direction."""
+    CAN_JITTER = "can-jitter"
+    """Each motor's feedback frame is one tick late with probability ``rate`` (a busy bus): the firmware
+    reads that motor's previous frame again (the timing of a real CAN bus, for identification)."""
     LINK_BYTE_LOSS = "link-byte-loss"
     """Each board-link byte (both directions) is lost with probability ``rate``."""
     LINK_BIT_FLIP = "link-bit-flip"
@@ -76,6 +79,7 @@ _RATE_KINDS = {
     FaultKind.DBUS_BIT_FLIP,
     FaultKind.LINK_BYTE_LOSS,
     FaultKind.LINK_BIT_FLIP,
+    FaultKind.CAN_JITTER,
 }
 _DELAY_KINDS = {FaultKind.LINK_DELAY, FaultKind.LOOP_DELAY, FaultKind.LOOP_JITTER}
 _MOTOR_KINDS = {FaultKind.MOTOR_SILENCE, FaultKind.MOTOR_STUCK, FaultKind.MOTOR_WRONG}
@@ -189,6 +193,7 @@ class FaultSet:
         self.rng = rng
         self._kinds = {f.kind for f in self.faults}
         self._stuck: dict[int, MotorFeedback] = {}
+        self._previous: dict[int, MotorFeedback] = {}
         self._frozen_frame: RcFrame | None = None
         self._link_delay = {"rx": _DelayLine(), "tx": _DelayLine()}
         self.injected: dict[str, int] = {}
@@ -257,6 +262,13 @@ class FaultSet:
             self._count("feedback_stuck")
             return stuck
         self._stuck.pop(motor, None)
+        jitter = self._active(FaultKind.CAN_JITTER, t_us)
+        if jitter is not None:
+            previous = self._previous.get(motor)
+            self._previous[motor] = frame
+            if previous is not None and self.rng.random() < jitter.rate:
+                self._count("feedback_late")
+                return previous
         if self._active(FaultKind.MOTOR_WRONG, t_us, motor):
             self._count("feedback_wrong")
             return MotorFeedback(

@@ -22,12 +22,12 @@ from typing import Any
 
 from controller.cli_kit import EXIT_FAILURE, EXIT_OK
 from host.errors import HostError
+from host.excite import ExcitationDriver, ExciteConfig, operator_lines
 from host.link.client import BoardClient, load_scaled_s
 from host.link.process import BoardLinkError
 from host.link.recording import LinkRecording
 from host.link.replay import ReplaySource
 from host.link.source import BoardSource
-from host.object_spec import ObjectSpec, plant_objects
 from host.options import (
     HostOptions,
     check_signing_timestamp_writable,
@@ -41,7 +41,8 @@ from host.panel.board_state import BoardState
 from host.panel.guard import PanelGuard, start_guarded_server
 from host.panel.notices import Notices
 from host.panel.record import RecordingSwitch
-from host.panel.scene import DronePose, SceneObject, ned_to_scene, scene_objects
+from host.panel.scene import ArmGeometry, DronePose, SceneObject, ned_to_scene, scene_objects
+from host.plant_model import resolve_preset, shadow_plant_factory, virtual_board_config
 from host.run_summary import RunSummary, SummaryReport
 from host.shadow import ShadowPlant
 from host.virtual_rc import VirtualRcDriver
@@ -96,6 +97,12 @@ class HostApp:
         self.drone_link: Any = None
         self.gamepad: Any = None
         self.virtual_rc: VirtualRcDriver | None = None
+        self.excite: ExcitationDriver | None = None
+        """``--excite``: the excitation played on the board."""
+        self.preset: Any = None
+        """``--preset``'s ``hil.sim.presets.Preset`` (None: the default model)."""
+        self.design: Any = None
+        """The arm's ``SpiralDesign`` when the host knows it (the virtual board's, or ``--preset``'s)."""
         self.summary = RunSummary()
         """Modes, phases, failsafes and faults of the run (the summary at exit)."""
         self.report: SummaryReport | None = None
@@ -129,6 +136,7 @@ class HostApp:
         if o.ui:
             check_ui_port_free(o.ui_host, o.ui_port)
         client: BoardClient | None = None
+        self.preset = resolve_preset(o.preset)
         if o.replay is None:
             self.board_url = o.port if o.port is not None else self._start_virtual_board()
             client = self.client = BoardClient(self.board_url)
@@ -165,6 +173,8 @@ class HostApp:
             self._start_ui()
         if self.replay is not None:
             self.replay.start()  # after the panel: it sees the recording from its start
+        if o.excite is not None and client is not None:
+            self._start_excite(client, o.excite)  # before the radio moves: it must see the lever's way
         if o.virtual_rc is not None:
             self.virtual_rc = VirtualRcDriver(arbiter, board, o.virtual_rc)
             self.virtual_rc.start()
@@ -179,12 +189,18 @@ class HostApp:
         if o.port is not None and o.shadow:
             # A board that sends no SimPoses (hardware) gets its shape from a local plant driven by
             # the measured currents; it switches itself off when SimPoses arrive.
-            self.shadow = ShadowPlant(self.board_state.on_shadow_poses)
+            self.shadow = ShadowPlant(
+                self.board_state.on_shadow_poses, plant_factory=shadow_plant_factory(self.preset)
+            )
+            if self.preset is not None:
+                self.design = self.preset.spiral()
             client.add_listener(self.shadow.on_board_message)
             self.shadow.start()
         meta = {"source": "spirob-host", "port": self.board_url}
         if self.board is not None:  # the virtual board's design and firmware parameters
             meta.update(self.board_config.describe())
+        if o.preset is not None:
+            meta["preset"] = o.preset
         if o.record is not None:
             tlog = o.record.with_suffix(".tlog") if o.mavlink is not None else None
             self.recording = LinkRecording(o.record, meta, tlog=tlog)
@@ -210,13 +226,11 @@ class HostApp:
             raise HostError(
                 f"the virtual board is not available ({exc}); pass --port to use a real board"
             ) from exc
-        from hil.board import BoardConfig  # type: ignore[import-not-found,unused-ignore]
         from hil.errors import HilError  # type: ignore[import-not-found,unused-ignore]
 
-        config = self.board_config if self.board_config is not None else BoardConfig(rc="link")
-        if self.options.objects:
-            config = _with_objects(config, self.options.objects)
+        config = virtual_board_config(self.board_config, self.preset, self.options.objects)
         self.board_config = config
+        self.design = config.design
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")
         try:
             url = str(self.board.start(timeout_s=load_scaled_s(30.0)))
@@ -225,6 +239,21 @@ class HostApp:
         # The objects of the plant we asked for (free objects drawn where they start).
         self.objects.extend(scene_objects(config.plant.model.objects))
         return url
+
+    def _start_excite(self, client: BoardClient, name: str) -> None:
+        from hil.identify.excitation import profile  # type: ignore[import-not-found,unused-ignore]
+
+        def send(msg: Any, on_ack: Any) -> bool:
+            return client.send(msg, origin="excite", on_ack=on_ack)
+
+        config = ExciteConfig(direct_wait_s=load_scaled_s(2.0), telemetry_wait_s=load_scaled_s(10.0))
+        recorders = [r for r in (self.recording, self.recorder) if r is not None]
+        self.excite = ExcitationDriver(
+            profile(name), send, operator_lines(self.notices), recorders, config=config
+        )
+        client.add_listener(self.excite.on_board_message)
+        client.add_state_listener(self.excite.on_link_state)
+        self.excite.start()
 
     def _start_gamepad(self, path: str) -> None:
         from host.gamepad import Gamepad
@@ -295,6 +324,7 @@ class HostApp:
             self.notices,
             self.board_params,
             objects=self.objects,
+            geometry=ArmGeometry.from_design(self.design) if self.design is not None else None,
             drone_pose=self._drone_pose if self.drone_link is not None else None,
             mavlink_status=self._mavlink_status if self.drone_link is not None else None,
             shadow_status=self._shadow_status if self.shadow is not None else None,
@@ -336,7 +366,8 @@ class HostApp:
 
         Returns:
             The exit status: 1 if a ``--virtual-rc`` run ended latched in a failsafe, saw a fault or no
-            telemetry at all (:meth:`SummaryReport.failure`), else 0.
+            telemetry at all (:meth:`SummaryReport.failure`), or an ``--excite`` profile did not play to
+            its end (the run ends with it), else 0.
         """
         stop = stop or threading.Event()
         end = None if duration_s is None else time.monotonic() + duration_s
@@ -347,15 +378,22 @@ class HostApp:
                 break
             if self.replay is not None and not self.options.ui and self.replay.done.is_set():
                 break
+            if self.excite is not None and self.excite.done.is_set():
+                break  # the run ends with its excitation
             if now >= next_status:
                 next_status = now + 10.0
                 _log.info("%s", self.status_line())
             wait = 0.1 if end is None else max(0.0, min(0.1, end - now))
             stop.wait(wait)
+        excite_failed = False
+        if self.excite is not None:
+            why = "the run was interrupted" if stop.is_set() else "--duration ran out"
+            outcome = self.excite.stop(f"{why} before the profile ended")
+            excite_failed = outcome is None or not outcome.completed
         self.report = self.take_report()
         if self.options.virtual_rc is not None and self.report.failure() is not None:
             return EXIT_FAILURE
-        return EXIT_OK
+        return EXIT_FAILURE if excite_failed else EXIT_OK
 
     def take_report(self) -> SummaryReport:
         """The run's summary so far, with the virtual radio's gaps from the link (when there is one)."""
@@ -382,6 +420,8 @@ class HostApp:
 
     def close(self) -> None:
         """Stop everything in reverse order; safe twice."""
+        if self.excite is not None:  # first: its last word to the board needs the link
+            self.excite.stop("the host closed before the profile ended")
         if self.virtual_rc is not None:
             self.virtual_rc.stop()
             self.virtual_rc = None
@@ -422,10 +462,3 @@ class HostApp:
             with contextlib.suppress(Exception):
                 self.board.stop()
             self.board = None
-
-
-def _with_objects(config: Any, specs: tuple[ObjectSpec, ...]) -> Any:
-    """``config`` (a ``hil.board.BoardConfig``) with the ``--object`` objects added to its plant."""
-    model = config.plant.model
-    model = model.with_objects(*plant_objects(specs, model))
-    return dataclasses.replace(config, plant=dataclasses.replace(config.plant, model=model))

@@ -73,6 +73,24 @@ def _follow_servo(text: str) -> ServoFollowConfig:
     return parse_follow_servo(text)
 
 
+def _preset(text: str) -> str:
+    # The spirob-hil commands' own check (a name, or a fitted model file that reads), loaded only when
+    # the flag is given: it reads the file.
+    from hil.cli.design import preset_arg  # type: ignore[import-not-found,unused-ignore]
+
+    return str(preset_arg(text))
+
+
+def _excite_profile(text: str) -> str:
+    from hil.identify.excitation import profile  # type: ignore[import-not-found,unused-ignore]
+
+    try:
+        profile(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The `spirob-host` argument parser (kept apart from :func:`main` so tests call it with argv)."""
     p = Parser(
@@ -111,6 +129,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     src.add_argument("--no-object", action="store_true", help="virtual board only: an empty scene")
     src.add_argument(
+        "--preset",
+        type=_preset,
+        metavar="NAME|FILE.toml",
+        help="the plant model of the virtual board (with --port: of the shadow plant): a preset's name "
+        "(default prototype; docs/plant.md lists them) or a model file fitted by spirob-hil identify",
+    )
+    src.add_argument(
         "--gamepad",
         metavar="DEVICE",
         help="a Linux joystick device (/dev/input/js0) as the virtual radio: right stick ch0/ch1, left "
@@ -145,6 +170,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--replay-speed", type=positive_duration, metavar="X", help="with --replay: speed factor (default 1)"
+    )
+    run.add_argument(
+        "--excite",
+        type=_excite_profile,
+        nargs="?",
+        const="standard",
+        metavar="PROFILE",
+        help="play an excitation profile on the board in DIRECT mode for identification (standard, 60 s, "
+        "the default; quick, 14.5 s): it starts when the right lever goes MIDDLE, stops when it goes DOWN, "
+        "and the run ends with it",
     )
     run.add_argument(
         "--foxglove",
@@ -215,6 +250,9 @@ class HostOptions:
             ``host.object_spec.DEFAULT_OBJECT``; ``--no-object``: none).
         gamepad: joystick device driving the virtual radio (None: none).
         gamepad_map: its mapping.
+        preset: the plant model (``hil.sim.presets.resolve``: a preset's name or a fitted model file) of
+            the virtual board, or of the shadow plant with ``port``; None: the default prototype.
+        excite: the excitation profile to play (``host.excite``); None: none.
     """
 
     port: str | None = None
@@ -238,6 +276,8 @@ class HostOptions:
     objects: tuple[ObjectSpec, ...] = ()
     gamepad: str | None = None
     gamepad_map: GamepadMapping = DEFAULT_MAPPING
+    preset: str | None = None
+    excite: str | None = None
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> HostOptions:
@@ -257,6 +297,10 @@ class HostOptions:
                 raise HostError("--virtual-rc needs a board; it cannot be used with --replay")
             if ns.gamepad is not None:
                 raise HostError("--gamepad needs a board; it cannot be used with --replay")
+            if ns.excite is not None:
+                raise HostError("--excite needs a board; it cannot be used with --replay")
+            if ns.preset is not None:
+                raise HostError("--preset is a model of the virtual board or the shadow plant: no --replay")
             if not ns.replay.is_file():
                 raise HostError(f"no such recording: {ns.replay}")
             from hil.recording import is_mcap
@@ -265,6 +309,7 @@ class HostOptions:
                 raise HostError(f"{ns.replay} is not an MCAP recording")
         if ns.port is not None:
             check_board_url(ns.port)
+        _check_excite_and_preset(ns)
         objects = _objects_from_args(ns)
         gamepad_map = _gamepad_from_args(ns)
         if ns.mavlink is not None:
@@ -312,7 +357,25 @@ class HostOptions:
             objects=objects,
             gamepad=ns.gamepad,
             gamepad_map=gamepad_map,
+            preset=ns.preset,
+            excite=ns.excite,
         )
+
+
+def _check_excite_and_preset(ns: argparse.Namespace) -> None:
+    """``--excite`` needs a lever that can go MIDDLE; ``--preset`` with ``--port`` a shadow plant to model.
+
+    Raises:
+        HostError: a combination that cannot work.
+    """
+    lever = VIRTUAL_RC_LEVERS.get(ns.virtual_rc or "")
+    if ns.excite is not None and lever is not None and lever != Lever.MIDDLE:
+        raise HostError(
+            f"--excite runs with the right lever MIDDLE: --virtual-rc {ns.virtual_rc} never puts it there "
+            "(use --virtual-rc manual, or the pilot's radio)"
+        )
+    if ns.preset is not None and ns.port is not None and ns.no_shadow:
+        raise HostError("--preset with --port is the shadow plant's model; it cannot go with --no-shadow")
 
 
 def _gamepad_from_args(ns: argparse.Namespace) -> GamepadMapping:

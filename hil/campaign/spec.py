@@ -29,7 +29,7 @@ from controller.config import FirmwareConfig
 from hil.errors import HilError
 from hil.faults import Fault
 from hil.sim.config import PHYSICS_STEPS_S, ModelConfig
-from hil.sim.presets import PRESETS
+from hil.sim.presets import resolve
 from hil.sim.spiral import SpiralDesign, b_from_taper, taper_from_b
 from hil.sim.variants import Variant
 from hil.trial.grasp import grasp_firmware
@@ -458,9 +458,10 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
     """
     d = {k.partition(".")[2]: v for k, v in inputs.items() if k.startswith("design.")}
     name = d.get("preset", "prototype")
-    if name not in PRESETS:
-        raise CampaignError(f"design.preset: unknown preset {name!r} (known: {', '.join(PRESETS)})")
-    chosen = PRESETS[name]
+    try:
+        chosen = resolve(str(name))
+    except ValueError as exc:
+        raise CampaignError(f"design.preset: {exc}") from exc
     physics = d.get("physics", physics)
     if physics not in PHYSICS_STEPS_S:
         raise CampaignError(f"design.physics: unknown {physics!r} (known: {', '.join(PHYSICS_STEPS_S)})")
@@ -468,8 +469,8 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
         if any(k in d for k in _PHYSICAL):
             design = _physical_design(d)
         else:
-            design = SpiralDesign.preset(chosen.design_preset)
-            cables = d.get("cables", chosen.cables)
+            design = chosen.spiral()
+            cables = d.get("cables")
             if cables is not None:
                 design = design.with_cables(cables)
         if design.units > _MAX_UNITS_N:

@@ -8,14 +8,29 @@ import math
 
 from controller.cli_kit import UsageError, finite_float
 from hil.sim.config import ModelConfig
-from hil.sim.presets import PRESETS, preset
+from hil.sim.presets import PRESETS, is_model_file, resolve
 from hil.sim.spiral import SpiralDesign
 
-__all__ = ["MAX_UNITS_N", "add_design_arguments", "design_from_args", "model_from_args"]
+__all__ = ["MAX_UNITS_N", "add_design_arguments", "design_from_args", "model_from_args", "preset_arg"]
 
 MAX_UNITS_N = 1000
 """The most units a command line accepts: every unit is a MuJoCo body and a joint of the 1 kHz plant, and
 the printed arms have tens (the authors' 24); a thousand is already far past anything buildable."""
+
+
+def preset_arg(text: str) -> str:
+    """``--preset``: a preset's name, or a fitted model file that reads (checked once, here)."""
+    if text in PRESETS:
+        return text
+    if not is_model_file(text):
+        raise argparse.ArgumentTypeError(
+            f"unknown preset {text!r} (choose from {', '.join(PRESETS)}, or a fitted model FILE.toml)"
+        )
+    try:
+        resolve(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+    return text
 
 
 def add_design_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,9 +46,9 @@ def add_design_arguments(parser: argparse.ArgumentParser) -> None:
     listing = "; ".join(f"{p.name}: {p.summary}" for p in PRESETS.values())
     g.add_argument(
         "--preset",
-        choices=list(PRESETS),
-        metavar="NAME",
-        help=f"a named design and plant model ({listing})",
+        type=preset_arg,
+        metavar="NAME|FILE",
+        help=f"a named design and plant model ({listing}), or a fitted model file (spirob-hil identify)",
     )
     g.add_argument("--length", type=finite_float, metavar="M", help="length of the straightened arm [m]")
     g.add_argument("--tip-width", type=finite_float, metavar="M", help="width of the tip [m]")
@@ -126,11 +141,9 @@ def _design_from_args(args: argparse.Namespace) -> SpiralDesign:
         return SpiralDesign.from_params(args.a, args.b, theta0, dtheta, cables)
     if args.dtheta_deg is not None:
         raise UsageError("--dtheta-deg needs physical inputs or spiral parameters (a preset fixes it)")
-    chosen = PRESETS[args.preset or "prototype"]
-    design = SpiralDesign.preset(chosen.design_preset)
-    if args.cables is not None:
-        return design.with_cables(cables)
-    return design if chosen.cables is None else design.with_cables(chosen.cables)
+    chosen = resolve(args.preset or "prototype")
+    design = chosen.spiral()
+    return design.with_cables(cables) if args.cables is not None else design
 
 
 def _preset_overridden(args: argparse.Namespace, *, physical: bool, params: bool) -> SpiralDesign:
@@ -141,8 +154,8 @@ def _preset_overridden(args: argparse.Namespace, *, physical: bool, params: bool
     taper; spiral-parameter overrides start from its ``a``, ``b``, θ0 and Δθ. ``--dtheta-deg`` alone keeps
     the preset's own form.
     """
-    chosen = PRESETS[args.preset]
-    base = SpiralDesign.preset(chosen.design_preset)
+    chosen = resolve(args.preset)
+    base = chosen.spiral()
     cables = args.cables if args.cables is not None else (chosen.cables or base.cables)
     inputs = dict(base.inputs)
     built_physical = "length_m" in inputs
@@ -192,4 +205,4 @@ def model_from_args(args: argparse.Namespace) -> ModelConfig:
     Raises:
         ValueError: unknown preset name (argparse's choices normally catch it first).
     """
-    return preset(args.preset or "prototype")
+    return resolve(args.preset or "prototype").model

@@ -38,6 +38,8 @@ from controller.cli_kit import (
 from hil.cli.campaign import CAMPAIGN_HELP, configure_campaign, run_campaign_command
 from hil.cli.design import add_design_arguments, design_from_args, model_from_args
 from hil.cli.experiment import EXPERIMENT_HELP, configure_experiment, run_experiment_command
+from hil.cli.identify import IDENTIFY_HELP, configure_identify, run_identify_command
+from hil.identify.excitation import PROFILES
 from hil.sim.config import ModelConfig, ObjectConfig, SolverConfig
 from hil.sim.mjcf import write_mjcf
 from hil.sim.presets import PRESETS
@@ -241,7 +243,7 @@ def _run_model(args: argparse.Namespace) -> int:
         cfg = replace(cfg, drone=replace(cfg.drone, floor=True))
     cfg = cfg.with_objects(*(_parse_object(t) for t in args.object))
     try:
-        path = write_mjcf(args.output, design, None, cfg)
+        path = write_mjcf(args.output, design, None, cfg, standalone=True)
     except OSError as exc:
         raise UsageError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
     print(f"wrote {path} ({design.cables} cables, {design.units} units)")
@@ -369,6 +371,12 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
         metavar="PORT",
         help="run against a board-link endpoint in real time (a real board, or spirob-hil board) instead",
     )
+    p.add_argument(
+        "--excite",
+        choices=list(PROFILES),
+        metavar="PROFILE",
+        help=f"the excitation scenario's profile ({', '.join(PROFILES)}; default standard)",
+    )
     add_design_arguments(p)
 
 
@@ -385,6 +393,16 @@ def _run_run(args: argparse.Namespace) -> int:
     if unknown:
         raise UsageError(f"unknown scenario {unknown[0]!r} (known: {', '.join(SCENARIOS)})", f"{PROG} run")
     faults = [Fault.parse(spec) for spec in args.fault]
+    options: dict[str, dict[str, str]] = {}
+    if args.excite is not None:
+        if "excitation" not in names:
+            raise UsageError("--excite is the excitation scenario's option: run excitation", f"{PROG} run")
+        if args.port:
+            raise UsageError(
+                "--excite in real time is spirob-host's: spirob-host --port PORT --excite PROFILE",
+                f"{PROG} run",
+            )
+        options["excitation"] = {"profile_name": args.excite}
     design = design_from_args(args)
     if args.report and not args.port:  # checked before the first run, not after it
         writable_dir(Path(args.report), "write plots into", f"{PROG} run")
@@ -424,7 +442,8 @@ def _run_run(args: argparse.Namespace) -> int:
             disable=not console.is_terminal,
         ) as progress:
             for name in names:
-                task = progress.add_task(name, total=SCENARIOS[name].duration_us / 1000)
+                ticks = SCENARIOS[name](**options.get(name, {})).duration_us / 1000
+                task = progress.add_task(name, total=ticks)
 
                 def advance(done: int, total: int, task: TaskID = task) -> None:
                     progress.update(task, completed=done)  # one tick is one simulated millisecond
@@ -438,6 +457,7 @@ def _run_run(args: argparse.Namespace) -> int:
                     record=record_paths.get(name),
                     report_dir=args.report,
                     progress=advance,
+                    options=options.get(name),
                 )
                 progress.remove_task(task)
                 if not console.is_terminal:
@@ -554,6 +574,7 @@ COMMANDS: list[Command] = [
         run_experiment_command,
     ),
     Command("campaign", CAMPAIGN_HELP, configure_campaign, run_campaign_command),
+    Command("identify", IDENTIFY_HELP, configure_identify, run_identify_command),
 ]
 """The subcommands, in ``--help`` order. Later issues append theirs."""
 

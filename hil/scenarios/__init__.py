@@ -11,7 +11,7 @@ board link in real time and judges it with the same checks.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from hil.board import BoardConfig
@@ -22,6 +22,7 @@ from hil.recording import Recorder
 from hil.run_record import TICK_US, Check, RunRecord, ScenarioResult
 from hil.scenarios.base import MANUAL, MS, RC_GAP_CHECK, SAFE, Plan, Scenario, rc, rc_gap_check
 from hil.scenarios.drone_manoeuvre import DroneManoeuvre
+from hil.scenarios.excitation import Excitation
 from hil.scenarios.grasp import Grasp
 from hil.scenarios.host_loss import HostLoss
 from hil.scenarios.link_disconnect import LinkDisconnect
@@ -70,6 +71,7 @@ SCENARIOS: dict[str, type[Scenario]] = {
         Overcurrent,
         Grasp,
         DroneManoeuvre,
+        Excitation,
     )
 }
 """The catalogue, in the order ``spirob-hil list`` shows it."""
@@ -113,6 +115,7 @@ def run_scenario(
     record: str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
     report_dir: str | Path | None = None,
+    options: Mapping[str, str] | None = None,
 ) -> ScenarioResult:
     """Run one scenario in lockstep and measure its checks.
 
@@ -125,11 +128,14 @@ def run_scenario(
         record: write an MCAP recording of every byte in and out of the board.
         progress: called as ``progress(ticks_done, ticks_total)`` every 100 ticks.
         report_dir: write a PNG of the run's signals there (``NAME.png``).
+        options: the scenario's own options (``excitation``: ``profile_name``).
 
     Raises:
         KeyError: unknown scenario name.
+        TypeError: an option the scenario does not take.
+        ValueError: an option value it refuses.
     """
-    scenario = SCENARIOS[name]()
+    scenario = SCENARIOS[name](**(options or {}))
     plan = scenario.plan()
     plan = dataclasses.replace(plan, faults=(*plan.faults, *faults))
     config = board_config(plan, seed, design, model)
@@ -139,6 +145,7 @@ def run_scenario(
         meta["faults"] = ";".join(repr(f) for f in plan.faults)
         if plan.drone is not None:  # only then: every other recording stays byte-identical
             meta["drone"] = repr(plan.drone)
+        meta.update(scenario.recording_metadata())
         recorder = Recorder(record, metadata=meta)
     try:
         env = Environment(

@@ -91,7 +91,8 @@ class Scenario(Episode, ABC):
 
     name: ClassVar[str]
     summary: ClassVar[str]
-    duration_us: ClassVar[int]
+    duration_us: int
+    """How long it runs (a class attribute; a scenario with options may set its own)."""
     needs_plant: ClassVar[bool] = False
     """Its plan or its checks need the simulated plant (objects, a packed start): lockstep only."""
 
@@ -102,6 +103,10 @@ class Scenario(Episode, ABC):
     @abstractmethod
     def checks(self, run: RunRecord, plan: Plan) -> list[Check]:
         """The measured checks of a finished run."""
+
+    def recording_metadata(self) -> dict[str, str]:
+        """What a recording of the run says about it beyond the board (none by default)."""
+        return {}
 
 
 # --- windows from the plan ------------------------------------------------------------------------

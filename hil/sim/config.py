@@ -64,7 +64,12 @@ class ArmConfig:
             ``k_base · β^{−p(i−1)}``. Published identification of a TPU arm: 0.3-0.8 N·m/rad near the
             base; the authors' generator: 0.04 N·m/rad.
         stiffness_exponent: p, the stiffness profile: 3 (stiffness ∝ size³, Note S3's proportionality:
-            a bending beam of the unit's section) or 2 (∝ size², the authors' generator).
+            a bending beam of the unit's section) or 2 (∝ size², the authors' generator); any value in
+            1..4 (a fitted model's).
+        joint_friction_nm: dry friction of the joint nearest the base, each joint's scaled like its
+            stiffness (0: none, the default; :mod:`hil.identify` fits it).
+        stiffness_scatter: factors on the joints' stiffness, base first (a printed arm's joint-to-joint
+            variation; cycled when shorter than the arm). Empty: the power law alone (the default).
         damping_ratio: ζ of each joint against the inertia it carries (identification: about 0.13).
         cable_offset_ratio: cable hole radius as a fraction of the local half-width.
         cable_mu: capstan friction coefficient of the cable in the holes (0.25-0.4 reproduces the
@@ -99,7 +104,9 @@ class ArmConfig:
 
     total_mass_kg: float = 0.0384
     base_stiffness_nm_per_rad: float = 0.5
-    stiffness_exponent: int = 3
+    stiffness_exponent: float = 3
+    joint_friction_nm: float = 0.0
+    stiffness_scatter: tuple[float, ...] = ()
     damping_ratio: float = 0.13
     cable_offset_ratio: float = 0.8
     cable_mu: float = 0.3
@@ -119,10 +126,17 @@ class ArmConfig:
         _finite("total_mass_kg", self.total_mass_kg)
         _finite("base_stiffness_nm_per_rad", self.base_stiffness_nm_per_rad, allow_equal=True)
         _check(
-            self.stiffness_exponent in (2, 3) and not isinstance(self.stiffness_exponent, bool),
-            f"stiffness_exponent must be 2 or 3, got {self.stiffness_exponent!r}",
+            isinstance(self.stiffness_exponent, int | float)
+            and not isinstance(self.stiffness_exponent, bool)
+            and 1.0 <= self.stiffness_exponent <= 4.0,
+            f"stiffness_exponent must be 1..4, got {self.stiffness_exponent!r}",
         )
         _finite("damping_ratio", self.damping_ratio, allow_equal=True)
+        _finite("joint_friction_nm", self.joint_friction_nm, allow_equal=True)
+        _check(
+            all(isinstance(x, int | float) and math.isfinite(x) and x > 0 for x in self.stiffness_scatter),
+            f"stiffness_scatter must hold positive factors, got {self.stiffness_scatter!r}",
+        )
         _finite("cable_offset_ratio", self.cable_offset_ratio)
         _check(
             self.cable_offset_ratio < 1.0, f"cable_offset_ratio must be < 1, got {self.cable_offset_ratio!r}"
@@ -217,6 +231,11 @@ class MotorConfig:
             torque-speed line ``I_avail = I_stall · (1 − ω/ω_nl)``. 18 A puts DJI's rated point (3 A at
             416 rpm) on that line.
         output_friction_nm: Coulomb friction of gearbox and spool at the output shaft.
+        torque_scale: the motors' true torque constant over ``torque_constant_nm_per_a`` (which the
+            firmware estimates tension with): 1 = they agree (a fitted model's may not).
+        command_delay_s: from a current setpoint reaching the drives to the motor acting on it (the
+            loop and the CAN bus of a real board; a fraction of the 1 ms period interpolates between
+            setpoints); 0 = the next control period, as the lockstep board.
         current_noise_raw: standard deviation of the fed-back current, raw units (0 = exact).
         temperature_c: temperature reported in every feedback frame.
     """
@@ -229,6 +248,8 @@ class MotorConfig:
     no_load_speed_rad_s: float = 500.0 * 2.0 * math.pi / 60.0
     stall_current_a: float = 18.0
     output_friction_nm: float = 0.01
+    torque_scale: float = 1.0
+    command_delay_s: float = 0.0
     current_noise_raw: float = 0.0
     temperature_c: int = 30
 
@@ -241,6 +262,11 @@ class MotorConfig:
     def force_per_amp_n(self) -> float:
         """Cable force per amp at standstill: ``kt / r_spool`` [N/A]."""
         return self.torque_constant_nm_per_a / self.spool_radius_m
+
+    @property
+    def delivered_force_per_amp_n(self) -> float:
+        """Cable force per amp the motor really delivers: :attr:`force_per_amp_n` · ``torque_scale`` [N/A]."""
+        return self.force_per_amp_n * self.torque_scale
 
     @property
     def friction_force_n(self) -> float:
@@ -261,6 +287,9 @@ class MotorConfig:
         _finite("no_load_speed_rad_s", self.no_load_speed_rad_s)
         _finite("stall_current_a", self.stall_current_a)
         _finite("output_friction_nm", self.output_friction_nm, allow_equal=True)
+        _finite("torque_scale", self.torque_scale)
+        _finite("command_delay_s", self.command_delay_s, allow_equal=True)
+        _check(self.command_delay_s <= 0.1, f"command_delay_s must be <= 0.1 s, got {self.command_delay_s!r}")
         _finite("current_noise_raw", self.current_noise_raw, allow_equal=True)
         _check(
             isinstance(self.temperature_c, int) and 0 <= self.temperature_c <= 255,

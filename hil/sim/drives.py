@@ -55,6 +55,7 @@ class Drives:
             ``muscle_force_n`` (capped at 1).
         muscle_force_n: the muscle's peak force F0 (needed by ``muscle``; see
             :attr:`hil.sim.config.ModelConfig.muscle_force_n`).
+        control_period_s: how often :meth:`drive` runs (a command delay is counted in these).
 
     Raises:
         ValueError: current noise without an rng, or a muscle without its peak force.
@@ -67,6 +68,7 @@ class Drives:
         rng: np.random.Generator | None,
         actuator: ActuatorConfig | None = None,
         muscle_force_n: float | None = None,
+        control_period_s: float = 1e-3,
     ) -> None:
         if rng is None and motor.current_noise_raw > 0:
             raise ValueError("current noise needs an rng (numpy.random.Generator)")
@@ -77,7 +79,7 @@ class Drives:
         """``motor``, ``tension`` or ``muscle``."""
         self._motor_kind = kind == "motor"
         # Asked tension per amp, in the actuator's control units (N for tension, activation for muscle).
-        fpa = motor.force_per_amp_n
+        fpa = motor.delivered_force_per_amp_n
         self._ctrl_per_a = fpa / muscle_force_n if muscle_force_n is not None and kind == "muscle" else fpa
         self._ctrl_max = 1.0 if kind == "muscle" else math.inf
         self._amps_per_n = 1.0 / fpa
@@ -88,6 +90,7 @@ class Drives:
         self.gear_ratio = motor.gear_ratio
         """Rotor turns per output (spool) turn."""
         self._limit_raw = round(motor.current_limit_a * RAW_PER_AMP)
+        self._limit_a = motor.current_limit_a
         self._inv_r_spool = 1.0 / motor.spool_radius_m
         self._counts_per_m = motor.gear_ratio * ANGLE_COUNTS / (2.0 * math.pi * motor.spool_radius_m)
         self._rpm_per_m_s = motor.gear_ratio * 60.0 / (2.0 * math.pi * motor.spool_radius_m)
@@ -96,6 +99,9 @@ class Drives:
         self._inv_no_load = 1.0 / motor.no_load_speed_rad_s
         self._stall_a = motor.stall_current_a
         self._current_raw_list = [0] * count
+        # Command delay, in control periods: the setpoints of the last periods, newest last.
+        self._delay_periods = motor.command_delay_s / control_period_s
+        self._history: list[list[int]] = [[0] * count] * (int(self._delay_periods) + 2)
         self._applied_a = np.zeros(count)
         self._applied_mv = _float_view(self._applied_a)
         self._angle_offset_list = [0] * count
@@ -145,6 +151,7 @@ class Drives:
     def reset(self) -> None:
         """No current, and new encoder zeros drawn from the rng (all 0 without one)."""
         self._current_raw_list = [0] * self._n
+        self._history = [[0] * self._n] * len(self._history)
         self._applied_a[:] = 0.0
         if self._rng is not None:
             self._angle_offset_list = [int(v) for v in self._rng.integers(0, ANGLE_COUNTS, size=self._n)]
@@ -159,13 +166,20 @@ class Drives:
     def drive(self) -> None:
         """Run the current loops for one control period: each drive's delivered current into its actuator.
 
-        Torque-speed line: in the direction of motion the drive can push at most ``I_stall·(1 − ω/ω_nl)``.
-        A tension source or a muscle gets the asked tension (pull only) in its control units; MuJoCo
-        applies its lag or activation dynamics. Plain floats over buffer views: three motors are cheaper
-        in Python than in numpy.
+        The C610's current loop on a supply of limited voltage: the command is delivered exactly while
+        the voltage it needs, ``I_cmd + I_stall·ω/ω_nl`` in amps of stall current, stays within
+        ``±I_stall``; beyond, the drive delivers what the supply allows. In the direction of motion that
+        is the torque-speed line ``I_stall·(1 − ω/ω_nl)``, and past the no-load speed it brakes (the
+        back-EMF exceeds the supply), up to the current limit: the law of MuJoCo's ``dcmotor`` actuator
+        in current mode, which the exported model uses (:mod:`hil.sim.standalone`), so the file and the
+        plant drive alike. A tension source or a muscle gets the asked tension (pull only) in its control
+        units; MuJoCo applies its lag or activation dynamics. Plain floats over buffer views: three
+        motors are cheaper in Python than in numpy.
         """
         ctrl = self._ctrl_mv
-        currents = self._current_raw_list
+        currents: list[int] | list[float] = self._current_raw_list
+        if self._delay_periods > 0.0:
+            currents = self._delayed()
         if not self._motor_kind:
             gain = self._ctrl_per_a / RAW_PER_AMP
             ctrl_max = self._ctrl_max
@@ -179,17 +193,30 @@ class Drives:
         inv_r_spool = self._inv_r_spool
         stall_a = self._stall_a
         inv_no_load = self._inv_no_load
+        limit_a = self._limit_a
         for k in range(self._n):
             cmd = currents[k] / RAW_PER_AMP
-            if cmd == 0.0:
-                applied = 0.0
+            omega = qvel[dadr[k]] * inv_r_spool
+            need = cmd + stall_a * omega * inv_no_load  # the voltage the command needs, in stall amps
+            if -stall_a <= need <= stall_a:
+                applied = cmd
             else:
-                omega = qvel[dadr[k]] * inv_r_spool
-                sign = 1.0 if cmd > 0 else -1.0
-                avail = stall_a * (1.0 - sign * omega * inv_no_load)
-                applied = sign * min(abs(cmd), avail) if avail > 0.0 else 0.0
+                sign = 1.0 if need > 0 else -1.0
+                applied = sign * stall_a * (1.0 - sign * omega * inv_no_load)
+                applied = limit_a if applied > limit_a else -limit_a if applied < -limit_a else applied
             applied_a[k] = applied
             ctrl[k] = applied
+
+    def _delayed(self) -> list[float]:
+        """The setpoints ``command_delay_s`` ago (linear between the two periods around it), raw units."""
+        hist = self._history
+        hist.append(self._current_raw_list)
+        del hist[0]
+        whole = int(self._delay_periods)
+        frac = self._delay_periods - whole
+        newer = hist[-1 - whole]
+        older = hist[-2 - whole]
+        return [(1.0 - frac) * a + frac * b for a, b in zip(newer, older, strict=True)]
 
     def apply_currents(self, currents_raw: Sequence[int]) -> tuple[int, ...]:
         """Set the motors' current setpoints in raw C610 units (1000 per amp), one per cable.

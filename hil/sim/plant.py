@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from hil.errors import PlantDivergedError
 from hil.sim.config import ObjectConfig
 from hil.sim.drives import Drives
-from hil.sim.mjcf import build_mjcf, cable_layout, unit_geometry
+from hil.sim.mjcf import build_mjcf, cable_layout, joint_friction_nm, unit_geometry
 from hil.sim.monitor import ExtremesMonitor, object_radii
 from hil.sim.objects import SceneObjects
 from hil.sim.spiral import SpiralDesign
@@ -110,7 +110,14 @@ class Plant:
         if rng is not None and not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
         model = self._config.model
-        drives = Drives(model.motor, self._design.cables, rng, model.actuator, model.muscle_force_n)
+        drives = Drives(
+            model.motor,
+            self._design.cables,
+            rng,
+            model.actuator,
+            model.muscle_force_n,
+            control_period_s=self._config.control_period_us * 1e-6,
+        )
         self._drives = drives
         self._drive = drives.drive
         self.apply_currents = drives.apply_currents
@@ -193,6 +200,9 @@ class Plant:
         self._wrap_buf = np.empty(n_units - 1)
         self._friction_on = False
         self._mu = cfg.arm.cable_mu
+        # The joints' own dry friction (a fitted model's; none by default): under the capstan friction.
+        self._joint_friction = np.array(joint_friction_nm(cfg.arm, self._geo)[1:], dtype=np.float64)
+        self._joint_friction_on = bool(np.any(self._joint_friction > 0.0))
         self._tension_adr_list = [int(a) for a in self._tension_adr]
         self._arm_slice = slice(int(self._arm_dofs.min()), int(self._arm_dofs.max()) + 1)
         self._spool_slice = slice(int(self._spool_dadr.min()), int(self._spool_dadr.max()) + 1)
@@ -293,7 +303,7 @@ class Plant:
         self._drone_accel[:] = 0.0
         self._drives.reset()
         self._time_us = 0
-        m.dof_frictionloss[self._bend_dofs_flat] = 0.0
+        self._rest_friction()
         self._friction_on = False
         self._bad_qacc = 0
         self._monitor.reset()
@@ -382,7 +392,7 @@ class Plant:
                 total += t
         if total == 0.0:
             if self._friction_on:
-                self._m.dof_frictionloss[self._bend_dofs_flat] = 0.0
+                self._rest_friction()
                 self._friction_on = False
             return
         alpha = self._alpha_buf
@@ -397,8 +407,17 @@ class Plant:
         np.expm1(alpha, out=alpha)  # −(share lost in that joint's holes)
         wrap *= alpha
         wrap *= self._friction_scale * -total  # cable radius at each joint
+        if self._joint_friction_on:
+            wrap += self._joint_friction
         self._m.dof_frictionloss[self._bend_dofs] = wrap[:, None]
         self._friction_on = True
+
+    def _rest_friction(self) -> None:
+        """The bending dofs' friction with no cable tension: the joints' own (none by default)."""
+        if self._joint_friction_on:
+            self._m.dof_frictionloss[self._bend_dofs] = self._joint_friction[:, None]
+        else:
+            self._m.dof_frictionloss[self._bend_dofs_flat] = 0.0
 
     # ------------------------------------------------------------------ named accessors
 

@@ -1,4 +1,5 @@
-"""Named sets of plant-model choices (actuator, stiffness profile, mounting) with the design they go with.
+"""Named sets of plant-model choices (actuator, stiffness profile, mounting) with the design they go with,
+and fitted models read from files (``spirob-hil identify``): :func:`resolve` takes either.
 
 A preset answers "which model is this result from?" in one word, so any figure can be cross-checked
 against another model: ``spirob-hil design/model export/board/run/experiment --preset NAME``, or from code
@@ -9,10 +10,14 @@ against another model: ``spirob-hil design/model export/board/run/experiment --p
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 from hil.sim.config import ActuatorConfig, ArmConfig, ModelConfig
+from hil.sim.model_file import ModelFileError, read_model_file
+from hil.sim.spiral import SpiralDesign
+from hil.sim.uncertain import apply
 
-__all__ = ["PRESETS", "Preset", "preset", "preset_names"]
+__all__ = ["PRESETS", "Preset", "is_model_file", "preset", "preset_names", "resolve"]
 
 
 @dataclass(frozen=True)
@@ -26,6 +31,7 @@ class Preset:
         cables: the cable count it sets on that design (``None``: the design's own).
         model: the plant model.
         source: where its choices come from.
+        design: the design itself, when it is not a named one (a fitted model's: the recorded arm).
     """
 
     name: str
@@ -34,6 +40,14 @@ class Preset:
     cables: int | None
     model: ModelConfig
     source: str
+    design: SpiralDesign | None = None
+
+    def spiral(self) -> SpiralDesign:
+        """The design it goes with."""
+        if self.design is not None:
+            return self.design
+        base = SpiralDesign.preset(self.design_preset)
+        return base if self.cables is None else base.with_cables(self.cables)
 
 
 _AUTHORS_MODEL = ModelConfig(
@@ -97,11 +111,52 @@ def preset_names() -> tuple[str, ...]:
 
 
 def preset(name: str) -> ModelConfig:
-    """The plant model of the preset ``name``.
+    """The plant model of the preset ``name``, or of a fitted model file (:func:`resolve`).
 
     Raises:
-        ValueError: no preset of that name (the message lists them).
+        ValueError: no preset of that name, or a model file that cannot be used (one line).
     """
-    if name not in PRESETS:
-        raise ValueError(f"unknown model preset {name!r}; choose from {', '.join(PRESETS)}")
-    return PRESETS[name].model
+    return resolve(name).model
+
+
+def is_model_file(spec: str) -> bool:
+    """``spec`` names a fitted model file rather than a preset (it ends in ``.toml``)."""
+    return spec.lower().endswith(".toml")
+
+
+def resolve(spec: str) -> Preset:
+    """A named preset, or a fitted model file (``arm.toml``, written by ``spirob-hil identify``) as one.
+
+    A model file names the preset it was fitted from; its fitted values replace that preset's, and its
+    design (the recorded arm) replaces the preset's design.
+
+    Raises:
+        ValueError: an unknown name (the message lists the presets), or a model file that is missing,
+            malformed, names an unknown preset or holds a value the model refuses (one line each).
+    """
+    if spec in PRESETS:
+        return PRESETS[spec]
+    if not is_model_file(spec):
+        raise ValueError(
+            f"unknown model preset {spec!r}; choose from {', '.join(PRESETS)} or a fitted model .toml"
+        )
+    try:
+        fitted = read_model_file(spec)
+    except ModelFileError as exc:
+        raise ValueError(str(exc)) from exc
+    base = PRESETS.get(fitted.preset)
+    if base is None:
+        raise ValueError(f"{spec}: fitted from an unknown preset {fitted.preset!r}")
+    try:
+        model = apply(base.model, fitted.values())
+    except ValueError as exc:
+        raise ValueError(f"{spec}: {exc}") from exc
+    return Preset(
+        Path(spec).stem,
+        f"fitted to {len(fitted.recordings)} recording(s) from the {fitted.preset} preset",
+        base.design_preset,
+        None,
+        model,
+        f"spirob-hil identify, {fitted.created or 'undated'} ({spec})",
+        fitted.design,
+    )

@@ -169,6 +169,17 @@ class LinkRecording:
         with self._lock, contextlib.suppress(ValueError):
             self._rec.write_event(_now_us(), f"board link {state.value}", warning=warning)
 
+    def write_json(self, topic: str, obj: Mapping[str, Any], schema: Mapping[str, Any]) -> None:
+        """A message of the host's own, now, on a JSON channel with its schema (``--excite``'s start on
+        ``/excitation``); nothing once the file is closed."""
+        with self._lock, contextlib.suppress(ValueError):
+            self._rec.write_json(topic, _now_us(), obj, schema=schema)
+
+    def write_event(self, text: str, *, warning: bool = False) -> None:
+        """A line of the host's own on ``/events``, now (an excitation's start and end)."""
+        with self._lock, contextlib.suppress(ValueError):
+            self._rec.write_event(_now_us(), text, warning=warning)
+
     def copy_tlog(self, tlog: Path) -> int:
         """Copy every packet of a ``.tlog`` to :data:`MAVLINK`, at the ``.tlog``'s own Unix times (to
         the µs), so the two files line up; returns the packets copied."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import datetime
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -92,6 +93,18 @@ class RecordingSwitch:
         rec = self._rec
         if rec is not None:
             rec.on_board_message(msg)
+
+    def write_json(self, topic: str, obj: Mapping[str, Any], schema: Mapping[str, Any]) -> None:
+        """A message of the host's own (``LinkRecording.write_json``), while recording."""
+        rec = self._rec
+        if rec is not None:
+            rec.write_json(topic, obj, schema)
+
+    def write_event(self, text: str, *, warning: bool = False) -> None:
+        """A line of the host's own on the event channel (``LinkRecording.write_event``), while recording."""
+        rec = self._rec
+        if rec is not None:
+            rec.write_event(text, warning=warning)
 
 
 @dataclass

@@ -122,14 +122,18 @@ class ArmGeometry:
         return len(self.unit_widths_m)
 
     @classmethod
+    def from_design(cls, design: Any) -> ArmGeometry:
+        """The units of a ``hil.sim.spiral.SpiralDesign`` (mean width, chord), base first."""
+        widths = tuple((a + b) / 2.0 for a, b in design.unit_widths_m())
+        return cls(widths, tuple(design.unit_chords_m()))
+
+    @classmethod
     def default(cls) -> ArmGeometry:
         """The paper's 3-cable prototype (``hil.sim.spiral``), or a 21-unit geometric stand-in."""
         try:
             from hil.sim.spiral import SpiralDesign
 
-            design = SpiralDesign.paper_prototype()
-            widths = tuple((a + b) / 2.0 for a, b in design.unit_widths_m())
-            return cls(widths, tuple(design.unit_chords_m()))
+            return cls.from_design(SpiralDesign.paper_prototype())
         except Exception:  # hil not installed / changed: draw a plausible arm anyway
             beta = 1.075
             n = 21

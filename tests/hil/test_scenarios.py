@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import pytest
@@ -20,8 +21,9 @@ def _assert_passed(result: ScenarioResult) -> None:
     assert result.checks and not failed, failed
 
 
-# drone-manoeuvre (19 s of wall time a run) passes in its byte-identity test below, not here again.
-@pytest.mark.parametrize("name", sorted(set(SCENARIOS) - {"drone-manoeuvre"}))
+# drone-manoeuvre (19 s of wall time a run) passes in its byte-identity test below, not here again;
+# excitation (a 60 s profile) with its 5 s profile below.
+@pytest.mark.parametrize("name", sorted(set(SCENARIOS) - {"drone-manoeuvre", "excitation"}))
 def test_scenario_passes(name: str) -> None:
     result = run_scenario(name, seed=1)
     failed = [c for c in result.checks if not c.passed]
@@ -116,3 +118,15 @@ def test_drone_manoeuvre_judgement_can_fail() -> None:
     s.min_wrap_deg[1] = float("nan")  # a level never measured is never held, nor any after it
     s.min_wrap_deg[2] = 190.0
     assert s.survived_m_s2() == 2.0
+
+
+def test_excitation_plays_its_profile_in_direct_mode_and_records_where_it_began(tmp_path: Path) -> None:
+    path = tmp_path / "excite.mcap"
+    result = run_scenario("excitation", seed=2, record=path, options={"profile_name": "tiny"})
+    failed = [c for c in result.checks if not c.passed]
+    assert result.checks and not failed, failed
+    meta = read_metadata(path)
+    described = json.loads(meta["excitation"])
+    assert described["name"] == "tiny" and described["start_us"] == 600_000
+    with pytest.raises(ValueError, match="unknown excitation profile"):
+        run_scenario("excitation", options={"profile_name": "nope"})

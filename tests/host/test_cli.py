@@ -101,6 +101,7 @@ def test_virtual_rc_choices() -> None:
         ["--ui-port", "70000"],
         ["--mav-compid", "0"],
         ["--virtual-rc", "fly"],
+        ["--excite", "slow"],
     ],
 )
 def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
@@ -138,6 +139,11 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--gamepad-map", "ch0=a1", "--headless"], "--gamepad-map needs --gamepad"),
         (["--gamepad", "/dev/null", "--headless"], "--gamepad /dev/null: not a joystick device"),
         (["--gamepad", "/dev/null", "--gamepad-map", "ch0=b1"], "a stick channel needs an axis"),
+        (["--excite", "--replay", "x.mcap"], "--excite needs a board"),
+        (["--excite", "quick", "--virtual-rc", "safe"], "--virtual-rc safe never puts it there"),
+        (["--virtual-rc", "grasp", "--excite"], "--excite runs with the right lever MIDDLE"),
+        (["--preset", "authors", "--replay", "x.mcap"], "--preset is a model of the virtual board"),
+        (["--preset", "authors", "--port", "loop://", "--no-shadow"], "cannot go with --no-shadow"),
     ],
 )
 def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:

@@ -19,8 +19,8 @@ from host.app import HostApp
 from host.options import HostOptions
 from host.panel.board_state import BoardState, PoseSource
 from host.shadow import ShadowConfig, ShadowPlant, ShadowState, reel_in_currents
-from protocol.messages import Message, SimPoses, Telemetry, TelemetryFlags
-from tests.support.link_peer import LinkPeer
+from protocol.messages import SimPoses, Telemetry, TelemetryFlags
+from tests.support.link_peer import HardwarePeer, LinkPeer
 from tests.support.realtime_guard import wait_for
 
 FRAME_US = 10_000  # the board's telemetry period (100 Hz)
@@ -216,17 +216,6 @@ def test_a_plant_that_cannot_be_built_fails_in_one_line() -> None:
 
 
 # ---------------------------------------------------------------------- in spirob-host
-
-
-class HardwarePeer(LinkPeer):
-    """The scripted fake board made to look like hardware: no SIM flag, no SimPoses."""
-
-    def _write(self, msg: Message) -> None:
-        if isinstance(msg, SimPoses):
-            return
-        if isinstance(msg, Telemetry):
-            msg = dataclasses.replace(msg, flags=msg.flags & ~TelemetryFlags.SIM)
-        super()._write(msg)
 
 
 def test_host_poses_a_hardware_board_from_the_shadow_plant() -> None:

@@ -13,6 +13,7 @@ This is a unit-test fake only; the real virtual board is ``hil.board``.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import errno
 import os
 import socket
@@ -22,7 +23,7 @@ import tty
 from typing import Any
 
 from protocol.link import LinkParser
-from protocol.messages import Message, Mode, Phase, decode, encode
+from protocol.messages import Message, Mode, Phase, SimPoses, Telemetry, TelemetryFlags, decode, encode
 from tests.support.fake_board import FakeBoard
 
 
@@ -226,6 +227,17 @@ def _serve(kind: str, urls: Any, stop: Any) -> None:
     with LinkPeer(kind) as peer:
         urls.put(peer.url)
         stop.wait(120.0)
+
+
+class HardwarePeer(LinkPeer):
+    """The scripted fake board made to look like hardware: no SIM flag, no SimPoses."""
+
+    def _write(self, msg: Message) -> None:
+        if isinstance(msg, SimPoses):
+            return
+        if isinstance(msg, Telemetry):
+            msg = dataclasses.replace(msg, flags=msg.flags & ~TelemetryFlags.SIM)
+        super()._write(msg)
 
 
 class LinkPeerProcess:

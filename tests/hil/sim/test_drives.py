@@ -46,9 +46,12 @@ def test_drive_follows_the_torque_speed_line() -> None:
     drives.drive()
     available_a = MOTOR.stall_current_a * 0.5  # 9 A in the direction of motion, below the 10 A asked
     assert ctrl.tolist() == pytest.approx([available_a, -2.0, 0.0])  # braking: the full 2 A
-    state[3] = 1.1 * omega_nl * r  # beyond no-load speed: nothing to give in that direction
+    state[3] = 1.1 * omega_nl * r  # beyond no-load speed: the back-EMF exceeds the supply, it brakes
     drives.drive()
-    assert ctrl[0] == 0.0
+    assert ctrl[0] == pytest.approx(-0.1 * MOTOR.stall_current_a)
+    state[3] = 3.0 * omega_nl * r  # dragged far past it: braking up to the current limit
+    drives.drive()
+    assert ctrl[0] == pytest.approx(-MOTOR.current_limit_a)
     assert drives.applied_currents_a().tolist() == ctrl.tolist()
 
 
@@ -117,3 +120,42 @@ def test_light_actuators_need_their_force_buffer() -> None:
         drives.attach(state, state, np.zeros(3), [0, 1, 2], [3, 4, 5])
     with pytest.raises(ValueError, match="muscle_force_n"):
         Drives(MOTOR, 3, None, ActuatorConfig(kind="muscle"))
+
+
+def test_a_command_delay_acts_late_and_interpolates_between_periods() -> None:
+    ctrl = np.zeros(3)
+    drives = Drives(MotorConfig(command_delay_s=0.0015), 3, None, control_period_s=1e-3)
+    state = np.zeros(6)
+    drives.attach(state, state, ctrl, [0, 1, 2], [3, 4, 5])
+    drives.reset()
+    seen = []
+    for k in range(5):
+        drives.apply_currents([1000 * (k + 1), 0, 0])  # 1, 2, 3 ... A, one per period
+        drives.drive()
+        seen.append(ctrl[0])
+    # 1.5 periods late: halfway between the setpoints of one and two periods before.
+    assert seen == pytest.approx([0.0, 0.5, 1.5, 2.5, 3.5])
+
+
+def test_no_delay_applies_the_setpoint_of_the_same_period() -> None:
+    ctrl = np.zeros(3)
+    drives = Drives(MotorConfig(), 3, None)
+    state = np.zeros(6)
+    drives.attach(state, state, ctrl, [0, 1, 2], [3, 4, 5])
+    drives.apply_currents([1234, 0, 0])
+    drives.drive()
+    assert ctrl[0] == 1.234
+
+
+def test_torque_scale_changes_the_force_not_the_reported_current() -> None:
+    scaled = MotorConfig(torque_scale=1.25)
+    assert scaled.delivered_force_per_amp_n == pytest.approx(1.25 * MOTOR.force_per_amp_n)
+    drives = Drives(scaled, 3, None, ActuatorConfig(kind="tension"))
+    ctrl, force = np.zeros(3), np.zeros(6)
+    state = np.zeros(6)
+    drives.attach(state, state, ctrl, [0, 1, 2], [3, 4, 5], qfrc_actuator=force)
+    drives.apply_currents([1000, 0, 0])
+    drives.drive()
+    assert ctrl[0] == pytest.approx(1.25 * MOTOR.force_per_amp_n)  # the tension 1 A really gives
+    force[3] = ctrl[0]
+    assert drives.applied_currents_a()[0] == pytest.approx(1.0)  # the ESC still measures 1 A

@@ -289,7 +289,7 @@ def test_floor_option() -> None:
         (ModelConfig(objects=(ObjectConfig("a", 0.01, 0.1, (0, 0, 0)),) * 2), "unique"),
         (ModelConfig(objects=(ObjectConfig("a", -0.01, 0.1, (0, 0, 0)),)), "radius_m"),
         (ModelConfig(objects=(ObjectConfig("a", 0.01, 0.1, (0, 0, 0), axis=(0, 0, 0)),)), "axis"),
-        (ModelConfig(arm=ArmConfig(stiffness_exponent=4)), "stiffness_exponent"),
+        (ModelConfig(arm=ArmConfig(stiffness_exponent=4.5)), "stiffness_exponent"),
         (ModelConfig(actuator=ActuatorConfig(kind="piston")), "actuator kind"),
         (ModelConfig(actuator=ActuatorConfig(lag_s=0.0)), "lag_s"),
         (ModelConfig(actuator=ActuatorConfig(muscle_force_n=-5.0)), "muscle_force_n"),

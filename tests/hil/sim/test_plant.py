@@ -451,3 +451,28 @@ def test_free_object_support_hold_release_throw_and_load() -> None:
             ObjectConfig("a", radius_m=0.01, length_m=0.1, pos_m=(0, 0, 0), mass_kg=0.01),
             ObjectConfig("a_support", radius_m=0.01, length_m=0.1, pos_m=(0, 0, 0)),
         ).validate()
+
+
+def test_joint_friction_sits_under_the_capstan_friction_and_is_none_by_default() -> None:
+    from hil.sim.config import ArmConfig, ModelConfig
+    from hil.sim.mjcf import joint_friction_nm, unit_geometry
+    from hil.sim.types import PlantConfig
+
+    default = Plant()
+    dm = default.mj_model
+    arm_dofs = [dm.jnt_dofadr[dm.joint(f"joint_{i:02d}").id] for i in range(1, default.design.units)]
+    assert float(dm.dof_frictionloss[arm_dofs].max()) == 0.0  # before any tension
+    arm = ArmConfig(joint_friction_nm=0.002)
+    plant = Plant(config=PlantConfig(model=ModelConfig(arm=arm)))
+    design = plant.design
+    expected = joint_friction_nm(arm, unit_geometry(design, arm))
+    assert expected[1] == pytest.approx(0.002) and expected[-1] < expected[1]  # scales like stiffness
+    m = plant.mj_model
+    for i in range(1, design.units):
+        dof = m.jnt_dofadr[m.joint(f"joint_{i:02d}").id]
+        assert m.dof_frictionloss[dof] == pytest.approx(expected[i])
+    plant.apply_currents([1000, 0, 0])
+    for _ in range(200):
+        plant.step()
+    dof1 = m.jnt_dofadr[m.joint("joint_01").id]
+    assert m.dof_frictionloss[dof1] > expected[1]  # the capstan friction on top of it

@@ -33,3 +33,26 @@ def test_start_mid_frame_stop_and_replay(tmp_path: Path) -> None:
     again = sw.start()  # a second recording goes to a new file
     assert again != path
     sw.stop()
+
+
+def test_the_hosts_own_messages_go_to_a_recording_only_while_it_runs(tmp_path: Path) -> None:
+    from hil import recording
+    from hil.identify.motor_data import EXCITATION_TOPIC
+    from host.excite import EXCITATION_SCHEMA
+    from tests.support.foxglove_check import check_recording
+
+    sw = RecordingSwitch(tmp_path / "rec", {"source": "test"})
+    start = {"name": "tiny", "duration_s": 0.5, "rest_n": 2.0, "peak_n": 10.0, "segments": [], "start_us": 7}
+    sw.write_json(EXCITATION_TOPIC, start, EXCITATION_SCHEMA)  # not recording: nowhere
+    sw.write_event("not recorded")
+    path = sw.start()
+    sw.on_board_message(Telemetry(4))
+    sw.write_json(EXCITATION_TOPIC, start, EXCITATION_SCHEMA)
+    sw.write_event("excitation tiny started", warning=False)
+    sw.stop()
+    checked = check_recording(path)
+    assert [m for _, _, m in checked.messages[EXCITATION_TOPIC]] == [start]
+    assert checked.schemas[EXCITATION_TOPIC] == ("spirob.Excitation", "jsonschema", "json")
+    texts = [m.message for _, _, m in checked.messages["/events"]]
+    assert "excitation tiny started" in texts and "not recorded" not in texts
+    assert recording.read_metadata(path)["source"] == "test"

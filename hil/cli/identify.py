@@ -1,0 +1,254 @@
+"""``spirob-hil identify REC.mcap ... -o arm.toml``: the command line of :mod:`hil.identify` (arguments,
+progress, the table, the model file, the report). The fit itself knows nothing of argparse or printing."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from absl import logging as absl_logging
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+
+from controller.cli_kit import EXIT_OK, UsageError, finite_float, writable_dir, writable_file
+from hil.cli.design import preset_arg
+from hil.identify.fit import FitError, FitOptions, FitResult, fit
+from hil.identify.motor_data import IdentifyDataError, load_motor_data
+from hil.identify.report import write_report
+from hil.recording import package_version
+from hil.sim.model_file import FittedParameter, ModelFile, read_model_file, write_model_file
+from hil.sim.presets import is_model_file, resolve
+from hil.sim.uncertain import ID_PARAMS
+
+__all__ = ["IDENTIFY_HELP", "configure_identify", "run_identify_command"]
+
+IDENTIFY_HELP = (
+    "fit the plant's uncertain parameters to recordings of an arm; write a model file --preset takes"
+)
+MAX_JOBS_N = 64
+
+
+def _param_list(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    known = {p.name for p in ID_PARAMS}
+    unknown = [n for n in names if n not in known]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown parameter(s) {', '.join(unknown) or '(none given)'}; known: {', '.join(sorted(known))}"
+        )
+    return names
+
+
+def configure_identify(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``spirob-hil identify``."""
+    p.add_argument("recordings", nargs="+", type=Path, metavar="REC.mcap", help="recordings of an excitation")
+    p.add_argument(
+        "-o", "--output", required=True, type=Path, metavar="FILE.toml", help="the model file to write"
+    )
+    p.add_argument(
+        "--preset",
+        type=preset_arg,
+        default="prototype",
+        metavar="NAME|FILE",
+        help="the model the fit starts from and keeps where it does not fit (default prototype)",
+    )
+    p.add_argument(
+        "--report", type=Path, metavar="DIR", help="write an HTML report (figures, intervals) into DIR"
+    )
+    p.add_argument(
+        "--params",
+        type=_param_list,
+        metavar="A,B,...",
+        help=f"the parameters to fit (default all: {', '.join(q.name for q in ID_PARAMS)})",
+    )
+    p.add_argument(
+        "--budget-s",
+        type=finite_float,
+        default=FitOptions().budget_s,
+        metavar="S",
+        help="simulated seconds per evaluation, shared among the recordings; the rest is held out "
+        f"(default {FitOptions().budget_s:g})",
+    )
+    p.add_argument(
+        "--max-iters", type=int, default=FitOptions().max_iters, metavar="N", help="solver iterations at most"
+    )
+    p.add_argument(
+        "--jobs", type=int, metavar="N", help="worker processes for the rollouts (default: one per core)"
+    )
+    p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+
+
+def run_identify_command(args: argparse.Namespace) -> int:
+    """``spirob-hil identify``: check everything a user can get wrong first, then fit, then write."""
+    if not 1 <= args.max_iters <= 1000:
+        raise UsageError(f"--max-iters must be 1..1000, got {args.max_iters}")
+    if args.jobs is not None and not 1 <= args.jobs <= MAX_JOBS_N:
+        raise UsageError(f"--jobs must be 1..{MAX_JOBS_N}, got {args.jobs}")
+    if not 1.0 <= args.budget_s <= 3600.0:
+        raise UsageError(f"--budget-s must be 1..3600 s, got {args.budget_s:g}")
+    writable_file(args.output, "the model file")
+    if args.report is not None:
+        writable_dir(args.report, "the report")
+    try:
+        data = [load_motor_data(path) for path in args.recordings]
+    except IdentifyDataError as exc:
+        raise UsageError(str(exc)) from exc
+    chosen = resolve(args.preset)
+    base_preset = read_model_file(args.preset).preset if is_model_file(args.preset) else args.preset
+    options = FitOptions(
+        params=args.params or tuple(p.name for p in ID_PARAMS),
+        budget_s=args.budget_s,
+        max_iters=args.max_iters,
+        jobs=args.jobs,
+    )
+    designs = {d.design for d in data if d.design is not None}
+    design = next(iter(designs)) if len(designs) == 1 else chosen.spiral()
+    err = Console(stderr=True)
+    absl_logging.set_verbosity(absl_logging.ERROR)  # the toolbox's advice lines; the report says what matters
+    try:
+        result = _fit_with_progress(data, chosen.model, options, design, args, err)
+    except FitError as exc:
+        raise UsageError(str(exc)) from exc
+    model = _model_file(result, base_preset, design)
+    write_model_file(args.output, model)
+    page = None
+    if args.report is not None:
+        page = write_report(
+            result, args.report, f"Identification: {', '.join(p.name for p in args.recordings)}"
+        )
+    if args.json:
+        print(json.dumps(_finite(_as_dict(result, args.output, page)), allow_nan=False))
+    else:
+        _print(result, args.output, page)
+    return EXIT_OK
+
+
+def _fit_with_progress(
+    data: list[Any], model: Any, options: FitOptions, design: Any, args: argparse.Namespace, err: Console
+) -> FitResult:
+    columns = (
+        TextColumn("[bold]identify"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        TextColumn("{task.description}"),
+    )
+    with Progress(*columns, console=err, transient=False, disable=args.json and not err.is_terminal) as bar:
+        task = bar.add_task("reading", total=1.0)
+
+        def progress(stage: str, fraction: float) -> None:
+            bar.update(task, completed=min(1.0, fraction), description=stage)
+
+        result = fit(
+            data,
+            model,
+            options,
+            design=design,
+            progress=progress,
+            sysid_report=None if args.report is None else args.report / "sysid",
+        )
+        bar.update(task, completed=1.0, description="done")
+    return result
+
+
+def _model_file(result: FitResult, preset: str, design: Any) -> ModelFile:
+    params = {
+        e.name: FittedParameter(e.name, e.value, e.unit, e.interval, e.identifiable, e.preset, e.why)
+        for e in result.estimates
+    }
+    fit_summary: dict[str, float | int | str] = {
+        "fitted_rms_mm": _mm(result.rms_m(False)),
+        "held_out_rms_mm": _mm(result.rms_m(True)),
+        "preset_fitted_rms_mm": _mm(result.rms_m(False, "nominal")),
+        "preset_held_out_rms_mm": _mm(result.rms_m(True, "nominal")),
+        "condition_number": result.condition_number,
+        "iterations": result.iterations,
+        "converged": str(result.converged).lower(),
+        "rollouts": result.rollouts,
+        "simulated_s": round(result.simulated_s, 1),
+        "wall_s": round(result.wall_s, 1),
+    }
+    return ModelFile(
+        preset, design, params, fit_summary, result.recordings, tool=f"spirob-teleop {package_version()}"
+    )
+
+
+def _mm(m: float) -> float:
+    return round(m * 1e3, 4) if math.isfinite(m) else math.nan
+
+
+def _print(result: FitResult, output: Path, page: Path | None) -> None:
+    console = Console()
+    table = Table(title="fitted parameters (95 % intervals, autocorrelation-consistent)")
+    for col in ("parameter", "preset", "fitted", "95 % interval", "identified"):
+        table.add_column(col)
+    for e in result.estimates:
+        lo, hi = e.interval
+        table.add_row(
+            e.name,
+            f"{e.preset:.4g}",
+            f"{e.value:.4g} {e.unit}",
+            f"{lo:.4g} .. {hi:.4g}",
+            "yes" if e.identifiable else f"no: {e.why}",
+        )
+    console.print(table)
+    console.print(
+        f"cable length error: fitted {_mm(result.rms_m(False))} mm, held out {_mm(result.rms_m(True))} mm "
+        f"(the preset: {_mm(result.rms_m(False, 'nominal'))} mm, {_mm(result.rms_m(True, 'nominal'))} mm); "
+        f"{result.iterations} iterations, {result.rollouts} rollouts, {result.wall_s:.0f} s"
+    )
+    if not result.converged:
+        console.print(
+            f"[yellow]the fit had not converged: its last iteration still lowered the error by "
+            f"{100 * result.last_reduction:.1f} %; the intervals are local "
+            "(more --max-iters, or fewer --params)"
+        )
+    console.print(f"wrote {output}" + (f"; report {page}" if page is not None else ""))
+
+
+def _as_dict(result: FitResult, output: Path, page: Path | None) -> dict[str, Any]:
+    return {
+        "model_file": str(output),
+        "report": None if page is None else str(page),
+        "parameters": [
+            {
+                "name": e.name,
+                "unit": e.unit,
+                "preset": e.preset,
+                "value": e.value,
+                "interval": list(e.interval),
+                "naive_interval": list(e.naive_interval),
+                "identifiable": e.identifiable,
+                "why": e.why,
+                "at_bound": e.at_bound,
+            }
+            for e in result.estimates
+        ],
+        "fitted_rms_m": result.rms_m(False),
+        "held_out_rms_m": result.rms_m(True),
+        "preset_fitted_rms_m": result.rms_m(False, "nominal"),
+        "preset_held_out_rms_m": result.rms_m(True, "nominal"),
+        "condition_number": result.condition_number,
+        "iterations": result.iterations,
+        "converged": result.converged,
+        "rollouts": result.rollouts,
+        "simulated_s": result.simulated_s,
+        "wall_s": result.wall_s,
+        "recordings": [list(r) for r in result.recordings],
+    }
+
+
+def _finite(value: Any) -> Any:
+    """JSON has no NaN: a number that is not finite becomes null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value

@@ -1,0 +1,741 @@
+"""Fit the plant's uncertain parameters to recordings, on MuJoCo's own system-identification toolbox.
+
+The pieces are ``mujoco.sysid``'s: the parameters (:class:`mujoco.sysid.ParameterDict`, with bounds), the
+measured data (:class:`mujoco.sysid.ModelSequences`: the arm's MJCF with the motors' view added as sensors,
+and one measured sequence per recording), the residual (:func:`mujoco.sysid.build_residual_fn`) and the solver
+(:func:`mujoco.sysid.optimize`, MuJoCo's Levenberg-Marquardt with a finite-difference Jacobian). Two hooks
+are ours: the rollout (:mod:`hil.identify.rollout`: the project's :class:`~hil.sim.plant.Plant`, whose drives
+and capstan friction live in Python, in worker processes) and the residual's shape (cable lengths measured
+from each window's start, speeds, and the tracked tip when recorded).
+
+Each parameter is optimized in units of its own size (a factor of the preset's value, or a stated scale),
+so one finite-difference step (1 %) means the same for all. Every recording is simulated from its first
+sample (the only instant whose state is known: friction keeps a bent arm where it was left), up to a share
+of the budget of simulated seconds per evaluation; what comes after, and any recording beyond the budget,
+is held out: the held-out error is measured on data the fit never saw, with each recording simulated
+whole from its start.
+
+**Intervals that are honest.** :func:`mujoco.sysid.calculate_intervals` assumes independent residuals;
+a simulated arm's errors are smooth in time, so its intervals are far too narrow. Both are computed: the
+toolbox's, and a heteroskedasticity-and-autocorrelation-consistent one (Newey-West sandwich around the same
+Jacobian, with each window's bandwidth read from its residual's autocorrelation, and Student's t on the
+effective number of samples). The second is the one reported and the one that decides whether a parameter
+is identifiable from the data (its half-width within :attr:`~hil.sim.uncertain.IdParam.identifiable_within`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import logging
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+import mujoco
+import numpy as np
+import scipy.stats
+from mujoco import sysid
+from numpy.typing import NDArray
+
+from hil.errors import HilError
+from hil.identify.motor_data import MotorData
+from hil.identify.rollout import RolloutJob, RolloutPool
+from hil.sim.config import ModelConfig
+from hil.sim.mjcf import build_mjcf
+from hil.sim.spiral import SpiralDesign
+from hil.sim.uncertain import ID_PARAMS, IdParam, apply, nominal
+
+__all__ = ["FitError", "FitOptions", "FitResult", "ParamEstimate", "Trace", "fit"]
+
+FloatArray = NDArray[np.float64]
+
+_log = logging.getLogger(__name__)
+
+SENSORS: Final = (
+    "tension_0",
+    "tension_1",
+    "tension_2",
+    "len_0",
+    "len_1",
+    "len_2",
+    "vel_0",
+    "vel_1",
+    "vel_2",
+    "tip",
+)
+"""The model's sensors: the cable tensions (not measured), the motors' view (wound cable and its speed per
+spool) and the tracked tip."""
+_TEN, _LEN, _VEL, _TIP = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
+_CH: Final = 12
+
+
+class FitError(HilError):
+    """A fit cannot start (one line: why)."""
+
+
+@dataclass(frozen=True, slots=True)
+class FitOptions:
+    """How to fit.
+
+    Attributes:
+        params: the parameters to fit (names of :data:`~hil.sim.uncertain.ID_PARAMS`); the others
+            keep the preset's values.
+        budget_s: simulated seconds per evaluation of the residual, shared among the recordings (each
+            fitted from its start up to its share, at least ``min_span_s``).
+        min_span_s: the shortest stretch of a recording worth fitting (a recording that would get less is
+            held out whole).
+        max_iters: Levenberg-Marquardt iterations at most.
+        fd_step: finite-difference step, in each parameter's own units (1 % of its size).
+        jobs: worker processes for the rollouts (None: one per core).
+        residual_period_s: the residual's sample period (the data are decimated to it).
+        sigma_length_m: the length residual's unit (sets its weight against the others).
+        sigma_speed_m_s: the speed residual's unit.
+        sigma_tip_m: the tracked tip's unit (when recorded).
+        use_speed: count the spools' speeds.
+        use_tip: count the tracked tip when an recording has it.
+    """
+
+    params: tuple[str, ...] = tuple(p.name for p in ID_PARAMS)
+    budget_s: float = 40.0
+    min_span_s: float = 10.0
+    max_iters: int = 8
+    fd_step: float = 0.01
+    jobs: int | None = None
+    residual_period_s: float = 0.005
+    sigma_length_m: float = 1e-4
+    sigma_speed_m_s: float = 5e-3
+    sigma_tip_m: float = 1e-3
+    use_speed: bool = True
+    use_tip: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class ParamEstimate:
+    """One parameter after the fit.
+
+    Attributes:
+        name: its name.
+        unit: its SI unit.
+        preset: the value it started from.
+        value: the fitted value.
+        interval: the 95 % interval (autocorrelation-consistent) [unit]; symmetric in the optimizer's
+            coordinate, so a relative parameter's is symmetric in its logarithm.
+        naive_interval: the toolbox's, which assumes independent residuals.
+        identifiable: the data pin it down (the interval within the row's threshold).
+        why: when not identifiable, why (the interval, or the parameter it trades against).
+        at_bound: the fit stopped at a search bound.
+    """
+
+    name: str
+    unit: str
+    preset: float
+    value: float
+    interval: tuple[float, float]
+    naive_interval: tuple[float, float]
+    identifiable: bool
+    why: str
+    at_bound: bool
+
+    @property
+    def half_width(self) -> float:
+        """Half the 95 % interval's width [unit]."""
+        return 0.5 * (self.interval[1] - self.interval[0])
+
+    @property
+    def naive_half_width(self) -> float:
+        """Half the toolbox's interval's width [unit]."""
+        return 0.5 * (self.naive_interval[1] - self.naive_interval[0])
+
+    def covers(self, value: float) -> bool:
+        """``value`` lies in the 95 % interval."""
+        return self.interval[0] <= value <= self.interval[1]
+
+
+@dataclass(frozen=True, slots=True)
+class Trace:
+    """Measured against simulated for one recording, simulated whole from its start (the report draws it).
+
+    Attributes:
+        recording: the recording's name.
+        t_s: judged sample times (the recording's clock).
+        held_out: per sample, the fit never saw it.
+        measured_m: (m, 3) cable lengths from the first sample.
+        fitted_m: the fitted model's.
+        nominal_m: the preset's.
+    """
+
+    recording: str
+    t_s: FloatArray
+    held_out: NDArray[np.bool_]
+    measured_m: FloatArray
+    fitted_m: FloatArray
+    nominal_m: FloatArray
+
+    def rms_m(self, held_out: bool, which: str = "fitted") -> float:
+        """RMS length error of the fitted (or ``nominal``) model over the fitted (or held-out) samples."""
+        sim = self.fitted_m if which == "fitted" else self.nominal_m
+        sel = self.held_out == held_out
+        if not sel.any():
+            return math.nan
+        return float(np.sqrt(np.nanmean((sim[sel] - self.measured_m[sel]) ** 2)))
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A finished fit.
+
+    Attributes:
+        estimates: one per identified parameter, in table order.
+        model: the fitted model (the preset with every fitted value written in).
+        preset_model: the model the fit started from.
+        traces: every recording, simulated whole: its fitted and held-out samples.
+        condition_number: of the scaled Jacobian at the optimum (large: parameters trade against each other).
+        correlation: the parameters' correlation matrix (order of ``estimates``).
+        iterations: solver iterations.
+        rollouts: simulations run.
+        simulated_s: seconds simulated in all.
+        wall_s: the fit's wall time.
+        recordings: (name, sha256, duration) of each recording used.
+    """
+
+    estimates: tuple[ParamEstimate, ...]
+    model: ModelConfig
+    preset_model: ModelConfig
+    traces: tuple[Trace, ...]
+    condition_number: float
+    correlation: FloatArray
+    iterations: int
+    rollouts: int
+    simulated_s: float
+    wall_s: float
+    recordings: tuple[tuple[str, str, float], ...]
+    objective: tuple[float, ...] = field(default=())
+    converged: bool = True
+
+    @property
+    def last_reduction(self) -> float:
+        """How much the last iteration lowered the objective, as a fraction of it (0: it stopped moving)."""
+        if len(self.objective) < 2 or self.objective[-2] <= 0:
+            return 0.0
+        return 1.0 - self.objective[-1] / self.objective[-2]
+
+    def rms_m(self, held_out: bool, which: str = "fitted") -> float:
+        """RMS length error over the fitted (or held-out) samples of every recording, of the fitted or
+        ``nominal`` model."""
+        errs = [
+            ((t.fitted_m if which == "fitted" else t.nominal_m) - t.measured_m)[t.held_out == held_out]
+            for t in self.traces
+        ]
+        flat = np.concatenate([e.ravel() for e in errs]) if errs else np.empty(0)
+        return float(np.sqrt(np.nanmean(flat**2))) if flat.size else math.nan
+
+
+# --- data ------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Win:
+    """A recording ready to simulate from its start up to ``end``: its 1 ms input, and the measured samples
+    it is judged on."""
+
+    recording: MotorData
+    end: int
+    """One past the last sample simulated."""
+    currents_a: FloatArray
+    """(n, 3): the command in force during each control period from the first sample."""
+    t0_s: float
+    """MotorData time of the first control period (its first sample)."""
+    sample_rows: NDArray[np.int64]
+    """For each judged sample, the rollout row that ends at its time."""
+    sample_t_s: FloatArray
+    measured: FloatArray
+    """(m, 12): the sensors' columns: length from the first sample, speed, tip (NaN where not measured)."""
+
+    @property
+    def seconds(self) -> float:
+        return len(self.currents_a) * 1e-3
+
+
+def _prepare(rec: MotorData, end: int, period_s: float) -> _Win:
+    t = rec.t_s
+    t0 = float(t[0])
+    n = max(2, round((float(t[end - 1]) - t0) / 1e-3))
+    grid = t0 + np.arange(n) * 1e-3
+    if rec.source == "can":
+        # One sample per control period: the command in force from each sample to the next.
+        idx = np.clip(np.searchsorted(t, grid + 1e-7, side="right") - 1, 0, len(t) - 1)
+        currents = rec.current_cmd_a[idx]
+    else:
+        currents = np.stack([np.interp(grid, t, rec.current_cmd_a[:, k]) for k in range(3)], axis=1)
+    # Judged samples: from the excitation's start to the end, decimated to the residual period.
+    step = max(1, round(period_s / max(rec.period_s, 1e-6)))
+    idx_s = np.arange(rec.first_judged(), end, step)
+    t_s = t[idx_s]
+    rows = np.rint((t_s - t0) / 1e-3).astype(np.int64) - 1
+    keep = (rows >= 0) & (rows < n)
+    idx_s, t_s, rows = idx_s[keep], t_s[keep], rows[keep]
+    meas = np.full((len(idx_s), _CH), np.nan)
+    meas[:, _LEN] = rec.length_m[idx_s] - rec.length_m[0]
+    meas[:, _VEL] = rec.speed_m_s[idx_s]
+    if rec.tip_m is not None:
+        meas[:, _TIP] = rec.tip_m[idx_s]
+    return _Win(rec, end, currents, t0, rows, t_s, meas)
+
+
+def _spans(recordings: Sequence[MotorData], options: FitOptions) -> list[tuple[MotorData, int]]:
+    """How far each fitted recording is simulated: the budget shared evenly, at least ``min_span_s`` each
+    (the recordings that then get nothing are held out whole)."""
+    fitted = list(recordings)
+    while len(fitted) > 1 and options.budget_s / len(fitted) < options.min_span_s:
+        fitted.pop()
+    share = options.budget_s / len(fitted)
+    return [(rec, rec.index_after(share)) for rec in fitted]
+
+
+# --- the model's view -------------------------------------------------------------------------------
+
+
+def _spec(design: SpiralDesign, model: ModelConfig) -> Any:
+    spec = mujoco.MjSpec.from_string(build_mjcf(design, None, model))
+    for k in range(3):
+        spec.add_sensor(
+            name=f"len_{k}",
+            type=mujoco.mjtSensor.mjSENS_JOINTPOS,
+            objtype=mujoco.mjtObj.mjOBJ_JOINT,
+            objname=f"spool_{k}",
+        )
+    for k in range(3):
+        spec.add_sensor(
+            name=f"vel_{k}",
+            type=mujoco.mjtSensor.mjSENS_JOINTVEL,
+            objtype=mujoco.mjtObj.mjOBJ_JOINT,
+            objname=f"spool_{k}",
+        )
+    spec.add_sensor(
+        name="tip",
+        type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
+        objtype=mujoco.mjtObj.mjOBJ_SITE,
+        objname="tip",
+        reftype=mujoco.mjtObj.mjOBJ_BODY,
+        refname="drone",
+    )
+    return spec
+
+
+def _timeseries(t_s: FloatArray, data: FloatArray, model: Any) -> Any:
+    return sysid.TimeSeries.from_names(t_s, data, model, list(SENSORS))
+
+
+class _Problem:
+    """The pieces the toolbox calls back: the model from a parameter vector, the rollout, the residual."""
+
+    def __init__(
+        self,
+        design: SpiralDesign,
+        preset: ModelConfig,
+        rows: Sequence[IdParam],
+        wins: list[_Win],
+        options: FitOptions,
+        pool: RolloutPool,
+    ) -> None:
+        self.design = design
+        self.preset = preset
+        self.rows = list(rows)
+        self.preset_values = nominal(preset)
+        self.wins = wins
+        self.options = options
+        self.pool = pool
+        self.spec = _spec(design, preset)
+        self.mj_model = self.spec.compile()
+        self._by_measured: dict[int, _Win] = {}
+        self._controls: dict[int, int] = {}
+        self._cache: dict[tuple[int, tuple[float, ...]], FloatArray] = {}
+        self.weights = np.array(
+            [0.0] * 3
+            + [1 / options.sigma_length_m] * 3
+            + [1 / options.sigma_speed_m_s if options.use_speed else 0.0] * 3
+            + [1 / options.sigma_tip_m if options.use_tip else 0.0] * 3
+        )
+
+    # Parameters in the optimizer's coordinates (hil.sim.uncertain.IdParam.to_x) <-> SI.
+    def params(self) -> Any:
+        pd = sysid.ParameterDict()
+        for p in self.rows:
+            v0 = self.preset_values[p.name]
+            if p.relative and not v0 > 0:
+                raise FitError(f"{p.name}: the preset's value {v0} cannot scale a relative search")
+            lo, hi = p.x_bounds(v0)
+            pd.add(sysid.Parameter(p.name, p.to_x(v0, v0), lo, hi))
+        return pd
+
+    def si_values(self, pd: Any) -> dict[str, float]:
+        return {p.name: p.from_x(float(pd[p.name].value[0]), self.preset_values[p.name]) for p in self.rows}
+
+    def model_for(self, pd: Any) -> ModelConfig:
+        return apply(self.preset, self.si_values(pd))
+
+    def build_model(self, pd: Any, spec: Any) -> Any:
+        return self.mj_model  # the rollout builds its own plant; the toolbox needs the layout only
+
+    def measured(self) -> Any:
+        m = self.mj_model
+        initial = sysid.create_initial_state(m, m.qpos0, np.zeros(m.nv))
+        series = [_timeseries(w.sample_t_s, w.measured, m) for w in self.wins]
+        controls = [self._control(w) for w in self.wins]
+        # The toolbox hands the hooks one window at a time, with that window's own series (the controls
+        # are not resampled): the hooks find their window by identity.
+        self._by_measured = {id(ts): w for ts, w in zip(series, self.wins, strict=True)}
+        self._controls = {id(c): i for i, c in enumerate(controls)}
+        return sysid.ModelSequences(
+            "arm",
+            self.spec,
+            [w.recording.name for w in self.wins],
+            [initial] * len(self.wins),
+            controls,
+            series,
+        )
+
+    def _control(self, w: _Win) -> Any:
+        t = w.t0_s + np.arange(len(w.currents_a)) * 1e-3
+        return sysid.TimeSeries.from_control_names(t, w.currents_a, self.mj_model)
+
+    def rollout(self, *, control_signal: Sequence[Any], param_dicts: Sequence[Any], **_: Any) -> list[Any]:
+        """The toolbox asks for one window at a time (every candidate of a Jacobian at once): the first
+        ask of a batch runs every window of every candidate in parallel, the others are then cached."""
+        which = [self._controls[id(c)] for c in control_signal]
+        keys = [(which[i % len(which)], self._key(pd)) for i, pd in enumerate(param_dicts)]
+        missing = [k for k in keys if k not in self._cache]
+        if missing:
+            wanted = {key for _, key in keys}
+            self._cache = {k: v for k, v in self._cache.items() if k[1] in wanted}
+            batch = sorted({key for _, key in missing})
+            vectors = {self._key(pd): pd for pd in param_dicts}
+            jobs = [(i, key) for key in batch for i in range(len(self.wins))]
+            outs = self.pool.map(
+                [
+                    RolloutJob(self.design, self.model_for(vectors[key]), self.wins[i].currents_a)
+                    for i, key in jobs
+                ]
+            )
+            self._cache.update(dict(zip(jobs, outs, strict=True)))
+        trajs = []
+        m = self.mj_model
+        nstate = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        for key in keys:
+            out = self._cache[key]
+            w = self.wins[key[0]]
+            t = np.asarray(w.t0_s + (np.arange(len(out)) + 1) * 1e-3, dtype=np.float64)
+            state = np.zeros((2, 1 + nstate))
+            state[:, 0] = t[:2]
+            trajs.append(
+                sysid.SystemTrajectory(
+                    model=m,
+                    control=self._control(w),
+                    sensordata=_timeseries(t, out, m),
+                    initial_state=np.zeros(nstate),
+                    state=sysid.TimeSeries(t[:2], state, None),
+                )
+            )
+        return trajs
+
+    def _key(self, pd: Any) -> tuple[float, ...]:
+        return tuple(float(v) for v in pd.as_vector())
+
+    def residual(
+        self, params: Any, pred: Any, measured: Any, model: Any, return_pred_all: bool, **_: Any
+    ) -> Any:
+        w = self._by_measured[id(measured)]
+        sim = pred.data[w.sample_rows].copy()
+        r = (sim - w.measured) * self.weights
+        r[~np.isfinite(w.measured)] = 0.0
+        r[~np.isfinite(r)] = 1e6  # a diverged rollout: a huge residual, never NaN
+        pred_ts = sysid.TimeSeries(measured.times, sim, measured.signal_mapping)
+        return r.ravel(), pred_ts, measured
+
+
+# --- intervals ----------------------------------------------------------------------------------
+
+
+def _hac_covariance(
+    jac: FloatArray, res: FloatArray, blocks: Sequence[tuple[int, int, int]]
+) -> tuple[FloatArray, float]:
+    """Newey-West sandwich covariance of a least-squares estimate with autocorrelated residuals.
+
+    Args:
+        jac: (N, p) Jacobian of the residual.
+        res: (N,) residual at the optimum.
+        blocks: per window, (first row, rows, channels per sample): rows are sample-major.
+
+    Returns:
+        The (p, p) covariance and the effective number of independent samples.
+    """
+    h = jac.T @ jac
+    h_inv = np.linalg.pinv(h)
+    p = jac.shape[1]
+    s = np.zeros((p, p))
+    n_eff = 0.0
+    for first, rows, ch in blocks:
+        if rows == 0:
+            continue
+        m = rows // ch
+        g = (jac[first : first + rows] * res[first : first + rows, None]).reshape(m, ch, p).sum(axis=1)
+        r = res[first : first + rows].reshape(m, ch)
+        lag = _bandwidth(r)
+        s += g.T @ g
+        for lag_k in range(1, lag + 1):
+            w = 1.0 - lag_k / (lag + 1.0)
+            gamma = g[lag_k:].T @ g[:-lag_k]
+            s += w * (gamma + gamma.T)
+        n_eff += m / max(1.0, _integrated_time(r))
+    cov = h_inv @ s @ h_inv
+    return cov, n_eff
+
+
+def _acf(r: FloatArray, max_lag: int) -> FloatArray:
+    x = r - r.mean(axis=0)
+    denom = float((x * x).sum())
+    if denom <= 0:
+        return np.zeros(max_lag + 1)
+    return np.array([float((x[k:] * x[: len(x) - k]).sum()) / denom for k in range(max_lag + 1)])
+
+
+def _bandwidth(r: FloatArray) -> int:
+    """Lags that still correlate: twice the first lag where the autocorrelation drops below 0.05."""
+    m = len(r)
+    rho = _acf(r, max(1, m // 3))
+    below = np.nonzero(rho < 0.05)[0]
+    first = int(below[0]) if len(below) else m // 3
+    return int(min(m // 3, max(1, 2 * first)))
+
+
+def _integrated_time(r: FloatArray) -> float:
+    """1 + 2 Σ ρ_k up to the first negative ρ (samples per independent sample)."""
+    m = len(r)
+    rho = _acf(r, max(1, m // 3))
+    total = 1.0
+    for k in range(1, len(rho)):
+        if rho[k] <= 0:
+            break
+        total += 2.0 * rho[k]
+    return total
+
+
+# --- the fit ------------------------------------------------------------------------------------
+
+
+ProgressFn = Callable[[str, float], None]
+"""Called with a stage and the fraction of the fit done (0..1, estimated)."""
+
+
+def fit(
+    recordings: Sequence[MotorData],
+    preset: ModelConfig,
+    options: FitOptions | None = None,
+    *,
+    design: SpiralDesign | None = None,
+    progress: ProgressFn | None = None,
+    sysid_report: Path | None = None,
+) -> FitResult:
+    """Fit the plant to the recordings.
+
+    Args:
+        recordings: the recordings (each with its windows).
+        preset: the model to start from (and to keep where a parameter is not fitted).
+        options: how to fit.
+        design: the arm (default: the one the first recording names, else the prototype).
+        progress: told how far the fit has come.
+        sysid_report: write MuJoCo's own report of the fit into this folder (``report.html``; two more
+            evaluations of the residual).
+
+    Raises:
+        FitError: nothing to fit, or the recordings disagree on the arm.
+    """
+    opts = options or FitOptions()
+    t_start = time.monotonic()
+    if not recordings:
+        raise FitError("no recordings")
+    designs = {rec.design for rec in recordings if rec.design is not None}
+    if design is None:
+        if len(designs) > 1:
+            raise FitError("the recordings were made with different arm designs")
+        design = next(iter(designs)) if designs else SpiralDesign.paper_prototype()
+    rows = [r for r in ID_PARAMS if r.name in opts.params]
+    if not rows:
+        raise FitError("no parameter to fit")
+    chosen = [_prepare(rec, end, opts.residual_period_s) for rec, end in _spans(recordings, opts)]
+    say = progress or (lambda stage, frac: None)
+    with RolloutPool(opts.jobs) as pool:
+        problem = _Problem(design, preset, rows, chosen, opts, pool)
+        # A parameter whose preset sits on a bound (no joint friction, no delay) starts a little inside:
+        # Levenberg-Marquardt can stall in a corner of the box.
+        params = problem.params().move_off_bounds()
+        measured = problem.measured()
+        residual_fn = sysid.build_residual_fn(
+            models_sequences=[measured],
+            build_model=problem.build_model,
+            custom_rollout=problem.rollout,
+            modify_residual=problem.residual,
+            n_threads=1,
+            resample_true=False,
+        )
+        objective: list[float] = []
+        # The solver's own decision to stop (its gradient or step fell under tolerance) or ours:
+        # an iteration that still lowered the objective by more than this means it had not converged.
+        converged_below = 1e-3
+
+        def on_iter(trace: list[Any]) -> None:
+            objective.append(float(trace[-1].objective))
+            say(f"iteration {len(trace)} of at most {opts.max_iters}", len(trace) / (opts.max_iters + 2))
+
+        say("first evaluation", 0.0)
+        opt_params, result = sysid.optimize(
+            params,
+            residual_fn,
+            optimizer="mujoco",
+            verbose=False,
+            max_iters=opts.max_iters,
+            eps=opts.fd_step,
+            iter_callback=on_iter,
+            output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
+        )
+        jac = np.asarray(result.jac, dtype=np.float64)
+        x = opt_params.as_vector()
+        res_list, _, _ = residual_fn(x, opt_params)
+        res = np.concatenate(res_list)
+        _, naive = sysid.calculate_intervals(res_list, jac)
+        blocks = []
+        first = 0
+        for _w, r in zip(problem.wins, res_list, strict=True):
+            blocks.append((first, len(r), _CH))
+            first += len(r)
+        cov, n_eff = _hac_covariance(jac, res, blocks)
+        dof = max(1.0, n_eff - len(rows))
+        quant = float(scipy.stats.t.ppf(0.975, dof))
+        half = quant * np.sqrt(np.maximum(np.diag(cov), 0.0))
+        sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        corr = cov / np.outer(sd, sd)
+        cond = float(np.linalg.cond(jac)) if jac.size else math.nan
+        fitted_si = problem.si_values(opt_params)
+        fitted_model = apply(preset, fitted_si)
+        estimates = _estimates(problem, rows, x, half, np.asarray(naive, dtype=float), corr)
+        if sysid_report is not None:
+            say("MuJoCo's report", 0.9)
+            _sysid_report(sysid_report, problem, measured, params, opt_params, residual_fn, result)
+        say("measured against simulated", 0.95)
+        traces = _traces(
+            problem, recordings, {w.recording.name: w.end for w in chosen}, fitted_model, preset, pool
+        )
+        return FitResult(
+            estimates=estimates,
+            model=fitted_model,
+            preset_model=preset,
+            traces=traces,
+            condition_number=cond,
+            correlation=corr,
+            iterations=len(objective),
+            rollouts=pool.rollouts,
+            simulated_s=pool.simulated_s,
+            wall_s=time.monotonic() - t_start,
+            recordings=tuple((rec.name, rec.sha256, rec.duration_s) for rec in recordings),
+            objective=tuple(objective),
+            converged=len(objective) <= opts.max_iters
+            or (len(objective) >= 2 and 1.0 - objective[-1] / max(objective[-2], 1e-300) < converged_below),
+        )
+
+
+def _estimates(
+    problem: _Problem,
+    rows: Sequence[IdParam],
+    x: FloatArray,
+    half_x: FloatArray,
+    naive_x: FloatArray,
+    corr: FloatArray,
+) -> tuple[ParamEstimate, ...]:
+    """The fitted values and intervals in SI, from the optimizer's coordinates."""
+    out = []
+    for i, p in enumerate(rows):
+        v0 = problem.preset_values[p.name]
+        value = p.from_x(float(x[i]), v0)
+        interval = _si_interval(p, v0, float(x[i]), float(half_x[i]))
+        naive = _si_interval(p, v0, float(x[i]), float(naive_x[i]) if i < len(naive_x) else math.nan)
+        half = 0.5 * (interval[1] - interval[0])
+        limit = p.identifiable_within * (abs(value) if p.relative else 1.0)
+        ok = math.isfinite(half) and half <= limit
+        why = ""
+        if not ok:
+            partners = [rows[j].name for j in range(len(rows)) if j != i and abs(corr[i, j]) > 0.9]
+            why = f"95 % interval ±{half:.3g} {p.unit} is wider than ±{limit:.3g}".replace("  ", " ")
+            if partners:
+                why += f"; trades against {', '.join(partners)}"
+        lo, hi = p.x_bounds(v0)
+        at_bound = math.isclose(float(x[i]), lo, abs_tol=1e-6) or math.isclose(float(x[i]), hi, abs_tol=1e-6)
+        out.append(ParamEstimate(p.name, p.unit, v0, value, interval, naive, ok, why, at_bound))
+    return tuple(out)
+
+
+def _si_interval(p: IdParam, v0: float, x: float, half: float) -> tuple[float, float]:
+    if not math.isfinite(half):
+        return (math.nan, math.nan)
+    lo, hi = p.from_x(x - half, v0), p.from_x(x + half, v0)
+    return (min(lo, hi), max(lo, hi))
+
+
+def _sysid_report(
+    out: Path, problem: _Problem, measured: Any, initial: Any, fitted: Any, residual_fn: Any, result: Any
+) -> None:
+    """MuJoCo's own report (parameters, signals, its covariance); a failure of it is said, never fatal."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        builder = sysid.default_report(
+            [measured],
+            initial,
+            fitted,
+            residual_fn,
+            result,
+            title="SpiRob identification (mujoco.sysid)",
+            save_path=str(out),
+            build_model=problem.build_model,
+            generate_videos=False,
+        )
+        builder.save(str(out / "report.html"))
+    except Exception as exc:  # the report is a view of the fit, which stands without it
+        _log.warning("MuJoCo's own report failed: %s: %s", type(exc).__name__, exc)
+
+
+def _traces(
+    problem: _Problem,
+    recordings: Sequence[MotorData],
+    fit_ends: dict[str, int],
+    fitted: ModelConfig,
+    preset: ModelConfig,
+    pool: RolloutPool,
+) -> tuple[Trace, ...]:
+    """Every recording simulated whole from its start with the fitted and the preset model; a sample is
+    held out when the fit never simulated it."""
+    wins = [_prepare(rec, len(rec.t_s), problem.options.residual_period_s) for rec in recordings]
+    jobs = [RolloutJob(problem.design, m, w.currents_a) for m in (fitted, preset) for w in wins]
+    outs = pool.map(jobs)
+    n = len(wins)
+    traces = []
+    for i, w in enumerate(wins):
+        end = fit_ends.get(w.recording.name, 0)
+        idx = np.searchsorted(w.recording.t_s, w.sample_t_s - 1e-9)
+        traces.append(
+            Trace(
+                w.recording.name,
+                w.sample_t_s,
+                idx >= end,
+                w.measured[:, _LEN],
+                outs[i][w.sample_rows, _LEN],
+                outs[n + i][w.sample_rows, _LEN],
+            )
+        )
+    return tuple(traces)
+
+
+def _replace_model(model: ModelConfig, **changes: Any) -> ModelConfig:
+    return dataclasses.replace(model, **changes)
