@@ -42,6 +42,7 @@ from mujoco import sysid
 from numpy.typing import NDArray
 
 from hil.errors import HilError
+from hil.identify.intervals import ParamEstimate, estimates, hac_covariance
 from hil.identify.motor_data import MotorData
 from hil.identify.rollout import RolloutJob, RolloutPool
 from hil.sim.config import ModelConfig
@@ -49,7 +50,7 @@ from hil.sim.mjcf import build_mjcf
 from hil.sim.spiral import SpiralDesign
 from hil.sim.uncertain import ID_PARAMS, IdParam, apply, nominal
 
-__all__ = ["FitError", "FitOptions", "FitResult", "ParamEstimate", "Trace", "fit"]
+__all__ = ["FitError", "FitOptions", "FitResult", "Trace", "fit"]
 
 FloatArray = NDArray[np.float64]
 
@@ -111,48 +112,6 @@ class FitOptions:
     sigma_tip_m: float = 1e-3
     use_speed: bool = True
     use_tip: bool = True
-
-
-@dataclass(frozen=True, slots=True)
-class ParamEstimate:
-    """One parameter after the fit.
-
-    Attributes:
-        name: its name.
-        unit: its SI unit.
-        preset: the value it started from.
-        value: the fitted value.
-        interval: the 95 % interval (autocorrelation-consistent) [unit]; symmetric in the optimizer's
-            coordinate, so a relative parameter's is symmetric in its logarithm.
-        naive_interval: the toolbox's, which assumes independent residuals.
-        identifiable: the data pin it down (the interval within the row's threshold).
-        why: when not identifiable, why (the interval, or the parameter it trades against).
-        at_bound: the fit stopped at a search bound.
-    """
-
-    name: str
-    unit: str
-    preset: float
-    value: float
-    interval: tuple[float, float]
-    naive_interval: tuple[float, float]
-    identifiable: bool
-    why: str
-    at_bound: bool
-
-    @property
-    def half_width(self) -> float:
-        """Half the 95 % interval's width [unit]."""
-        return 0.5 * (self.interval[1] - self.interval[0])
-
-    @property
-    def naive_half_width(self) -> float:
-        """Half the toolbox's interval's width [unit]."""
-        return 0.5 * (self.naive_interval[1] - self.naive_interval[0])
-
-    def covers(self, value: float) -> bool:
-        """``value`` lies in the 95 % interval."""
-        return self.interval[0] <= value <= self.interval[1]
 
 
 @dataclass(frozen=True, slots=True)
@@ -457,73 +416,6 @@ class _Problem:
         return r.ravel(), pred_ts, measured
 
 
-# --- intervals ----------------------------------------------------------------------------------
-
-
-def _hac_covariance(
-    jac: FloatArray, res: FloatArray, blocks: Sequence[tuple[int, int, int]]
-) -> tuple[FloatArray, float]:
-    """Newey-West sandwich covariance of a least-squares estimate with autocorrelated residuals.
-
-    Args:
-        jac: (N, p) Jacobian of the residual.
-        res: (N,) residual at the optimum.
-        blocks: per window, (first row, rows, channels per sample): rows are sample-major.
-
-    Returns:
-        The (p, p) covariance and the effective number of independent samples.
-    """
-    h = jac.T @ jac
-    h_inv = np.linalg.pinv(h)
-    p = jac.shape[1]
-    s = np.zeros((p, p))
-    n_eff = 0.0
-    for first, rows, ch in blocks:
-        if rows == 0:
-            continue
-        m = rows // ch
-        g = (jac[first : first + rows] * res[first : first + rows, None]).reshape(m, ch, p).sum(axis=1)
-        r = res[first : first + rows].reshape(m, ch)
-        lag = _bandwidth(r)
-        s += g.T @ g
-        for lag_k in range(1, lag + 1):
-            w = 1.0 - lag_k / (lag + 1.0)
-            gamma = g[lag_k:].T @ g[:-lag_k]
-            s += w * (gamma + gamma.T)
-        n_eff += m / max(1.0, _integrated_time(r))
-    cov = h_inv @ s @ h_inv
-    return cov, n_eff
-
-
-def _acf(r: FloatArray, max_lag: int) -> FloatArray:
-    x = r - r.mean(axis=0)
-    denom = float((x * x).sum())
-    if denom <= 0:
-        return np.zeros(max_lag + 1)
-    return np.array([float((x[k:] * x[: len(x) - k]).sum()) / denom for k in range(max_lag + 1)])
-
-
-def _bandwidth(r: FloatArray) -> int:
-    """Lags that still correlate: twice the first lag where the autocorrelation drops below 0.05."""
-    m = len(r)
-    rho = _acf(r, max(1, m // 3))
-    below = np.nonzero(rho < 0.05)[0]
-    first = int(below[0]) if len(below) else m // 3
-    return int(min(m // 3, max(1, 2 * first)))
-
-
-def _integrated_time(r: FloatArray) -> float:
-    """1 + 2 Σ ρ_k up to the first negative ρ (samples per independent sample)."""
-    m = len(r)
-    rho = _acf(r, max(1, m // 3))
-    total = 1.0
-    for k in range(1, len(rho)):
-        if rho[k] <= 0:
-            break
-        total += 2.0 * rho[k]
-    return total
-
-
 # --- the fit ------------------------------------------------------------------------------------
 
 
@@ -587,8 +479,12 @@ def fit(
         # an iteration that still lowered the objective by more than this means it had not converged.
         converged_below = 1e-3
 
+        steps: list[FloatArray] = []
+
         def on_iter(trace: list[Any]) -> None:
             objective.append(float(trace[-1].objective))
+            if trace[-1].step is not None:
+                steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
             say(f"iteration {len(trace)} of at most {opts.max_iters}", len(trace) / (opts.max_iters + 2))
 
         say("first evaluation", 0.0)
@@ -612,7 +508,7 @@ def fit(
         for _w, r in zip(problem.wins, res_list, strict=True):
             blocks.append((first, len(r), _CH))
             first += len(r)
-        cov, n_eff = _hac_covariance(jac, res, blocks)
+        cov, n_eff = hac_covariance(jac, res, blocks)
         dof = max(1.0, n_eff - len(rows))
         quant = float(scipy.stats.t.ppf(0.975, dof))
         half = quant * np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -621,7 +517,22 @@ def fit(
         cond = float(np.linalg.cond(jac)) if jac.size else math.nan
         fitted_si = problem.si_values(opt_params)
         fitted_model = apply(preset, fitted_si)
-        estimates = _estimates(problem, rows, x, half, np.asarray(naive, dtype=float), corr)
+        # Converged: the solver stopped on its own, the objective no longer fell, or the last step moved
+        # every parameter by less than half its interval (further steps cannot take it out of it).
+        converged = (
+            len(objective) <= opts.max_iters
+            or (len(objective) >= 2 and 1.0 - objective[-1] / max(objective[-2], 1e-300) < converged_below)
+            or (bool(steps) and len(steps[-1]) == len(half) and bool(np.all(steps[-1] <= 0.5 * half)))
+        )
+        fitted_estimates = estimates(
+            problem.preset_values,
+            rows,
+            x,
+            half,
+            np.asarray(naive, dtype=float),
+            corr,
+            None if converged else len(objective),
+        )
         if sysid_report is not None:
             say("MuJoCo's report", 0.9)
             _sysid_report(sysid_report, problem, measured, params, opt_params, residual_fn, result)
@@ -630,7 +541,7 @@ def fit(
             problem, recordings, {w.recording.name: w.end for w in chosen}, fitted_model, preset, pool
         )
         return FitResult(
-            estimates=estimates,
+            estimates=fitted_estimates,
             model=fitted_model,
             preset_model=preset,
             traces=traces,
@@ -642,46 +553,8 @@ def fit(
             wall_s=time.monotonic() - t_start,
             recordings=tuple((rec.name, rec.sha256, rec.duration_s) for rec in recordings),
             objective=tuple(objective),
-            converged=len(objective) <= opts.max_iters
-            or (len(objective) >= 2 and 1.0 - objective[-1] / max(objective[-2], 1e-300) < converged_below),
+            converged=converged,
         )
-
-
-def _estimates(
-    problem: _Problem,
-    rows: Sequence[IdParam],
-    x: FloatArray,
-    half_x: FloatArray,
-    naive_x: FloatArray,
-    corr: FloatArray,
-) -> tuple[ParamEstimate, ...]:
-    """The fitted values and intervals in SI, from the optimizer's coordinates."""
-    out = []
-    for i, p in enumerate(rows):
-        v0 = problem.preset_values[p.name]
-        value = p.from_x(float(x[i]), v0)
-        interval = _si_interval(p, v0, float(x[i]), float(half_x[i]))
-        naive = _si_interval(p, v0, float(x[i]), float(naive_x[i]) if i < len(naive_x) else math.nan)
-        half = 0.5 * (interval[1] - interval[0])
-        limit = p.identifiable_within * (abs(value) if p.relative else 1.0)
-        ok = math.isfinite(half) and half <= limit
-        why = ""
-        if not ok:
-            partners = [rows[j].name for j in range(len(rows)) if j != i and abs(corr[i, j]) > 0.9]
-            why = f"95 % interval ±{half:.3g} {p.unit} is wider than ±{limit:.3g}".replace("  ", " ")
-            if partners:
-                why += f"; trades against {', '.join(partners)}"
-        lo, hi = p.x_bounds(v0)
-        at_bound = math.isclose(float(x[i]), lo, abs_tol=1e-6) or math.isclose(float(x[i]), hi, abs_tol=1e-6)
-        out.append(ParamEstimate(p.name, p.unit, v0, value, interval, naive, ok, why, at_bound))
-    return tuple(out)
-
-
-def _si_interval(p: IdParam, v0: float, x: float, half: float) -> tuple[float, float]:
-    if not math.isfinite(half):
-        return (math.nan, math.nan)
-    lo, hi = p.from_x(x - half, v0), p.from_x(x + half, v0)
-    return (min(lo, hi), max(lo, hi))
 
 
 def _sysid_report(

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from hil.experiments.common import pyplot, save_figure
-from hil.identify.fit import FitResult, ParamEstimate
+from hil.identify.fit import FitResult
+from hil.identify.intervals import ParamEstimate
 
 __all__ = ["write_report"]
 

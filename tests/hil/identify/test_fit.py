@@ -9,12 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.identify.fit import FitError, FitOptions, _acf, _bandwidth, _hac_covariance, fit
+from hil.identify.fit import FitError, FitOptions, fit
+from hil.identify.intervals import _acf, _bandwidth, hac_covariance
 from hil.identify.motor_data import load_motor_data
 from hil.sim.config import ModelConfig
 from tests.hil.identify.conftest import TRUTH
 
-FAST = FitOptions(params=tuple(TRUTH), budget_s=6.0, min_span_s=4.0, max_iters=4, jobs=2)
+FAST = FitOptions(params=tuple(TRUTH), budget_s=6.0, min_span_s=4.0, max_iters=6, jobs=2)
 
 
 def test_a_fit_recovers_the_hidden_parameters(truth_recording: Path) -> None:
@@ -53,7 +54,7 @@ def test_the_sandwich_widens_intervals_for_correlated_residuals() -> None:
     walk = np.cumsum(rng.normal(size=n)) * 0.05
     walk -= walk.mean()
     for res, wider in ((white, False), (walk, True)):
-        cov, n_eff = _hac_covariance(jac, res, [(0, n, 1)])
+        cov, n_eff = hac_covariance(jac, res, [(0, n, 1)])
         naive = float(res @ res) / n / n
         if wider:
             assert cov[0, 0] > 10 * naive and n_eff < n / 10

@@ -1,0 +1,202 @@
+"""A fitted parameter's 95 % interval, and whether the data identify it.
+
+:func:`mujoco.sysid.calculate_intervals` assumes independent residuals; a simulated arm's errors are smooth
+in time, so its intervals are far too narrow. :func:`hac_covariance` is the heteroskedasticity-and-
+autocorrelation-consistent one (a Newey-West sandwich around the same Jacobian, each window's bandwidth read
+from its residual's autocorrelation); :func:`estimates` turns it into intervals (Student's t on the effective
+number of samples, computed by the caller) and decides identifiability.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hil.sim.uncertain import IdParam
+
+__all__ = [
+    "NUMERICAL_FLOOR_X",
+    "TRADES_AGAINST",
+    "ParamEstimate",
+    "estimates",
+    "hac_covariance",
+    "si_interval",
+]
+
+FloatArray = NDArray[np.float64]
+
+NUMERICAL_FLOOR_X: Final = 1e-4
+"""The smallest half-width of an interval, in the optimizer's coordinates (0.01 % of a relative parameter,
+1e-4 of an absolute one's scale). With data that a model reproduces exactly (a synthetic recording of the same
+model), the statistical interval shrinks below what the solver resolves: its finite differences (1 % steps)
+and its stopping rule leave the minimum this uncertain, so an interval narrower than that claims more than
+the fit knows."""
+
+
+@dataclass(frozen=True, slots=True)
+class ParamEstimate:
+    """One parameter after the fit.
+
+    Attributes:
+        name: its name.
+        unit: its SI unit.
+        preset: the value it started from.
+        value: the fitted value.
+        interval: the 95 % interval (autocorrelation-consistent) [unit]; symmetric in the optimizer's
+            coordinate, so a relative parameter's is symmetric in its logarithm.
+        naive_interval: the toolbox's, which assumes independent residuals.
+        identifiable: the data pin it down (the interval within the row's threshold).
+        why: when not identifiable, why (the interval, or the parameter it trades against).
+        at_bound: the fit stopped at a search bound.
+    """
+
+    name: str
+    unit: str
+    preset: float
+    value: float
+    interval: tuple[float, float]
+    naive_interval: tuple[float, float]
+    identifiable: bool
+    why: str
+    at_bound: bool
+
+    @property
+    def half_width(self) -> float:
+        """Half the 95 % interval's width [unit]."""
+        return 0.5 * (self.interval[1] - self.interval[0])
+
+    @property
+    def naive_half_width(self) -> float:
+        """Half the toolbox's interval's width [unit]."""
+        return 0.5 * (self.naive_interval[1] - self.naive_interval[0])
+
+    def covers(self, value: float) -> bool:
+        """``value`` lies in the 95 % interval."""
+        return self.interval[0] <= value <= self.interval[1]
+
+
+def hac_covariance(
+    jac: FloatArray, res: FloatArray, blocks: Sequence[tuple[int, int, int]]
+) -> tuple[FloatArray, float]:
+    """Newey-West sandwich covariance of a least-squares estimate with autocorrelated residuals.
+
+    Args:
+        jac: (N, p) Jacobian of the residual.
+        res: (N,) residual at the optimum.
+        blocks: per window, (first row, rows, channels per sample): rows are sample-major.
+
+    Returns:
+        The (p, p) covariance and the effective number of independent samples.
+    """
+    h = jac.T @ jac
+    h_inv = np.linalg.pinv(h)
+    p = jac.shape[1]
+    s = np.zeros((p, p))
+    n_eff = 0.0
+    for first, rows, ch in blocks:
+        if rows == 0:
+            continue
+        m = rows // ch
+        g = (jac[first : first + rows] * res[first : first + rows, None]).reshape(m, ch, p).sum(axis=1)
+        r = res[first : first + rows].reshape(m, ch)
+        lag = _bandwidth(r)
+        s += g.T @ g
+        for lag_k in range(1, lag + 1):
+            w = 1.0 - lag_k / (lag + 1.0)
+            gamma = g[lag_k:].T @ g[:-lag_k]
+            s += w * (gamma + gamma.T)
+        n_eff += m / max(1.0, _integrated_time(r))
+    cov = h_inv @ s @ h_inv
+    return cov, n_eff
+
+
+def _acf(r: FloatArray, max_lag: int) -> FloatArray:
+    x = r - r.mean(axis=0)
+    denom = float((x * x).sum())
+    if denom <= 0:
+        return np.zeros(max_lag + 1)
+    return np.array([float((x[k:] * x[: len(x) - k]).sum()) / denom for k in range(max_lag + 1)])
+
+
+def _bandwidth(r: FloatArray) -> int:
+    """Lags that still correlate: twice the first lag where the autocorrelation drops below 0.05."""
+    m = len(r)
+    rho = _acf(r, max(1, m // 3))
+    below = np.nonzero(rho < 0.05)[0]
+    first = int(below[0]) if len(below) else m // 3
+    return int(min(m // 3, max(1, 2 * first)))
+
+
+def _integrated_time(r: FloatArray) -> float:
+    """1 + 2 Σ ρ_k up to the first negative ρ (samples per independent sample)."""
+    m = len(r)
+    rho = _acf(r, max(1, m // 3))
+    total = 1.0
+    for k in range(1, len(rho)):
+        if rho[k] <= 0:
+            break
+        total += 2.0 * rho[k]
+    return total
+
+
+TRADES_AGAINST: Final = 0.95
+"""|correlation| between two fitted parameters above which neither counts as identified."""
+
+
+def estimates(
+    preset_values: Mapping[str, float],
+    rows: Sequence[IdParam],
+    x: FloatArray,
+    half_x: FloatArray,
+    naive_x: FloatArray,
+    corr: FloatArray,
+    unconverged_after: int | None = None,
+) -> tuple[ParamEstimate, ...]:
+    """The fitted values and intervals in SI, from the optimizer's coordinates.
+
+    A parameter is identified only when its interval is within its row's threshold, it is not at a bound,
+    it does not trade against another one (|correlation| above :data:`TRADES_AGAINST`: a narrow interval
+    along a valley says how flat the valley's floor is, not where on it the truth is) and the fit
+    converged (``unconverged_after`` None): an interval at a point still moving is no interval.
+    """
+    out = []
+    half_x = np.maximum(half_x, NUMERICAL_FLOOR_X)
+    for i, p in enumerate(rows):
+        v0 = preset_values[p.name]
+        value = p.from_x(float(x[i]), v0)
+        interval = si_interval(p, v0, float(x[i]), float(half_x[i]))
+        naive = si_interval(p, v0, float(x[i]), float(naive_x[i]) if i < len(naive_x) else math.nan)
+        half = 0.5 * (interval[1] - interval[0])
+        limit = p.identifiable_within * (abs(value) if p.relative else 1.0)
+        lo, hi = p.x_bounds(v0)
+        at_bound = math.isclose(float(x[i]), lo, abs_tol=1e-6) or math.isclose(float(x[i]), hi, abs_tol=1e-6)
+        partners = [rows[j].name for j in range(len(rows)) if j != i and abs(corr[i, j]) > TRADES_AGAINST]
+        reasons = []
+        if not (math.isfinite(half) and half <= limit):
+            reasons.append(
+                f"95 % interval ±{half:.3g} {p.unit} is wider than ±{limit:.3g}".replace("  ", " ")
+            )
+        if partners:
+            reasons.append(f"trades against {', '.join(partners)}")
+        if at_bound:
+            reasons.append("at its bound")
+        if unconverged_after is not None:
+            reasons.append(f"the fit had not converged after {unconverged_after} iterations")
+        out.append(
+            ParamEstimate(
+                p.name, p.unit, v0, value, interval, naive, not reasons, "; ".join(reasons), at_bound
+            )
+        )
+    return tuple(out)
+
+
+def si_interval(p: IdParam, v0: float, x: float, half: float) -> tuple[float, float]:
+    if not math.isfinite(half):
+        return (math.nan, math.nan)
+    lo, hi = p.from_x(x - half, v0), p.from_x(x + half, v0)
+    return (min(lo, hi), max(lo, hi))
