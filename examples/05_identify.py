@@ -38,7 +38,7 @@ def main() -> int:
         data = load_motor_data(recording)
         print(f"recorded {data.duration_s:.1f} s of the board's CAN frames ({recording.name})")
         result = fit(
-            [data], preset, FitOptions(params=tuple(truth), budget_s=6.0, min_span_s=4.0, max_iters=5)
+            [data], preset, FitOptions(params=tuple(truth), budget_s=6.0, min_span_s=4.0, max_iters=8)
         )
         for e in result.estimates:
             lo, hi = e.interval
