@@ -303,10 +303,15 @@ class HostOptions:
                 raise HostError("--preset is a model of the virtual board or the shadow plant: no --replay")
             if not ns.replay.is_file():
                 raise HostError(f"no such recording: {ns.replay}")
-            from hil.recording import is_mcap
+            from hil.mcap_bounded import RecordingError
+            from hil.recording import is_mcap, read_metadata
 
             if not is_mcap(ns.replay):
                 raise HostError(f"{ns.replay} is not an MCAP recording")
+            try:  # the top-level records through the bounded reader (a chunk is checked as it is played)
+                read_metadata(ns.replay)
+            except RecordingError as exc:
+                raise HostError(f"--replay {ns.replay}: {exc}") from exc
         if ns.port is not None:
             check_board_url(ns.port)
         _check_excite_and_preset(ns)
