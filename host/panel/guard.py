@@ -17,6 +17,11 @@ while the server starts, so every request passes :meth:`PanelGuard.check` first:
   query from its websocket URL, and the cookie carries it there, as Jupyter does. Compared in
   constant time.
 
+- **Well-formed headers**: a request with more than one ``Host`` or ``Origin`` header, or one that is not
+  a host name (or IP literal) with an optional port, or an ``Origin`` that is not ``null`` or
+  ``scheme://host[:port]``, is answered 400 before anything reads them (a duplicate used to raise inside
+  the check: HTTP 500 and a traceback per request).
+
 Refusals are counted (:class:`GuardStats`) and logged at info level, one line each.
 
 A message on an open websocket that viser cannot decode (not msgpack, a text frame, an unknown type,
@@ -33,6 +38,7 @@ import hmac
 import http
 import http.cookies
 import logging
+import re
 import threading
 import urllib.parse
 import warnings
@@ -42,7 +48,7 @@ from typing import Any
 from host.errors import HostError
 from host.options import is_loopback
 
-__all__ = ["GuardStats", "PanelGuard", "request_token", "start_guarded_server"]
+__all__ = ["GuardStats", "PanelGuard", "header_problem", "request_token", "start_guarded_server"]
 
 _log = logging.getLogger(__name__)
 
@@ -62,11 +68,50 @@ class GuardStats:
         token_refused_n: requests refused for a missing or wrong token.
         malformed_messages_n: panel messages viser could not decode or handle (each one closes the
             connection that sent it, or is dropped).
+        bad_headers_n: requests answered 400 for a duplicate or malformed ``Host`` or ``Origin``.
     """
 
     origin_refused_n: int = 0
     token_refused_n: int = 0
     malformed_messages_n: int = 0
+    bad_headers_n: int = 0
+
+
+_HOST = r"(?:[A-Za-z0-9](?:[A-Za-z0-9.\-_]*[A-Za-z0-9])?|\[[0-9A-Fa-f:.]+\])(?::[0-9]{1,5})?"
+_HOST_RE = re.compile(_HOST)
+_ORIGIN_RE = re.compile(r"[A-Za-z][A-Za-z0-9+.\-]*://" + _HOST)
+
+
+def _port_of(url: str) -> int | None:
+    """The port of ``url`` (None without one, -1 when it is not in 0..65535)."""
+    try:
+        return urllib.parse.urlsplit(url).port
+    except ValueError:
+        return -1
+
+
+def header_problem(headers: Any) -> str | None:
+    """What is wrong with a request's ``Host`` and ``Origin`` headers (None: nothing).
+
+    More than one of either, a ``Host`` that is not a host name or IP literal with an optional port in
+    1..65535, or an ``Origin`` that is neither ``null`` nor ``scheme://host[:port]`` (no path). A missing
+    header is not malformed (the Origin check decides about it).
+
+    Args:
+        headers: the request headers (``websockets.datastructures.Headers``: ``get_all``).
+    """
+    for name in ("Host", "Origin"):
+        values = headers.get_all(name)
+        if len(values) > 1:
+            return f"{len(values)} {name} headers"
+    for name, pattern in (("Host", _HOST_RE), ("Origin", _ORIGIN_RE)):
+        values = headers.get_all(name)
+        if not values or (name == "Origin" and values[0] == "null"):
+            continue
+        value = str(values[0])
+        if not pattern.fullmatch(value) or _port_of(value if name == "Origin" else "//" + value) in (0, -1):
+            return f"malformed {name} header {value[:80]!r}"
+    return None
 
 
 def _host_name(host_header: str) -> str | None:
@@ -192,13 +237,19 @@ class PanelGuard:
         return True
 
     def check(self, connection: Any, request: Any) -> Any:
-        """Refuse (an HTTP 403 response) or let through (None) one request.
+        """Refuse (an HTTP 400 or 403 response) or let through (None) one request.
 
         Args:
             connection: the ``websockets`` ``ServerConnection``.
             request: its ``Request`` (path and headers).
         """
         headers = request.headers
+        problem = header_problem(headers)
+        if problem is not None:
+            with self._lock:
+                self.stats.bad_headers_n += 1
+            _log.info("panel request refused (400): %s", problem)
+            return connection.respond(http.HTTPStatus.BAD_REQUEST, f"bad request: {problem}\n")
         if str(headers.get("Upgrade", "")).lower() == "websocket":
             if not self._origin_ok(headers):
                 with self._lock:
