@@ -270,7 +270,7 @@ class HostApp:
         from host.foxglove_live import FoxgloveLive
 
         assert self.options.foxglove_port is not None
-        live = FoxgloveLive(self.options.foxglove_port, metadata)
+        live = FoxgloveLive(self.options.foxglove_port, metadata, self.options.foxglove_origins)
         live.start()
         self.foxglove = live
         assert self.source is not None

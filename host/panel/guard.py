@@ -38,7 +38,6 @@ import hmac
 import http
 import http.cookies
 import logging
-import re
 import threading
 import urllib.parse
 import warnings
@@ -46,9 +45,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from host.errors import HostError
+from host.http_headers import header_problem
 from host.options import is_loopback
 
-__all__ = ["GuardStats", "PanelGuard", "header_problem", "request_token", "start_guarded_server"]
+__all__ = ["GuardStats", "PanelGuard", "request_token", "start_guarded_server"]
 
 _log = logging.getLogger(__name__)
 
@@ -75,43 +75,6 @@ class GuardStats:
     token_refused_n: int = 0
     malformed_messages_n: int = 0
     bad_headers_n: int = 0
-
-
-_HOST = r"(?:[A-Za-z0-9](?:[A-Za-z0-9.\-_]*[A-Za-z0-9])?|\[[0-9A-Fa-f:.]+\])(?::[0-9]{1,5})?"
-_HOST_RE = re.compile(_HOST)
-_ORIGIN_RE = re.compile(r"[A-Za-z][A-Za-z0-9+.\-]*://" + _HOST)
-
-
-def _port_of(url: str) -> int | None:
-    """The port of ``url`` (None without one, -1 when it is not in 0..65535)."""
-    try:
-        return urllib.parse.urlsplit(url).port
-    except ValueError:
-        return -1
-
-
-def header_problem(headers: Any) -> str | None:
-    """What is wrong with a request's ``Host`` and ``Origin`` headers (None: nothing).
-
-    More than one of either, a ``Host`` that is not a host name or IP literal with an optional port in
-    1..65535, or an ``Origin`` that is neither ``null`` nor ``scheme://host[:port]`` (no path). A missing
-    header is not malformed (the Origin check decides about it).
-
-    Args:
-        headers: the request headers (``websockets.datastructures.Headers``: ``get_all``).
-    """
-    for name in ("Host", "Origin"):
-        values = headers.get_all(name)
-        if len(values) > 1:
-            return f"{len(values)} {name} headers"
-    for name, pattern in (("Host", _HOST_RE), ("Origin", _ORIGIN_RE)):
-        values = headers.get_all(name)
-        if not values or (name == "Origin" and values[0] == "null"):
-            continue
-        value = str(values[0])
-        if not pattern.fullmatch(value) or _port_of(value if name == "Origin" else "//" + value) in (0, -1):
-            return f"malformed {name} header {value[:80]!r}"
-    return None
 
 
 def _host_name(host_header: str) -> str | None:
