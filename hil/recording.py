@@ -44,14 +44,12 @@ from typing import IO, Any, Final
 import numpy as np
 import numpy.typing as npt
 from foxglove.messages import LogLevel
-from mcap.exceptions import McapError
-from mcap.reader import make_reader
 from mcap.records import Channel, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from hil import foxglove_log
 from hil.foxglove_log import TELEMETRY, ChannelSpec, FoxgloveView
+from hil.mcap_bounded import MAGIC, RecordingError, iter_records
 
 __all__ = [
     "BOARD_CONFIG",
@@ -334,7 +332,7 @@ class Recorder:
         self.close()
 
 
-MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
+MCAP_MAGIC: Final = MAGIC
 """The first bytes of every MCAP file."""
 
 
@@ -368,19 +366,17 @@ def is_truncated(path: str | Path) -> bool:
 
 
 def read_metadata(path: str | Path) -> dict[str, str]:
-    """The ``spirob`` metadata record of a recording (empty if none), of a truncated file too."""
+    """The ``spirob`` metadata record of a recording (empty if none), of a truncated file too.
+
+    Reads the top-level records only (chunks are skipped unread), through the bounded reader.
+
+    Raises:
+        RecordingError: a record over the cap or a malformed one (:mod:`hil.mcap_bounded`).
+    """
     with open(path, "rb") as f:
-        try:
-            if _ends_with_magic(f):
-                for meta in make_reader(f).iter_metadata():
-                    if meta.name == PROFILE:
-                        return dict(meta.metadata)
-                return {}
-            for rec in StreamReader(f, skip_magic=False).records:
-                if isinstance(rec, Metadata) and rec.name == PROFILE:
-                    return dict(rec.metadata)
-        except (McapError, EOFError, struct.error, ValueError):
-            pass
+        for rec in iter_records(f, chunks=False):
+            if isinstance(rec, Metadata) and rec.name == PROFILE:
+                return dict(rec.metadata)
     return {}
 
 
@@ -403,42 +399,51 @@ def recover(path: str | Path, out: str | Path) -> Recovered:
     Schemas, channels, metadata and messages are kept as they were, in file order; the new file has a
     summary and an index, so the mcap library's normal reader (and Foxglove) opens it. Its ``spirob``
     metadata gains ``truncated`` = ``true``: the run it records was cut short all the same.
+
+    Raises:
+        RecordingError: a record over the cap, a chunk bomb or a malformed record (``out`` is removed).
     """
+    try:
+        with open(path, "rb") as src, open(out, "wb") as dst:
+            return _copy_records(src, dst)
+    except RecordingError:
+        Path(out).unlink(missing_ok=True)  # half a copy of a file refused is no recovery
+        raise
+
+
+def _copy_records(src: IO[bytes], dst: IO[bytes]) -> Recovered:
+    """The loop of :func:`recover`."""
     schema_ids: dict[int, int] = {0: 0}
     channel_ids: dict[int, int] = {}
     n = 0
     last: int | None = None
-    with open(path, "rb") as src, open(out, "wb") as dst:
-        writer = Writer(dst, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
-        started = False
-        try:
-            for rec in StreamReader(src, skip_magic=False).records:
-                if isinstance(rec, Header):
-                    writer.start(profile=rec.profile, library=rec.library)
-                    started = True
-                elif not started:
-                    continue
-                elif isinstance(rec, Schema):
-                    schema_ids[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
-                elif isinstance(rec, Channel) and rec.id not in channel_ids:
-                    channel_ids[rec.id] = writer.register_channel(
-                        rec.topic, rec.message_encoding, schema_ids.get(rec.schema_id, 0), dict(rec.metadata)
-                    )
-                elif isinstance(rec, Metadata):
-                    meta = dict(rec.metadata)
-                    if rec.name == PROFILE:
-                        meta[TRUNCATED_KEY] = "true"  # complete now, but its run was cut short
-                    writer.add_metadata(rec.name, meta)
-                elif isinstance(rec, Message) and rec.channel_id in channel_ids:
-                    channel = channel_ids[rec.channel_id]
-                    writer.add_message(channel, rec.log_time, bytes(rec.data), rec.publish_time, rec.sequence)
-                    n += 1
-                    last = rec.publish_time // 1000
-        except (McapError, EOFError, struct.error, ValueError):
-            pass  # the truncated tail
-        if not started:
-            writer.start(profile=PROFILE, library="spirob-teleop")
-        writer.finish()
+    writer = Writer(dst, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
+    started = False
+    for rec in iter_records(src):
+        if isinstance(rec, Header):
+            writer.start(profile=rec.profile, library=rec.library)
+            started = True
+        elif not started:
+            continue
+        elif isinstance(rec, Schema):
+            schema_ids[rec.id] = writer.register_schema(rec.name, rec.encoding, rec.data)
+        elif isinstance(rec, Channel) and rec.id not in channel_ids:
+            channel_ids[rec.id] = writer.register_channel(
+                rec.topic, rec.message_encoding, schema_ids.get(rec.schema_id, 0), dict(rec.metadata)
+            )
+        elif isinstance(rec, Metadata):
+            meta = dict(rec.metadata)
+            if rec.name == PROFILE:
+                meta[TRUNCATED_KEY] = "true"  # complete now, but its run was cut short
+            writer.add_metadata(rec.name, meta)
+        elif isinstance(rec, Message) and rec.channel_id in channel_ids:
+            channel = channel_ids[rec.channel_id]
+            writer.add_message(channel, rec.log_time, bytes(rec.data), rec.publish_time, rec.sequence)
+            n += 1
+            last = rec.publish_time // 1000
+    if not started:
+        writer.start(profile=PROFILE, library="spirob-teleop")
+    writer.finish()
     return Recovered(n, last)
 
 
@@ -446,18 +451,18 @@ def read_records(path: str | Path, topics: frozenset[str] | set[str] | None = No
     """Every message of a recording in file order, stopping quietly at a truncated tail.
 
     Reads sequentially (no index needed), so files of a killed process read up to their last complete
-    chunk.
+    chunk; one record at a time through the bounded reader (:mod:`hil.mcap_bounded`), so memory stays
+    bounded whatever the file's size.
+
+    Raises:
+        RecordingError: a record over the cap, a chunk bomb or a malformed record.
     """
     channels: dict[int, str] = {}
     with open(path, "rb") as f:
-        reader = StreamReader(f, skip_magic=False)
-        try:
-            for rec in reader.records:
-                if isinstance(rec, Message):
-                    topic = channels.get(rec.channel_id)
-                    if topic is not None and (topics is None or topic in topics):
-                        yield Record(topic, rec.publish_time // 1000, bytes(rec.data), rec.log_time)
-                elif isinstance(rec, Channel):
-                    channels[rec.id] = rec.topic
-        except (McapError, EOFError, struct.error, ValueError):
-            return
+        for rec in iter_records(f):
+            if isinstance(rec, Message):
+                topic = channels.get(rec.channel_id)
+                if topic is not None and (topics is None or topic in topics):
+                    yield Record(topic, rec.publish_time // 1000, bytes(rec.data), rec.log_time)
+            elif isinstance(rec, Channel):
+                channels[rec.id] = rec.topic

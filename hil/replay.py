@@ -10,6 +10,7 @@ plant at all, and compares what it emits with what was recorded, record by recor
 from __future__ import annotations
 
 import json
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,11 @@ from hil.recording import (
 
 _INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
 _OUTPUTS = frozenset({recording.CAN_TX, recording.LINK_TX})
+
+MAX_SEGMENT_RECORDS = 100_000
+"""Records between two tick marks a replay holds (a lockstep tick has a handful)."""
+MAX_SEGMENT_BYTES = 64 << 20
+"""Their bytes."""
 
 
 @dataclass(frozen=True)
@@ -140,9 +146,25 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
         exec_timer_ns=zero_ns,
     )
 
-    produced: list[tuple[int, str, bytes]] = []
-    expected: list[tuple[int, str, bytes]] = []
+    # Outputs are compared as soon as both sides have them, so only what one side is ahead by is held.
+    produced: deque[tuple[int, str, bytes]] = deque()
+    expected: deque[tuple[int, str, bytes]] = deque()
     ticks = 0
+    pairs = compared = mismatches = 0
+    first: str | None = None
+
+    def compare(got: tuple[int, str, bytes] | None, want: tuple[int, str, bytes] | None) -> None:
+        nonlocal pairs, compared, mismatches, first
+        pairs += 1
+        compared += want is not None
+        if got != want:
+            mismatches += 1
+            if first is None:
+                first = f"output #{pairs - 1}: recorded {_describe(want)}, replay produced {_describe(got)}"
+
+    def compare_ready() -> None:
+        while produced and expected:
+            compare(produced.popleft(), expected.popleft())
 
     def feed(rec: Record) -> None:
         topic = rec.topic
@@ -179,22 +201,32 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
     # One pass over the file: the records between two tick marks (one segment) are held until the next
     # mark, then the tick runs with its poses and the segment's inputs are fed after it, as they arrived.
     # Each record is touched a bounded number of times, so the replay is linear in the recording's length.
+    # A segment is bounded (a file without tick marks is not a lockstep recording, however long it is).
     tick_us: int | None = None
     segment: list[Record] = []
+    segment_bytes = 0
     for rec in read_records(path, topics=_INPUTS | _OUTPUTS | {recording.TICK}):
         if rec.topic != recording.TICK:
             segment.append(rec)
+            segment_bytes += len(rec.data)
+            if len(segment) > MAX_SEGMENT_RECORDS or segment_bytes > MAX_SEGMENT_BYTES:
+                raise HilError(
+                    f"more than {MAX_SEGMENT_RECORDS} records or {MAX_SEGMENT_BYTES >> 20} MiB between two "
+                    f"tick marks (after {ticks} ticks): not a lockstep recording"
+                )
             continue
         if tick_us is not None:
             run_tick(tick_us, segment)
         for held in segment:
             feed(held)
-        tick_us, segment = rec.time_us, []
+        compare_ready()
+        tick_us, segment, segment_bytes = rec.time_us, [], 0
     truncated = recording.is_truncated(path)
     if truncated:
         # The last tick's segment may be cut anywhere: its outputs are not compared (nor run).
         if tick_us is not None:
-            expected = [e for e in expected if e[0] < tick_us]
+            cut = tick_us
+            expected = deque(e for e in expected if e[0] < cut)
     else:
         if tick_us is not None:
             run_tick(tick_us, segment)
@@ -205,16 +237,10 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
         if bus.sent:
             last_t = produced[-1][0] if produced else 0
             produced.extend((last_t, recording.CAN_TX, frame) for frame in bus.sent)
-    mismatches = 0
-    first: str | None = None
-    for i in range(max(len(produced), len(expected))):
-        got = produced[i] if i < len(produced) else None
-        want = expected[i] if i < len(expected) else None
-        if got != want:
-            mismatches += 1
-            if first is None:
-                first = f"output #{i}: recorded {_describe(want)}, replay produced {_describe(got)}"
-    return ReplayResult(str(path), ticks, len(expected), mismatches, first, truncated)
+    compare_ready()
+    while produced or expected:
+        compare(produced.popleft() if produced else None, expected.popleft() if expected else None)
+    return ReplayResult(str(path), ticks, compared, mismatches, first, truncated)
 
 
 def _describe(item: tuple[int, str, bytes] | None) -> str:

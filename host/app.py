@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from controller.cli_kit import EXIT_FAILURE, EXIT_OK
+from controller.cli_kit import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
 from host.errors import HostError
 from host.excite import ExcitationDriver, ExciteConfig, operator_lines
 from host.link.client import BoardClient, load_scaled_s
@@ -270,7 +270,7 @@ class HostApp:
         from host.foxglove_live import FoxgloveLive
 
         assert self.options.foxglove_port is not None
-        live = FoxgloveLive(self.options.foxglove_port, metadata)
+        live = FoxgloveLive(self.options.foxglove_port, metadata, self.options.foxglove_origins)
         live.start()
         self.foxglove = live
         assert self.source is not None
@@ -365,7 +365,8 @@ class HostApp:
         run's summary (:attr:`report`).
 
         Returns:
-            The exit status: 1 if a ``--virtual-rc`` run ended latched in a failsafe, saw a fault or no
+            The exit status: 2 if the ``--replay`` file was refused (``replay.error``), 1 if a
+            ``--virtual-rc`` run ended latched in a failsafe, saw a fault or no
             telemetry at all (:meth:`SummaryReport.failure`), or an ``--excite`` profile did not play to
             its end (the run ends with it), else 0.
         """
@@ -376,6 +377,8 @@ class HostApp:
             now = time.monotonic()
             if end is not None and now >= end:
                 break
+            if self.replay is not None and self.replay.error is not None:
+                break  # a recording refused by the bounded reader ends the run, panel or not
             if self.replay is not None and not self.options.ui and self.replay.done.is_set():
                 break
             if self.excite is not None and self.excite.done.is_set():
@@ -391,6 +394,8 @@ class HostApp:
             outcome = self.excite.stop(f"{why} before the profile ended")
             excite_failed = outcome is None or not outcome.completed
         self.report = self.take_report()
+        if self.replay is not None and self.replay.error is not None:
+            return EXIT_USAGE
         if self.options.virtual_rc is not None and self.report.failure() is not None:
             return EXIT_FAILURE
         return EXIT_FAILURE if excite_failed else EXIT_OK

@@ -7,7 +7,8 @@ a board that vanishes mid-run is retried until it comes back, with the panel sho
 
 Exit status: 0 normal end (``--duration`` elapsed, Ctrl-C, replay finished headless), 1 runtime failure
 or a ``--virtual-rc`` run that ended latched in a failsafe, saw a fault or got no telemetry, 2 start-up or
-usage error. A summary of the run (time per mode and phase, failsafes, faults, RC gaps) is printed at exit.
+usage error (a ``--replay`` file the bounded reader refuses too, even mid-replay). A summary of the run
+(time per mode and phase, failsafes, faults, RC gaps) is printed at exit.
 """
 
 from __future__ import annotations
@@ -78,6 +79,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             if app.foxglove is not None:
                 print(f"{PROG}: Foxglove live at {app.foxglove.url}", flush=True)
             status = app.run(options.duration_s, stop)
+            if app.replay is not None and app.replay.error is not None:
+                error_line(PROG, f"--replay {options.replay}: {app.replay.error}")
+                return status
             report = app.report
             if report is not None:
                 for line in report.lines():

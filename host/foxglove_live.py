@@ -5,7 +5,10 @@ A :class:`FoxgloveLive` is one more listener of the board link: what it is hande
 the same topics, schemas and encodings (``/tf``, ``/arm/scene``, ``/events``, ``/telemetry``). The server
 is the ``foxglove-sdk`` package's WebSocket server (Foxglove's ``foxglove.websocket.v1`` protocol), in its
 own SDK context so nothing else in the process logs to it; the Foxglove app connects to
-``ws://127.0.0.1:PORT``. It binds the loopback address only: it has no access control.
+``ws://127.0.0.1:PORT``. Who may connect is decided by :class:`host.foxglove_gate.FoxgloveGate`, which
+holds that port: no ``Origin`` (Foxglove's desktop app) or an origin the user named (``--foxglove-origin``),
+other origins refused and counted; the SDK's server itself listens on another loopback port, TLS only,
+under this run's own certificate, which only the gate trusts.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import foxglove
 from foxglove.messages import LogLevel
 
 from host.errors import HostError
+from host.foxglove_gate import FoxgloveGate, self_signed_tls
 from host.link.source import LinkState
 from protocol.messages import Message, SimPoses, Telemetry
 
@@ -33,9 +37,12 @@ class FoxgloveLive:
     Args:
         port: TCP port on 127.0.0.1 (0 = any free port; :attr:`port` says which).
         metadata: the run's description; its ``design`` (JSON) sizes the arm's drawing.
+        origins: browser origins let through besides none (``--foxglove-origin``).
     """
 
-    def __init__(self, port: int, metadata: Mapping[str, str] | None = None) -> None:
+    def __init__(
+        self, port: int, metadata: Mapping[str, str] | None = None, origins: tuple[str, ...] = ()
+    ) -> None:
         from hil import foxglove_log
 
         self._fl = foxglove_log
@@ -52,7 +59,11 @@ class FoxgloveLive:
         self._lock = threading.Lock()
         self._server: Any = None
         self._requested_port = port
+        self._origins = origins
         self.port = 0
+        self.backend_port = 0
+        """The SDK server's own port (TLS, this run's certificate): only the gate connects there."""
+        self.gate: FoxgloveGate | None = None
         self.messages_logged = 0
 
     def start(self) -> int:
@@ -61,13 +72,21 @@ class FoxgloveLive:
         Raises:
             HostError: the port cannot be bound (one line).
         """
+        cert, key, der = self_signed_tls()
         try:
             self._server = foxglove.start_server(
-                name="spirob-host", host=LIVE_HOST, port=self._requested_port, context=self._context
+                name="spirob-host", host=LIVE_HOST, port=0, context=self._context, tls_cert=cert, tls_key=key
             )
         except Exception as exc:  # the SDK raises its own error types for a bind failure
-            raise HostError(f"--foxglove: cannot serve on {LIVE_HOST}:{self._requested_port}: {exc}") from exc
-        self.port = int(self._server.port)
+            raise HostError(f"--foxglove: cannot start the Foxglove server on {LIVE_HOST}: {exc}") from exc
+        self.backend_port = int(self._server.port)
+        try:
+            self.gate = FoxgloveGate(LIVE_HOST, self._requested_port, self.backend_port, der, self._origins)
+        except HostError:
+            self._server.stop()
+            self._server = None
+            raise
+        self.port = self.gate.port
         return self.port
 
     @property
@@ -104,6 +123,8 @@ class FoxgloveLive:
 
     def close(self) -> None:
         """Stop the server and close the channels (safe twice)."""
+        if self.gate is not None:
+            self.gate.close()
         with self._lock:
             server, self._server = self._server, None
             if server is not None:

@@ -25,7 +25,8 @@ Default mapping (an Xbox-layout pad on the Linux ``xpad`` driver: axes 0/1 left 
 
 Failsafe: when the device goes away (unplugged: read error or end of file) the right lever goes DOWN
 (SAFE: zero current) and the sticks to the centre at once; the device is reopened every second, and a pad
-that comes back starts from right lever DOWN, like a radio switched on.
+that comes back starts from right lever DOWN, like a radio switched on. It is reported back when its
+events flow again, not when the device merely opens (a FIFO with no writer opens and reads end of file).
 """
 
 from __future__ import annotations
@@ -360,6 +361,9 @@ class Gamepad:
         self.reopen_period_s = reopen_period_s
         self.losses_n = 0
         """Times the device went away."""
+        self.backs_n = 0
+        """Times it came back: events flowed again after a loss (a reopen alone is not enough)."""
+        self._reopened = False
         self._fd: int | None = None
         self._worker = Worker("gamepad", self._run)
         self._stop = self._worker.stop_event
@@ -395,9 +399,11 @@ class Gamepad:
                     return
                 try:
                     self._fd = os.open(self.path, os.O_RDONLY | os.O_NONBLOCK)
-                    _log.warning("gamepad %s is back (right lever DOWN: step it up to drive)", self.path)
                 except OSError:
                     continue
+                # Opened is not back: a FIFO with no writer opens fine and reads end of file at once.
+                # The pad is back when its events flow (a joystick device sends its state on open).
+                self._reopened = True
                 continue
             try:
                 ready, _, _ = select.select([fd], [], [], 0.1)
@@ -411,11 +417,20 @@ class Gamepad:
                 self._lost("end of file")
                 continue
             if data:
-                for event in self.reader.feed(data):
+                events = self.reader.feed(data)
+                for event in events:
                     self.state.apply(event)
+                if events and self._reopened:
+                    self._reopened = False
+                    self.backs_n += 1
+                    _log.warning("gamepad %s is back (right lever DOWN: step it up to drive)", self.path)
             self._push()
 
     def _lost(self, reason: str) -> None:
+        if self._reopened:  # reopened but silent: still the same loss, said once
+            self._close()
+            _log.debug("gamepad %s reopened without events (%s)", self.path, reason)
+            return
         self.losses_n += 1
         self._close()
         self.state.lost()

@@ -189,6 +189,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PORT",
         help=f"serve the run live to Foxglove on ws://127.0.0.1:PORT (default {FOXGLOVE_PORT}; 0 = any)",
     )
+    run.add_argument(
+        "--foxglove-origin",
+        action="append",
+        default=[],
+        metavar="ORIGIN",
+        help="a browser origin --foxglove lets in besides Foxglove's desktop app (no Origin), e.g. "
+        "https://app.foxglove.dev for Foxglove's web app (repeatable); others are refused",
+    )
     mav = p.add_argument_group("drone link (MAVLink)")
     mav.add_argument(
         "--mavlink", metavar="URL", help="pymavlink connection string, e.g. udpout:127.0.0.1:14550"
@@ -220,6 +228,24 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _foxglove_origins(ns: argparse.Namespace) -> tuple[str, ...]:
+    """``--foxglove-origin`` values checked and normalised (lower-case, no trailing slash).
+
+    Raises:
+        HostError: without ``--foxglove``, or a value that is not ``scheme://host[:port]``.
+    """
+    if not ns.foxglove_origin:
+        return ()
+    if ns.foxglove is None:
+        raise HostError("--foxglove-origin needs --foxglove")
+    from host.http_headers import normalise_origin
+
+    try:
+        return tuple(dict.fromkeys(normalise_origin(o) for o in ns.foxglove_origin))
+    except ValueError as exc:
+        raise HostError(f"--foxglove-origin: {exc}") from None
+
+
 @dataclass(frozen=True, slots=True)
 class HostOptions:
     """Validated options of one `spirob-host` run (what :func:`build_parser` produced, checked).
@@ -237,6 +263,7 @@ class HostOptions:
         replay: MCAP file to replay instead of a board.
         replay_speed: replay speed factor.
         foxglove_port: serve the Foxglove channels live on 127.0.0.1 at this port (None = not).
+        foxglove_origins: browser origins the live server lets in besides none (``--foxglove-origin``).
         virtual_rc: right lever the command line drives the virtual radio to (None = it does not).
         mavlink: MAVLink connection string.
         mav_sysid: drone system id.
@@ -265,6 +292,7 @@ class HostOptions:
     replay: Path | None = None
     replay_speed: float = 1.0
     foxglove_port: int | None = None
+    foxglove_origins: tuple[str, ...] = ()
     virtual_rc: Lever | None = None
     mavlink: str | None = None
     mav_sysid: int = 1
@@ -303,10 +331,15 @@ class HostOptions:
                 raise HostError("--preset is a model of the virtual board or the shadow plant: no --replay")
             if not ns.replay.is_file():
                 raise HostError(f"no such recording: {ns.replay}")
-            from hil.recording import is_mcap
+            from hil.mcap_bounded import RecordingError
+            from hil.recording import is_mcap, read_metadata
 
             if not is_mcap(ns.replay):
                 raise HostError(f"{ns.replay} is not an MCAP recording")
+            try:  # the top-level records through the bounded reader (a chunk is checked as it is played)
+                read_metadata(ns.replay)
+            except RecordingError as exc:
+                raise HostError(f"--replay {ns.replay}: {exc}") from exc
         if ns.port is not None:
             check_board_url(ns.port)
         _check_excite_and_preset(ns)
@@ -346,6 +379,7 @@ class HostOptions:
             replay=ns.replay,
             replay_speed=1.0 if ns.replay_speed is None else ns.replay_speed,
             foxglove_port=ns.foxglove,
+            foxglove_origins=_foxglove_origins(ns),
             virtual_rc=VIRTUAL_RC_LEVERS[ns.virtual_rc] if ns.virtual_rc else None,
             mavlink=ns.mavlink,
             mav_sysid=ns.mav_sysid,

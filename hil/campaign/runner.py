@@ -16,6 +16,7 @@ import math
 import os
 import signal
 import socket
+import stat
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -160,8 +161,24 @@ class ResultsFile:
             if exists:
                 self._read_and_repair()
             self._out: IO[bytes] = path.open("ab")
+            self._probe()
         except OSError as exc:
             raise CampaignError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+    def _probe(self) -> None:
+        """Write one byte through to the device before the first run (``-o /dev/full`` opens fine and
+        fails only on its first write, which used to come after the first trial), then take it back."""
+        fd = self._out.fileno()
+        size = os.fstat(fd).st_size
+        try:
+            self._out.write(b"\n")  # a blank line, which a reader skips, should the truncate not apply
+            self._out.flush()
+            if stat.S_ISREG(os.fstat(fd).st_mode):
+                os.fsync(fd)
+                os.ftruncate(fd, size)
+        except OSError:
+            self._out.close()
+            raise
 
     def _read_and_repair(self) -> None:
         data = self.path.read_bytes()

@@ -95,6 +95,33 @@ class CampaignError(HilError, ValueError):
     """A campaign file or override that cannot be run (reported as one line, naming the key)."""
 
 
+MAX_CAMPAIGN_BYTES = 1 << 20
+"""The largest campaign file read (1 MiB; the examples are under 2 KB)."""
+MAX_CAMPAIGN_DEPTH = 16
+"""The deepest nesting of tables and arrays a campaign may have (a campaign uses 3: file, section, list).
+Deeper input is refused in one line, also where the parsers themselves would recurse past Python's limit."""
+
+
+def _depth(value: Any) -> int:
+    """Nesting depth of parsed tables and arrays (a scalar: 0), without recursion."""
+    deepest = 0
+    stack: list[tuple[Any, int]] = [(value, 0)]
+    while stack:
+        item, level = stack.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
+        if children is None:
+            continue
+        deepest = max(deepest, level + 1)
+        if deepest > MAX_CAMPAIGN_DEPTH:
+            break
+        stack.extend((child, level + 1) for child in children)
+    return deepest
+
+
+def _too_deep(where: str) -> CampaignError:
+    return CampaignError(f"{where}nested deeper than {MAX_CAMPAIGN_DEPTH} levels of tables and arrays")
+
+
 @dataclass(frozen=True)
 class Run:
     """One run of a campaign.
@@ -200,13 +227,20 @@ def load_campaign(path: Path | None, overrides: list[str]) -> Campaign:
     raw: dict[str, Any] = {}
     if path is not None:
         try:
-            text = path.read_text(encoding="utf-8")
+            with path.open("rb") as f:
+                data = f.read(MAX_CAMPAIGN_BYTES + 1)
+            if len(data) > MAX_CAMPAIGN_BYTES:
+                limit = MAX_CAMPAIGN_BYTES >> 20
+                raise CampaignError(f"{path}: larger than the {limit} MiB a campaign file may be")
+            text = data.decode("utf-8")
         except (OSError, UnicodeDecodeError) as exc:
             reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
             raise CampaignError(f"cannot read {path}: {reason}") from None
         raw = _parse_text(path, text)
     for spec in overrides:
         apply_override(raw, spec)
+    if _depth(raw) > MAX_CAMPAIGN_DEPTH:
+        raise _too_deep(f"{path}: " if path is not None else "")
     try:
         return parse_campaign(raw)
     except CampaignError as exc:
@@ -215,16 +249,22 @@ def load_campaign(path: Path | None, overrides: list[str]) -> Campaign:
 
 
 def _parse_text(path: Path, text: str) -> dict[str, Any]:
+    # Both parsers recurse once per level: deep nesting ends in RecursionError, refused like any depth
+    # over the limit (checked on what they return).
     if path.suffix.lower() == ".json":
         try:
             data = json.loads(text)
         except json.JSONDecodeError as exc:
             raise CampaignError(f"{path}: not valid JSON: {exc.msg} (line {exc.lineno})") from None
+        except RecursionError:
+            raise _too_deep(f"{path}: ") from None
     else:
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise CampaignError(f"{path}: not valid TOML: {exc}") from None
+        except RecursionError:
+            raise _too_deep(f"{path}: ") from None
     if not isinstance(data, dict):
         raise CampaignError(f"{path}: a campaign is a table of keys, got {type(data).__name__}")
     return data
@@ -245,6 +285,8 @@ def apply_override(raw: dict[str, Any], spec: str) -> None:
         value = tomllib.loads(f"v = {text.strip()}")["v"]
     except tomllib.TOMLDecodeError:
         value = text.strip()  # a bare word: a scenario or preset name
+    except RecursionError:
+        raise _too_deep(f"--set {key}: ") from None
     parts = key.split(".")
     if len(parts) == 1:
         raw[key] = value

@@ -524,6 +524,7 @@ def _configure_recover(p: argparse.ArgumentParser) -> None:
 
 
 def _run_recover(args: argparse.Namespace) -> int:
+    from hil.mcap_bounded import RecordingError
     from hil.recording import is_mcap, is_truncated, recover
 
     path = Path(args.file)
@@ -531,13 +532,19 @@ def _run_recover(args: argparse.Namespace) -> int:
         raise UsageError(f"no such recording: {path}", f"{PROG} recover")
     if not is_mcap(path):
         raise UsageError(f"{path} is not an MCAP file", f"{PROG} recover")
-    if not is_truncated(path):
+    try:
+        truncated = is_truncated(path)
+    except RecordingError as exc:
+        raise UsageError(f"{path}: {exc}", f"{PROG} recover") from exc
+    if not truncated:
         raise UsageError(f"{path} is complete: nothing to recover", f"{PROG} recover")
     out = Path(args.output) if args.output else path.with_name(path.name + ".recovered.mcap")
     if out.resolve() == path.resolve():
         raise UsageError("--output must differ from FILE", f"{PROG} recover")
     try:
         got = recover(path, out)
+    except RecordingError as exc:
+        raise UsageError(f"{path}: {exc} (nothing recovered)", f"{PROG} recover") from exc
     except OSError as exc:
         raise UsageError(f"cannot write {out}: {exc.strerror or exc}", f"{PROG} recover") from exc
     until = "" if got.last_time_us is None else f" up to {got.last_time_us / 1e6:.3f} s"

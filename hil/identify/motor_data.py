@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from hil import recording
 from hil.errors import HilError
 from hil.identify.excitation import Profile
+from hil.mcap_bounded import RecordingError
 from hil.sim.spiral import SpiralDesign
 from protocol.c610 import ANGLE_COUNTS, COMMAND_ID_LOW, FEEDBACK_ID_BASE, RAW_PER_AMP, MotorFeedback
 from protocol.errors import DecodeError
@@ -133,10 +134,16 @@ def load_motor_data(path: str | Path) -> MotorData:
     """Read one recording.
 
     Raises:
-        IdentifyDataError: not a recording, or it holds neither the board's CAN frames nor its telemetry
-            (one line naming the file).
+        IdentifyDataError: not a recording, or it holds neither the board's CAN frames nor its telemetry,
+            or the bounded reader refuses it (one line naming the file).
     """
-    p = Path(path)
+    try:
+        return _load(Path(path))
+    except RecordingError as exc:
+        raise IdentifyDataError(f"{path}: {exc}") from exc
+
+
+def _load(p: Path) -> MotorData:
     if not p.is_file():
         raise IdentifyDataError(f"{p}: no such file")
     if not recording.is_mcap(p):

@@ -2,8 +2,10 @@
 
 ``PARAM_REQUEST_LIST`` / ``PARAM_REQUEST_READ`` are answered from the mirror (the board is asked
 when it is not complete); a ``PARAM_SET`` goes to the board and is answered with the value the board
-confirms, or with the value in force when it does not confirm in time. A list requested before the
-board has answered is sent once the mirror is complete (the board is asked again until it answers).
+confirms, or with the value in force when it does not confirm in time. A ``PARAM_SET`` that comes before
+the mirror is complete goes to the board when the firmware's parameter table has its name. A list
+requested before the board has answered is sent once the mirror is complete (the board is asked again
+until it answers).
 
 Values are typed by the kind column of the firmware's parameter table (``controller.params``):
 booleans ``UINT8``, integers ``INT32``, the rest ``REAL32``; integers are encoded bytewise or by C cast as
@@ -150,6 +152,12 @@ class ParamMirror:
             now: Link-clock time in µs.
         """
         name = self._by_upper.get(req.param_id.upper())
+        if name is None and not self.complete and req.param_id.upper() in WIRE_ROWS:
+            # Before the board has listed its parameters (a set sent before any PARAM_REQUEST_LIST, or
+            # while the board is slow to answer), a name of the firmware's table goes to the board all
+            # the same: its ParamValue answers the drone and starts the mirror.
+            name = req.param_id.upper()
+            self.ask_board_for_all(now)
         if name is None:
             # MAVLink has no negative answer to PARAM_SET (the sender times out); say why.
             self._count_event("unexpected")

@@ -7,7 +7,7 @@ import dataclasses
 import struct
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any, Final
 
@@ -222,13 +222,21 @@ class LinkRecording:
             self._rec.close()
 
 
-def replay_messages(path: Path) -> list[tuple[int, Message]]:
-    """Decode every board -> host message of a recording with its time (µs), in order."""
+def replay_messages(path: Path) -> Iterator[tuple[int, Message]]:
+    """Every board -> host message of a recording with its time (µs), in order, decoded as it is read:
+    one chunk of the file in memory at a time, whatever its size (``hil.recording.read_records``).
+
+    Raises:
+        HostError: the file is refused by the bounded reader (a record over its cap, a chunk bomb, a
+            malformed record): one line naming the record (the iteration stops there).
+    """
     from hil import recording
+    from hil.mcap_bounded import RecordingError
 
     stream = MessageStream()
-    return [
-        (rec.time_us, msg)
-        for rec in recording.read_records(path, {recording.LINK_TX})
-        for _, msg in stream.feed(rec.data)
-    ]
+    try:
+        for rec in recording.read_records(path, {recording.LINK_TX}):
+            for _, msg in stream.feed(rec.data):
+                yield rec.time_us, msg
+    except RecordingError as exc:
+        raise HostError(str(exc)) from exc

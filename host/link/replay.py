@@ -7,6 +7,7 @@ import threading
 import time
 from pathlib import Path
 
+from host.errors import HostError
 from host.link.recording import replay_messages
 from host.link.source import BoardSource, LinkState
 from host.worker import Worker
@@ -19,8 +20,9 @@ _log = logging.getLogger(__name__)
 class ReplaySource(BoardSource):
     """Feeds the board -> host messages of a recording (``/board/link_tx``) to its listeners.
 
-    The link reads as connected while it plays; :attr:`done` is set when the file has been played (or
-    could not be read: one error line). Ours and ``spirob-hil``'s recordings, format 1 too.
+    The link reads as connected while it plays; :attr:`done` is set when the file has been played, or
+    could not be read (:attr:`error` says why: a record over the bounded reader's cap, a chunk bomb, a
+    malformed record; what came before it was played). Ours and ``spirob-hil``'s recordings, format 1 too.
 
     Args:
         path: the MCAP recording.
@@ -40,6 +42,8 @@ class ReplaySource(BoardSource):
         """Set once the whole file has been fed (or it could not be read)."""
         self.messages_n = 0
         """Messages fed so far."""
+        self.error: str | None = None
+        """Why the file could not be (wholly) read: set with :attr:`done`; the run ends on it."""
         self._worker = Worker("replay", self._run)
         self._stop = self._worker.stop_event
 
@@ -57,23 +61,29 @@ class ReplaySource(BoardSource):
             self.set_state(LinkState.STOPPED)
 
     def _run(self) -> None:
+        # Messages are decoded as they are played (a generator over the file), never all at once: a file
+        # of 300,000 records starts at once, holds one chunk in memory and stops when told to.
+        t0_rec: int | None = None
+        t0 = time.monotonic()
+        stopped = False
         try:
-            messages = replay_messages(self.path)
-        except Exception as exc:
-            _log.error("cannot read %s: %s", self.path, exc)
-            self.done.set()
-            return
-        if messages:
-            t0_rec = messages[0][0]
-            t0 = time.monotonic()
-            for t_us, msg in messages:
+            for t_us, msg in replay_messages(self.path):
+                if t0_rec is None:
+                    t0_rec, t0 = t_us, time.monotonic()
                 due = t0 + (t_us - t0_rec) / 1e6 / self.speed
                 delay = due - time.monotonic()
-                if delay > 0 and self._stop.wait(delay):
+                if self._stop.wait(delay) if delay > 0 else self._stop.is_set():
+                    stopped = True
                     break
                 self.fan_out(msg)
                 self.messages_n += 1
-            _log.info("replay finished: %d messages", self.messages_n)
-        else:
+        except Exception as exc:  # any unreadable file: the run ends on it with one line (HostApp.run)
+            self.error = str(exc) if isinstance(exc, HostError) else f"{type(exc).__name__}: {exc}"
+            _log.debug("replay of %s stopped", self.path, exc_info=True)
+        if self.error is not None:
+            _log.debug("replay of %s refused after %d messages", self.path, self.messages_n)
+        elif t0_rec is None:
             _log.warning("%s holds no board-link messages (/board/link_tx): nothing to replay", self.path)
+        else:
+            _log.info("replay %s: %d messages", "stopped" if stopped else "finished", self.messages_n)
         self.done.set()

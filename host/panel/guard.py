@@ -17,6 +17,11 @@ while the server starts, so every request passes :meth:`PanelGuard.check` first:
   query from its websocket URL, and the cookie carries it there, as Jupyter does. Compared in
   constant time.
 
+- **Well-formed headers**: a request with more than one ``Host`` or ``Origin`` header, or one that is not
+  a host name (or IP literal) with an optional port, or an ``Origin`` that is not ``null`` or
+  ``scheme://host[:port]``, is answered 400 before anything reads them (a duplicate used to raise inside
+  the check: HTTP 500 and a traceback per request).
+
 Refusals are counted (:class:`GuardStats`) and logged at info level, one line each.
 
 A message on an open websocket that viser cannot decode (not msgpack, a text frame, an unknown type,
@@ -40,6 +45,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from host.errors import HostError
+from host.http_headers import header_problem
 from host.options import is_loopback
 
 __all__ = ["GuardStats", "PanelGuard", "request_token", "start_guarded_server"]
@@ -62,11 +68,13 @@ class GuardStats:
         token_refused_n: requests refused for a missing or wrong token.
         malformed_messages_n: panel messages viser could not decode or handle (each one closes the
             connection that sent it, or is dropped).
+        bad_headers_n: requests answered 400 for a duplicate or malformed ``Host`` or ``Origin``.
     """
 
     origin_refused_n: int = 0
     token_refused_n: int = 0
     malformed_messages_n: int = 0
+    bad_headers_n: int = 0
 
 
 def _host_name(host_header: str) -> str | None:
@@ -192,13 +200,19 @@ class PanelGuard:
         return True
 
     def check(self, connection: Any, request: Any) -> Any:
-        """Refuse (an HTTP 403 response) or let through (None) one request.
+        """Refuse (an HTTP 400 or 403 response) or let through (None) one request.
 
         Args:
             connection: the ``websockets`` ``ServerConnection``.
             request: its ``Request`` (path and headers).
         """
         headers = request.headers
+        problem = header_problem(headers)
+        if problem is not None:
+            with self._lock:
+                self.stats.bad_headers_n += 1
+            _log.info("panel request refused (400): %s", problem)
+            return connection.respond(http.HTTPStatus.BAD_REQUEST, f"bad request: {problem}\n")
         if str(headers.get("Upgrade", "")).lower() == "websocket":
             if not self._origin_ok(headers):
                 with self._lock:

@@ -305,6 +305,35 @@ def test_every_safety_parameter_is_refused_while_armed_and_taken_in_safe(name: s
     assert rig.fw.config.get_param(name) == pytest.approx(value)
 
 
+@pytest.mark.parametrize("name", sorted(WIRE_ROWS))
+def test_an_armed_param_set_follows_its_row(name: str) -> None:
+    """Every row of the table, armed in DIRECT: refused (value kept) exactly when the row says SAFE-only,
+    taken otherwise. Which rows are SAFE-only is pinned by ``test_the_safety_parameters_are_the_documented_
+    seven`` (tests/controller/test_params.py): the table is both the rule and this test's expectation, so a
+    row whose flag is dropped is caught there, not here."""
+    rig = Rig(link=True)
+    _direct(rig)
+    rig.drain()
+    before = rig.fw.config.get_param(name)
+    value = _another_valid_value(name)
+    for other in (value, 0.5, 1.0, 0.1, 10.0):  # a default of 0 moved by 10 % is still 0
+        try:
+            FirmwareConfig().with_param(name, other, safe=True)
+        except ConfigError:
+            continue
+        if other != before:
+            value = other
+            break
+    assert value != before, name
+    rig.send(ParamSet(name, value))
+    _live(rig, 20)
+    assert rig.fw.mode == Mode.DIRECT
+    if WIRE_ROWS[name].safety:
+        assert rig.fw.config.get_param(name) == before
+    else:
+        assert rig.fw.config.get_param(name) == pytest.approx(value)
+
+
 def test_non_safety_params_still_change_while_armed() -> None:
     rig = Rig(link=True)
     _direct(rig)

@@ -96,6 +96,9 @@ def test_run_time_parameters_fit_the_wire_in_their_index_order() -> None:
 
 
 def test_the_safety_parameters_are_the_documented_seven() -> None:
+    """The specification, by hand on purpose: the armed-set tests (tests/controller/test_commands.py) take
+    the SAFE-only rows from the table, so dropping a row's flag (HOST_TIMEOUT_US, TORQUE_K_NM_A,
+    PAYIN_MAX_M_S, any of the seven) would pass them; it fails here."""
     assert {
         "CURRENT_LIMIT_A",
         "TENSION_MAX_N",

@@ -143,3 +143,106 @@ def test_a_replay_is_served_live_too(peer: LinkPeer, tmp_path: Path) -> None:
     obj = json.loads(payload)
     jsonschema.validate(obj, json.loads(tel["schema"]))  # the schema the server advertised
     assert obj["time_us"] > 0
+
+
+# ---------------------------------------------------------------------- who may connect (issue 26)
+
+WEB_APP = "https://app.foxglove.dev"
+
+
+def _subscribe_telemetry(ws: ClientConnection, deadline: float) -> dict[str, Any]:
+    channels = {c["topic"]: c for c in _json_until(ws, "advertise", deadline)["channels"]}
+    tel = channels[foxglove_log.TELEMETRY]
+    ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 5, "channelId": tel["id"]}]}))
+    _, payload = _binary_until(ws, 5, deadline)
+    obj: dict[str, Any] = json.loads(payload)
+    return obj
+
+
+def test_other_origins_are_refused_and_counted_named_ones_and_the_desktop_app_read(peer: LinkPeer) -> None:
+    """A real cross-origin websocket client on 127.0.0.1: 403 and nothing served (it got 453 messages in
+    3 s before); no Origin (Foxglove's desktop app) and a named origin subscribe and read telemetry."""
+    from websockets.exceptions import InvalidStatus
+
+    opts = HostOptions(port=peer.url, ui=False, foxglove_port=0, foxglove_origins=(WEB_APP,))
+    with HostApp(opts) as app:
+        app.start()
+        assert app.foxglove is not None and app.foxglove.gate is not None
+        url, stats = app.foxglove.url, app.foxglove.gate.stats
+        for origin in (
+            "http://evil.example",
+            "null",
+            f"http://127.0.0.1:{app.foxglove.port}",
+            WEB_APP + ".evil",
+        ):
+            with pytest.raises(InvalidStatus) as info:
+                connect(url, subprotocols=[SUBPROTOCOL], origin=origin, open_timeout=10)  # type: ignore[arg-type]
+            assert info.value.response.status_code == 403, origin
+        assert stats.origin_refused_n == 4 and stats.accepted_n == 0
+        deadline = time.monotonic() + 20.0
+        for origin in (None, WEB_APP):  # the desktop app sends none
+            with connect(url, subprotocols=[SUBPROTOCOL], origin=origin, open_timeout=10) as ws:  # type: ignore[arg-type]
+                assert ws.subprotocol == SUBPROTOCOL
+                assert _subscribe_telemetry(ws, deadline)["time_us"] > 0
+        assert stats.accepted_n == 2 and stats.origin_refused_n == 4
+
+
+def test_the_sdk_server_behind_the_gate_takes_no_browser(peer: LinkPeer) -> None:
+    """The SDK's own port speaks TLS under this run's certificate: a plain ws:// fails, and a wss:// that
+    checks certificates (as every browser does) fails; only the gate, which pins it, gets through."""
+    import ssl
+
+    from websockets.exceptions import InvalidMessage
+
+    with HostApp(HostOptions(port=peer.url, ui=False, foxglove_port=0)) as app:
+        app.start()
+        assert app.foxglove is not None and app.foxglove.backend_port not in (0, app.foxglove.port)
+        backend = app.foxglove.backend_port
+        with pytest.raises((InvalidMessage, OSError, EOFError)):
+            connect(f"ws://127.0.0.1:{backend}", subprotocols=[SUBPROTOCOL], open_timeout=5)  # type: ignore[list-item]
+        with pytest.raises(ssl.SSLCertVerificationError):
+            connect(f"wss://127.0.0.1:{backend}", subprotocols=[SUBPROTOCOL], open_timeout=5)  # type: ignore[list-item]
+
+
+def test_duplicate_or_malformed_origin_gets_400(peer: LinkPeer) -> None:
+    with HostApp(HostOptions(port=peer.url, ui=False, foxglove_port=0)) as app:
+        app.start()
+        assert app.foxglove is not None and app.foxglove.gate is not None
+        port = app.foxglove.port
+        for headers in (
+            ["Origin: http://evil.example", "Origin: https://app.foxglove.dev"],
+            ["Origin: http://evil.example/path"],
+            ["Host: a b"],
+        ):
+            host = ["Host: 127.0.0.1"] if "Host" not in headers[0] else []
+            lines = ["GET / HTTP/1.1", *host, *headers, "Upgrade: websocket", "Connection: Upgrade"]
+            with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+                s.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+                assert s.recv(1024).startswith(b"HTTP/1.1 400"), headers
+        assert app.foxglove.gate.stats.bad_headers_n == 3 and app.foxglove.gate.stats.accepted_n == 0
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--foxglove-origin", WEB_APP], "--foxglove-origin needs --foxglove"),
+        (["--foxglove", "0", "--foxglove-origin", "app.foxglove.dev"], "--foxglove-origin: not an origin"),
+        (["--foxglove", "0", "--foxglove-origin", f"{WEB_APP}/studio"], "--foxglove-origin: not an origin"),
+    ],
+)
+def test_bad_origin_flags_are_one_line(
+    peer: LinkPeer, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    assert main(["--port", peer.url, "--headless", "--duration", "1", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0] and "Traceback" not in err[0], err
+
+
+def test_origin_flags_are_normalised() -> None:
+    from host.options import build_parser
+
+    ns = build_parser().parse_args(["--foxglove", "--foxglove-origin", "HTTPS://App.Foxglove.dev/"])
+    ns2 = ["--foxglove-origin", "https://app.foxglove.dev", "--foxglove-origin", "http://localhost:8080"]
+    assert HostOptions.from_args(ns).foxglove_origins == (WEB_APP,)
+    both = HostOptions.from_args(build_parser().parse_args(["--foxglove", *ns2]))
+    assert both.foxglove_origins == (WEB_APP, "http://localhost:8080")

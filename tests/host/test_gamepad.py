@@ -258,3 +258,36 @@ def test_a_tab_that_asks_gets_control_and_start_asks_for_it_back(tmp_path: Path)
     finally:
         pad.stop()
         os.close(writer)
+
+
+def test_a_fifo_reopened_without_a_writer_is_not_back_until_events_flow(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    from host.gamepad import Gamepad
+    from host.panel.arbiter import ControlArbiter
+    from host.panel.notices import Notices
+
+    js = tmp_path / "js0"
+    os.mkfifo(js)
+    writer = os.open(js, os.O_RDWR | os.O_NONBLOCK)
+    pad = Gamepad(str(js), ControlArbiter(Notices()), CLI_CLIENT, reopen_period_s=0.05)
+    try:
+        with caplog.at_level("DEBUG", logger="host.gamepad"):
+            pad.start()
+            os.write(writer, stream(opening_state()))
+            os.close(writer)  # the writer goes: lost once
+            writer = -1
+            assert wait_for(lambda: pad.losses_n == 1)
+            time.sleep(0.6)  # reopened (a FIFO opens without a writer), and nothing flows
+            back = [r for r in caplog.records if "is back" in r.getMessage()]
+            lost = [r for r in caplog.records if "lost" in r.getMessage() and r.levelname == "WARNING"]
+            assert not back and pad.backs_n == 0, [r.getMessage() for r in back]
+            assert len(lost) == 1 and pad.losses_n == 1
+            writer = os.open(js, os.O_RDWR | os.O_NONBLOCK)  # a writer again, events flow
+            os.write(writer, stream(opening_state()))
+            assert wait_for(lambda: pad.backs_n == 1)
+            assert len([r for r in caplog.records if "is back" in r.getMessage()]) == 1
+    finally:
+        pad.stop()
+        if writer >= 0:
+            os.close(writer)

@@ -187,7 +187,8 @@ class Rig:
 def rig_factory(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     """The body of a ``make_rig`` fixture: ``make(**DroneLinkConfig fields)`` builds a started rig.
 
-    ``board_params`` sets parameter values (wire names) on the fake board before the link first asks.
+    ``board_params`` sets parameter values (wire names) on the fake board before the link first asks;
+    ``board_state`` sets its other attributes then (``answer_param_list=False``: a board slow to list).
     """
     made: list[Rig] = []
 
@@ -196,12 +197,14 @@ def rig_factory(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
         start_board: bool = True,
         peer_key: bytes | None = None,
         board_params: dict[str, float] | None = None,
+        board_state: dict[str, object] | None = None,
         **cfg: Any,
     ) -> Rig:
         port = free_udp_port()
         peer = Peer(f"udpin:127.0.0.1:{port}", key=peer_key)
         board = FakeBoard()
         board.params.update(board_params or {})
+        board.set(**(board_state or {}))
         cfg.setdefault("tlog_path", tmp_path / f"link{len(made)}.tlog")
         to_board = GripperBoard(board)
         link = DroneLink(DroneLinkConfig(url=f"udpout:127.0.0.1:{port}", **cfg), to_board)

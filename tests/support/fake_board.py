@@ -58,6 +58,7 @@ class FakeBoard:
         outcome: How the next grasp ends: "hold", "fail" or "stall" (never finishes).
         ticks_per_phase: Telemetry ticks spent in REACH, WRAP and RELEASE.
         answer_param_set: False = ignore ``ParamSet`` (a board that never confirms).
+        answer_param_list: False = ignore a ``ParamRequest`` for all (a board slow to list).
         defer_param_set: True = take ``ParamSet`` values but confirm them only on
             :meth:`confirm_param_sets` (a slow board).
         tension_n: Cable tensions shown in telemetry (targets and estimates; the radio sets them).
@@ -77,6 +78,7 @@ class FakeBoard:
     outcome: str = "hold"
     ticks_per_phase: int = 5
     answer_param_set: bool = True
+    answer_param_list: bool = True
     defer_param_set: bool = False
     tension_n: tuple[float, float, float] = (1.5, 2.5, 3.5)
     current_raw: tuple[int, int, int] = (500, 1000, 1500)
@@ -174,7 +176,7 @@ class FakeBoard:
         if isinstance(msg, bm.ParamRequest):
             names = list(self.params)
             if msg.index == bm.PARAM_LIST_ALL:
-                return [self._pv(n) for n in names]
+                return [self._pv(n) for n in names] if self.answer_param_list else []
             if msg.index >= 0:
                 return [self._pv(names[msg.index])] if msg.index < len(names) else []
             return [self._pv(msg.name)] if msg.name in self.params else []

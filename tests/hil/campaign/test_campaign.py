@@ -111,6 +111,13 @@ def test_overrides_change_the_file(tmp_path: Path) -> None:
     assert [r.inputs["scenario.faults"] for r in c.runs()] == [[], ["motor-silence@1"]]
 
 
+_DEEP = "nested deeper than 16 levels"
+
+
+def _nested(n: int) -> str:
+    return "[" * n + "]" * n
+
+
 MALFORMED = [
     ("bad.toml", 'kind = "scenario"\n[scenario\nname = "x"\n', "not valid TOML"),
     ("bad.json", '{"kind": "scenario",', "not valid JSON"),
@@ -151,6 +158,15 @@ MALFORMED = [
         'kind = "scenario"\n[object]\ndiameter_m = 0.02\n[scenario]\nname = "rc-loss"\n',
         "object.diameter_m: not a key of a scenario campaign",
     ),
+    # limits: deep nesting used to end in a RecursionError traceback (exit 1)
+    ("deep.json", '{"kind": "scenario", "seeds": ' + _nested(100_000) + "}", _DEEP),
+    ("deep.toml", 'kind = "scenario"\nseeds = ' + _nested(100_000) + "\n", _DEEP),
+    ("deep17.json", '{"kind": "scenario", "seeds": ' + _nested(16) + "}", _DEEP),
+    (
+        "big.toml",
+        'kind = "scenario"\n' + "# padding\n" * 110_000,
+        "larger than the 1 MiB a campaign file may",
+    ),
 ]
 
 
@@ -167,6 +183,41 @@ def test_a_malformed_campaign_is_one_clear_line(
     assert len(lines) == 1, captured.err
     assert lines[0].startswith("spirob-hil") and "error:" in lines[0] and message in lines[0], lines[0]
     assert not out.exists() or out.stat().st_size == 0  # no run started
+
+
+def test_nesting_within_the_limit_reaches_the_checks(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """15 levels under the file's table: parsed, then refused by the campaign's own checks (not its depth)."""
+    path = write(tmp_path, "c.json", '{"kind": "scenario", "seeds": ' + "[" * 15 + "]" * 15 + "}")
+    assert main(["campaign", str(path), "-o", str(tmp_path / "o.jsonl")]) == 2
+    line = capsys.readouterr().err.strip()
+    assert "seeds" in line and "nested deeper" not in line, line
+
+
+def test_an_unwritable_output_fails_before_the_first_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``-o /dev/full`` opens fine and fails on its first write, which came after the first trial."""
+    import hil.cli.campaign as campaign_cli
+
+    def no_runs(*_args: object, **_kwargs: object) -> Iterator[dict[str, Any]]:
+        raise AssertionError("a run started before the output was checked")
+
+    monkeypatch.setattr(campaign_cli, "execute_local", no_runs)
+    path = write(tmp_path, "c.toml", SCENARIO_CAMPAIGN)
+    assert main(["campaign", str(path), "-o", "/dev/full"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "cannot write /dev/full: No space left on device" in lines[0], lines
+
+
+def test_the_write_probe_leaves_the_results_file_as_it_was(tmp_path: Path) -> None:
+    path = tmp_path / "r.jsonl"
+    with ResultsFile(path, resume=False) as f:
+        f.append({"key": "a"})
+    with ResultsFile(path, resume=True) as f:
+        assert list(f.done) == ["a"] and f.unreadable_n == 0
+    assert path.read_text() == '{"key":"a"}\n'
 
 
 @pytest.mark.parametrize(

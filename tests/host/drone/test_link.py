@@ -297,6 +297,24 @@ def test_param_set_answers_with_what_the_board_took(make_rig: Callable[..., Rig]
     assert m.param_value == 20.0
 
 
+def test_param_set_before_any_list_is_answered_by_the_board(make_rig: Callable[..., Rig]) -> None:
+    """A PARAM_SET before the mirror holds anything (no PARAM_REQUEST_LIST yet, a board slow to list)
+    goes to the board, whose confirmation answers; it was answered "unknown"."""
+    rig = make_rig(board_state={"answer_param_list": False})
+    rig.ready()
+    assert rig.link._params.known == 0
+    rig.peer.conn.mav.param_set_send(1, 25, b"pretension_n", 0.75, mav.ParamType.REAL32)
+    m = rig.peer.recv_type("PARAM_VALUE", lambda m: m.param_id == "PRETENSION_N")
+    assert m.param_value == 0.75 and m.param_count == len(PARAMS)
+    assert rig.board.params["PRETENSION_N"] == 0.75
+    assert bm.ParamSet("PRETENSION_N", 0.75) in rig.board.received
+    assert not [m for m in rig.peer.seen if m.get_type() == "STATUSTEXT" and "unknown" in m.text]
+    # a name the firmware's table does not have is still unknown
+    rig.peer.conn.mav.param_set_send(1, 25, b"NO_SUCH_PARAM", 1.0, mav.ParamType.REAL32)
+    rig.peer.statustext("NO_SUCH_PARAM unknown")
+    assert not [m for m in rig.board.received if isinstance(m, bm.ParamSet) and m.name == "NO_SUCH_PARAM"]
+
+
 def test_param_read_right_after_a_set_waits_for_the_board(make_rig: Callable[..., Rig]) -> None:
     """A read of a parameter whose set the board has not confirmed yet gets the confirmed value."""
     rig = make_rig()

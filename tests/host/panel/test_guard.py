@@ -101,3 +101,63 @@ def test_malformed_messages_are_counted_not_traced(app: HostApp, caplog: pytest.
     assert len(warnings) == 1  # the first one says so; the rest are counted
     # The panel still serves well-formed clients.
     assert _open(url, own, []) == "open"
+
+
+def _raw_upgrade(port: int, header_lines: list[str]) -> str:
+    """A websocket upgrade written by hand (a client library will not send two Host headers): the
+    status line of the answer."""
+    import base64
+    import os
+    import socket
+
+    key = base64.b64encode(os.urandom(16)).decode()
+    lines = [
+        f"GET /?token={TOKEN} HTTP/1.1",
+        *header_lines,
+        "Upgrade: websocket",
+        "Connection: Upgrade",
+        f"Sec-WebSocket-Key: {key}",
+        "Sec-WebSocket-Version: 13",
+    ]
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+        s.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+        return s.recv(4096).decode(errors="replace").split("\r\n", 1)[0]
+
+
+_HOST, _ORIGIN = "Host: 127.0.0.1:{port}", "Origin: http://127.0.0.1:{port}"
+
+
+@pytest.mark.parametrize(
+    ("headers", "problem"),
+    [
+        (
+            ["Host: 127.0.0.1:{port}", "Host: 127.0.0.1:{port}", "Origin: http://127.0.0.1:{port}"],
+            "2 Host headers",
+        ),
+        (
+            ["Host: 127.0.0.1:{port}", "Origin: http://127.0.0.1:{port}", "Origin: http://evil.example"],
+            "2 Origin",
+        ),
+        (["Host: 127.0.0.1:{port}/x y", "Origin: http://127.0.0.1:{port}"], "malformed Host header"),
+        (["Host: 127.0.0.1:99999", "Origin: http://127.0.0.1:99999"], "malformed Host header"),
+        (["Host: 127.0.0.1:{port}", "Origin: http://127.0.0.1:{port}/path"], "malformed Origin header"),
+    ],
+)
+def test_duplicate_or_malformed_host_and_origin_get_400_counted_in_one_line(
+    app: HostApp, caplog: pytest.LogCaptureFixture, headers: list[str], problem: str
+) -> None:
+    assert app.server is not None and app.guard is not None
+    port = app.server.get_port()
+    with caplog.at_level(logging.DEBUG):
+        status = _raw_upgrade(port, [h.format(port=port) for h in headers])
+        time.sleep(0.2)  # the server's log line
+    assert status.startswith("HTTP/1.1 400"), status
+    assert app.guard.stats.bad_headers_n == 1
+    assert app.guard.stats.origin_refused_n == 0 and app.guard.stats.token_refused_n == 0
+    assert not [r for r in caplog.records if r.exc_info], "a traceback was logged"
+    ours = [r.getMessage() for r in caplog.records if "refused (400)" in r.getMessage()]
+    assert len(ours) == 1 and problem in ours[0], ours
+    # the same request with one well-formed Host and Origin opens
+    own = f"http://127.0.0.1:{port}"
+    assert _raw_upgrade(port, [f"Host: 127.0.0.1:{port}", f"Origin: {own}"]).startswith("HTTP/1.1 101")
+    assert app.guard.stats.bad_headers_n == 1
