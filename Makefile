@@ -10,7 +10,8 @@ test:
 	.venv/bin/ruff check .
 	.venv/bin/ruff format --check .
 	.venv/bin/mypy
-	.venv/bin/python -m pytest
+	.venv/bin/python -m pytest -n 2 -m "not serial"
+	.venv/bin/python -m pytest -m serial
 
 lint:
 	.venv/bin/ruff check .

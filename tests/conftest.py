@@ -2,6 +2,8 @@
 
 - A run in which no test passed fails (pytest itself only fails on "nothing collected").
 - A test that leaves a thread or a child process running fails.
+- Tests that need the machine to themselves are marked ``serial`` (``make test`` runs the others on two
+  workers first, then these one at a time).
 - Hypothesis has no deadline: tests never assert wall-clock times, and a loaded machine makes one example
   slow without making it wrong.
 - Real-time tests (``@pytest.mark.realtime``) the machine starved are skipped as ``starved:``
@@ -32,6 +34,30 @@ _REALTIME: defaultdict[str, dict[str, int]] = defaultdict(lambda: {"passed": 0, 
 
 _WALL_CLOCK_MARKS = frozenset({"realtime", "mavproxy", "browser"})
 """The tests that can be starved: they wait on wall-clock time, another process or a browser."""
+
+_SERIAL_PATHS = (
+    "tests/host/",
+    "tests/test_examples.py",
+    "tests/test_docs.py",
+    "tests/test_packaging.py",
+    "tests/hil/test_board.py",
+    "tests/hil/test_realtime.py",
+    "tests/controller/test_clock.py",
+    "tests/controller/test_firmware.py",
+)
+"""Files whose tests run real-time boards, link processes, browsers or CLIs in real time without a mark."""
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark ``serial`` every test that must have the machine to itself: a wall-clock mark, a Ray cluster,
+    or a file of :data:`_SERIAL_PATHS`. ``make test`` runs the rest on two workers first (pytest-xdist:
+    simulations in lockstep, parsers, the firmware on a fake clock), then these one at a time."""
+    root = config.rootpath
+    for item in items:
+        rel = item.path.relative_to(root).as_posix() if item.path.is_relative_to(root) else ""
+        wall = not _WALL_CLOCK_MARKS.isdisjoint(item.keywords) or "ray" in item.keywords
+        if wall or rel.startswith(_SERIAL_PATHS):
+            item.add_marker(pytest.mark.serial)
 
 
 @pytest.fixture(autouse=True)
