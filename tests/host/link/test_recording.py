@@ -85,8 +85,11 @@ def test_transforms_reproduce_the_poses_the_board_sent(host_run: tuple[Checked, 
     assert 0 <= len(sent) - len(tfs) <= 1
     for (_, _, msg), poses in zip(tfs, sent[: len(tfs)], strict=True):
         positions, quats = poses_array(msg, units)
-        np.testing.assert_array_equal(positions, np.asarray(poses.positions_m, dtype=np.float64))
-        np.testing.assert_array_equal(quats, np.asarray(poses.quats_wxyz, dtype=np.float64))
+        # Composed down the tree (world -> drone -> arm_base -> unit): the world poses sent.
+        np.testing.assert_allclose(
+            positions, np.asarray(poses.positions_m, dtype=np.float64), rtol=0, atol=1e-9
+        )
+        np.testing.assert_allclose(quats, np.asarray(poses.quats_wxyz, dtype=np.float64), rtol=0, atol=1e-9)
 
 
 def test_link_state_and_board_state_are_events(host_run: tuple[Checked, int, int]) -> None:
