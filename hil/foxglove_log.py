@@ -19,8 +19,9 @@ schemas and encodings:
 The messages are encoded by the ``foxglove-sdk`` package (its ``encode()`` and ``get_schema()``), so the
 schemas are Foxglove's own definitions: a protobuf ``FileDescriptorSet`` for each well-known type.
 Every Foxglove stamp inside a message (``FrameTransform.timestamp``, ``Log.timestamp``) is the message's
-wall-clock log time, because the 3D panel looks transforms up at the playback time; the board's own clock
-is in the telemetry payload (``time_us``) and in the MCAP ``publish_time`` of every message.
+log time (Unix time, except in a lockstep recording: :mod:`hil.recording`), because the 3D panel looks
+transforms up at the playback time; MCAP's ``publish_time`` is the same instant, and the board's own clock
+is in the telemetry payload (``time_us``).
 """
 
 from __future__ import annotations
