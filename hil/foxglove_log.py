@@ -5,8 +5,9 @@ into messages on a fixed set of channels (:data:`CHANNELS`), so an MCAP recordin
 ``spirob-host --record``) and the live server (``spirob-host --foxglove``) carry the same topics,
 schemas and encodings:
 
-- :data:`TF` (``foxglove.FrameTransforms``, protobuf): ``world`` -> ``drone`` and ``world`` ->
-  ``unit_00`` .. (base to tip), the poses exactly as the plant reports them;
+- :data:`TF` (``foxglove.FrameTransforms``, protobuf): a tree, ``world`` -> ``drone`` -> ``arm_base`` ->
+  ``unit_00`` .. (base to tip), each pose relative to its parent (:func:`frame_transforms`), so moving the
+  drone's frame moves the arm with it; composed down the tree they give back the plant's world poses;
 - :data:`SCENE` (``foxglove.SceneUpdate``): one truncated cone per unit locked to its frame, and a flat box
   for the drone, so Foxglove's 3D panel draws the arm with no set-up; sent with the first poses and
   again every :data:`SCENE_PERIOD_US` of board time (a panel opened mid-run, or a seek, finds it);
@@ -18,8 +19,9 @@ schemas and encodings:
 The messages are encoded by the ``foxglove-sdk`` package (its ``encode()`` and ``get_schema()``), so the
 schemas are Foxglove's own definitions: a protobuf ``FileDescriptorSet`` for each well-known type.
 Every Foxglove stamp inside a message (``FrameTransform.timestamp``, ``Log.timestamp``) is the message's
-wall-clock log time, because the 3D panel looks transforms up at the playback time; the board's own clock
-is in the telemetry payload (``time_us``) and in the MCAP ``publish_time`` of every message.
+log time (Unix time, except in a lockstep recording: :mod:`hil.recording`), because the 3D panel looks
+transforms up at the playback time; MCAP's ``publish_time`` is the same instant, and the board's own clock
+is in the telemetry payload (``time_us``).
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from foxglove.messages import (
 from protocol.messages import ArmBlocker, GraspState, Mode, Phase, Telemetry, TelemetryFlags
 
 TF: Final = "/tf"
-"""``foxglove.FrameTransforms``: the drone and every unit in the world frame."""
+"""``foxglove.FrameTransforms``: ``world`` -> ``drone`` -> ``arm_base`` -> every unit, each in its parent."""
 SCENE: Final = "/arm/scene"
 """``foxglove.SceneUpdate``: the arm's shape, each unit locked to its frame."""
 EVENTS: Final = "/events"
@@ -64,6 +66,9 @@ TELEMETRY: Final = "/telemetry"
 
 WORLD_FRAME: Final = "world"
 DRONE_FRAME: Final = "drone"
+ARM_BASE_FRAME: Final = "arm_base"
+"""Where the arm is fixed to the drone: the base unit's frame (``unit_00`` is rigid on the drone), so its
+pose in ``drone`` is constant and ``unit_00`` sits at the identity in it."""
 SCENE_PERIOD_US: Final = 1_000_000
 """The arm's shape is sent again every second of board time."""
 LOG_NAME: Final = "spirob"
@@ -204,20 +209,77 @@ def _quat(wxyz: npt.NDArray[np.float64]) -> Quaternion:
     return Quaternion(x=float(wxyz[1]), y=float(wxyz[2]), z=float(wxyz[3]), w=float(wxyz[0]))
 
 
-def frame_transforms(stamp_ns: int, positions_m: npt.ArrayLike, quats_wxyz: npt.ArrayLike) -> bytes:
-    """``foxglove.FrameTransforms`` of the bodies (drone first, then the units base to tip), encoded."""
+def _quat_mul(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Hamilton products of rows of w, x, y, z quaternions (broadcast)."""
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
+
+
+def _in_parent(
+    parent_p: npt.NDArray[np.float64],
+    parent_q: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    q: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Poses ``(p, q)`` (world) expressed in the frame whose world pose is ``(parent_p, parent_q)``:
+    the parent's inverse applied, ``q_parent* (p - p_parent) q_parent`` and ``q_parent* q``."""
+    norm = float(np.dot(parent_q, parent_q))
+    conj = parent_q * np.array([1.0, -1.0, -1.0, -1.0]) / norm  # the inverse, a unit quaternion or not
+    d = np.zeros((len(p), 4))
+    d[:, 1:] = p - parent_p
+    rel_p = _quat_mul(_quat_mul(conj, d), parent_q)[:, 1:]
+    return rel_p, _quat_mul(conj, q)
+
+
+def tree_poses(
+    positions_m: npt.ArrayLike, quats_wxyz: npt.ArrayLike
+) -> list[tuple[str, str, npt.NDArray[np.float64], npt.NDArray[np.float64]]]:
+    """The frame tree of one set of world poses (drone first, then the units base to tip).
+
+    Returns (parent, child, position in the parent, quaternion w x y z in the parent), parents first:
+    ``world`` -> ``drone`` (its world pose), ``drone`` -> ``arm_base`` (the base unit's pose on the drone,
+    constant: it is rigid there), ``arm_base`` -> ``unit_k`` (each unit in the arm's base frame).
+    """
     pos = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
     quat = np.asarray(quats_wxyz, dtype=np.float64).reshape(-1, 4)
+    if len(pos) != len(quat):
+        raise ValueError(f"{len(pos)} positions but {len(quat)} quaternions")
+    if len(pos) == 0:
+        return []
+    out = [(WORLD_FRAME, DRONE_FRAME, pos[0], quat[0])]
+    if len(pos) == 1:
+        return out
+    base_p, base_q = _in_parent(pos[0], quat[0], pos[1:2], quat[1:2])
+    out.append((DRONE_FRAME, ARM_BASE_FRAME, base_p[0], base_q[0]))
+    unit_p, unit_q = _in_parent(pos[1], quat[1], pos[1:], quat[1:])
+    out.extend(
+        (ARM_BASE_FRAME, unit_frame(i), p, q) for i, (p, q) in enumerate(zip(unit_p, unit_q, strict=True))
+    )
+    return out
+
+
+def frame_transforms(stamp_ns: int, positions_m: npt.ArrayLike, quats_wxyz: npt.ArrayLike) -> bytes:
+    """``foxglove.FrameTransforms`` of the bodies' world poses (drone first, then the units base to tip) as
+    the tree of :func:`tree_poses`, encoded."""
     stamp = _stamp(stamp_ns)
     transforms = [
         FrameTransform(
             timestamp=stamp,
-            parent_frame_id=WORLD_FRAME,
-            child_frame_id=DRONE_FRAME if i == 0 else unit_frame(i - 1),
+            parent_frame_id=parent,
+            child_frame_id=child,
             translation=Vector3(x=float(p[0]), y=float(p[1]), z=float(p[2])),
             rotation=_quat(q),
         )
-        for i, (p, q) in enumerate(zip(pos, quat, strict=True))
+        for parent, child, p, q in tree_poses(positions_m, quats_wxyz)
     ]
     return FrameTransforms(transforms=transforms).encode()
 

@@ -19,14 +19,16 @@ never an error. Such a file has no summary, which the mcap library's normal (see
 :func:`recover` copies what it holds into a complete file that reader opens, and
 :func:`is_truncated` tells the two apart.
 
-Timestamps: ``publish_time`` is the board's clock (``time_us * 1000``) and ``log_time`` is
-``publish_time + clock_offset_ns`` (metadata key of that name). A recording of something that ran in real
-time (a run against a port, metadata ``kind`` = :data:`KIND_PORT`, and ``spirob-host`` recordings) is on
-the host's monotonic clock with the offset that makes ``log_time`` Unix time, so it lines up with the
-``.tlog`` and anything else logged beside it. A lockstep run has no wall clock: its simulated time runs
-faster than real time, and a recording of it stays byte-identical for a seed, so its offset is 0 and its
-``log_time`` is simulated time. :attr:`Record.time_us` is read from ``publish_time``; files of format 1 (no
-``format`` key) had both times equal to the board's, so they read the same.
+Timestamps (format 3): ``log_time`` and ``publish_time`` are equal, the board's clock (``time_us * 1000``)
+plus ``clock_offset_ns`` (metadata key of that name). A recording of something that ran in real time (a run
+against a port, metadata ``kind`` = :data:`KIND_PORT`, and ``spirob-host`` recordings) is on the host's
+monotonic clock with the offset that makes both times Unix time, so it lines up with the ``.tlog`` and
+anything else logged beside it, and Foxglove's log-time and publish-time timelines agree. A lockstep run has
+no wall clock: its simulated time runs faster than real time, and a recording of it stays byte-identical for
+a seed, so its offset is 0 and both times are simulated time. :attr:`Record.time_us` (the board's clock) is
+``log_time - clock_offset_ns``, which holds for every format: format 2 wrote the board's clock in
+``publish_time`` (``log_time`` = it + the offset), format 1 (no ``format`` key, no offset) both times equal to
+the board's.
 """
 
 from __future__ import annotations
@@ -66,6 +68,7 @@ __all__ = [
     "Record",
     "Recorder",
     "Recovered",
+    "clock_offset_of",
     "is_mcap",
     "is_truncated",
     "monotonic_clock_offset_ns",
@@ -83,9 +86,10 @@ __all__ = [
 PROFILE: Final = "spirob"
 RAW_ENCODING: Final = "spirob.raw"
 
-FORMAT: Final = 2
+FORMAT: Final = 3
 """Layout of the files this module writes (metadata ``format``). 1 (no key): JSON channels with an empty
-schema, ``log_time`` on the board's clock. 2: Foxglove's schemas, Unix ``log_time``."""
+schema, ``log_time`` on the board's clock. 2: Foxglove's schemas, Unix ``log_time``, the board's clock in
+``publish_time``. 3: ``publish_time`` equal to ``log_time`` (Unix time in real-time recordings)."""
 
 # Raw wires, named from the board's side (rx = into the board).
 DBUS_RX: Final = "/board/dbus_rx"
@@ -164,15 +168,29 @@ def recording_format(meta: Mapping[str, str]) -> int:
     return int(meta.get("format", "1"))
 
 
+def clock_offset_of(meta: Mapping[str, str]) -> int:
+    """The ``clock_offset_ns`` of a recording's metadata: ``log_time`` minus the board's clock (0 when
+    absent, as in format 1).
+
+    Raises:
+        RecordingError: the value is not an integer.
+    """
+    value = meta.get("clock_offset_ns", "0")
+    try:
+        return int(value)
+    except ValueError as exc:
+        raise RecordingError(f"metadata clock_offset_ns {value[:40]!r} is not an integer") from exc
+
+
 @dataclass(frozen=True, slots=True)
 class Record:
     """One recorded message.
 
     Attributes:
         topic: its channel's topic.
-        time_us: the board's clock (MCAP ``publish_time``).
+        time_us: the board's clock (MCAP ``log_time`` minus the metadata's ``clock_offset_ns``).
         data: the payload.
-        log_time_ns: MCAP ``log_time`` (Unix ns in format 2).
+        log_time_ns: MCAP ``log_time`` (Unix ns in real-time recordings of format 2 and later).
     """
 
     topic: str
@@ -194,9 +212,10 @@ class Recorder:
             ``format``, ``version`` (the package's) and ``clock_offset_ns`` are added.
         flush_every: Finish and flush the current chunk after this many messages, bounding what a
             killed process can lose.
-        clock_offset_ns: Added to every ``time_us`` (in ns) to make ``log_time``. Default: for a
+        clock_offset_ns: Added to every ``time_us`` (in ns) to make ``log_time`` and ``publish_time``
+            (equal). Default: for a
             recording of ``kind`` :data:`KIND_PORT` (the host's monotonic clock)
-            :func:`monotonic_clock_offset_ns`, so ``log_time`` is Unix time; else 0, simulated time
+            :func:`monotonic_clock_offset_ns`, so both are Unix time; else 0, simulated time
             (deterministic: a lockstep recording is byte-identical for a seed).
     """
 
@@ -248,8 +267,8 @@ class Recorder:
     def _add(self, channel: int, time_us: int, data: bytes) -> None:
         if self._closed:
             raise ValueError(f"recording {self.path} is closed")
-        t_ns = time_us * 1000
-        self._writer.add_message(channel, log_time=t_ns + self._offset_ns, data=data, publish_time=t_ns)
+        t_ns = time_us * 1000 + self._offset_ns
+        self._writer.add_message(channel, log_time=t_ns, data=data, publish_time=t_ns)
         self.messages_written += 1
         self._since_flush += 1
         if self._since_flush >= self._flush_every:
@@ -261,11 +280,12 @@ class Recorder:
 
     @property
     def clock_offset_ns(self) -> int:
-        """Unix time of board time 0 (``log_time - publish_time`` of every message)."""
+        """Unix time of board time 0 in a real-time recording, 0 in a lockstep one (``log_time`` minus the
+        board's clock)."""
         return self._offset_ns
 
     def unix_ns(self, time_us: int) -> int:
-        """The ``log_time`` of a message written at ``time_us``."""
+        """The ``log_time`` (and ``publish_time``) of a message written at ``time_us``."""
         return time_us * 1000 + self._offset_ns
 
     def write_raw(self, topic: str, time_us: int, data: bytes) -> None:
@@ -386,7 +406,7 @@ class Recovered:
 
     Attributes:
         messages_n: messages copied.
-        last_time_us: log time of the last one (None without messages).
+        last_time_us: board time of the last one (None without messages).
     """
 
     messages_n: int
@@ -417,6 +437,7 @@ def _copy_records(src: IO[bytes], dst: IO[bytes]) -> Recovered:
     channel_ids: dict[int, int] = {}
     n = 0
     last: int | None = None
+    offset_ns = 0
     writer = Writer(dst, chunk_size=256 * 1024, compression=CompressionType.ZSTD)
     started = False
     for rec in iter_records(src):
@@ -435,12 +456,13 @@ def _copy_records(src: IO[bytes], dst: IO[bytes]) -> Recovered:
             meta = dict(rec.metadata)
             if rec.name == PROFILE:
                 meta[TRUNCATED_KEY] = "true"  # complete now, but its run was cut short
+                offset_ns = clock_offset_of(meta)
             writer.add_metadata(rec.name, meta)
         elif isinstance(rec, Message) and rec.channel_id in channel_ids:
             channel = channel_ids[rec.channel_id]
             writer.add_message(channel, rec.log_time, bytes(rec.data), rec.publish_time, rec.sequence)
             n += 1
-            last = rec.publish_time // 1000
+            last = (rec.log_time - offset_ns) // 1000
     if not started:
         writer.start(profile=PROFILE, library="spirob-teleop")
     writer.finish()
@@ -458,11 +480,14 @@ def read_records(path: str | Path, topics: frozenset[str] | set[str] | None = No
         RecordingError: a record over the cap, a chunk bomb or a malformed record.
     """
     channels: dict[int, str] = {}
+    offset_ns = 0  # the metadata (written before any message) sets it
     with open(path, "rb") as f:
         for rec in iter_records(f):
             if isinstance(rec, Message):
                 topic = channels.get(rec.channel_id)
                 if topic is not None and (topics is None or topic in topics):
-                    yield Record(topic, rec.publish_time // 1000, bytes(rec.data), rec.log_time)
+                    yield Record(topic, (rec.log_time - offset_ns) // 1000, bytes(rec.data), rec.log_time)
             elif isinstance(rec, Channel):
                 channels[rec.id] = rec.topic
+            elif isinstance(rec, Metadata) and rec.name == PROFILE:
+                offset_ns = clock_offset_of(rec.metadata)

@@ -17,10 +17,15 @@ import shutil
 import subprocess
 import sys
 import sysconfig
+import tomllib
+import zipfile
 from collections.abc import Callable
+from email.parser import HeaderParser
 from pathlib import Path
 
 import pytest
+from packaging.requirements import Requirement
+from packaging.specifiers import SpecifierSet
 
 from controller.cli import main as firmware_main
 from hil.cli.main import main as hil_main
@@ -43,6 +48,54 @@ def test_every_command_line_prints_its_version(
         main(["--version"])
     assert exc.value.code == 0
     assert capsys.readouterr().out == f"{prog} {VERSION}\n"
+
+
+PROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+CLASSIFIER_ROOTS = {
+    "Development Status",
+    "Environment",
+    "Intended Audience",
+    "Operating System",
+    "Programming Language",
+    "Topic",
+    "Typing",
+}
+
+
+def test_metadata_has_classifiers_urls_and_keywords() -> None:
+    classifiers = PROJECT["classifiers"]
+    assert len(classifiers) >= 5 and len(set(classifiers)) == len(classifiers)
+    for c in classifiers:
+        parts = c.split(" :: ")
+        assert len(parts) >= 2 and all(p.strip() == p and p for p in parts), c
+        # No License classifier: PEP 639's `license` expression replaces it (setuptools >= 77 refuses both).
+        assert parts[0] in CLASSIFIER_ROOTS, c
+    assert any(c.startswith("Development Status :: ") for c in classifiers)
+    assert any(c.startswith("Topic :: ") for c in classifiers)
+    # The Python versions claimed are ones requires-python allows, and the one the suite runs on is one.
+    requires = SpecifierSet(PROJECT["requires-python"])
+    minors = [
+        c.rsplit(" :: ", 1)[1] for c in classifiers if c.startswith("Programming Language :: Python :: 3.")
+    ]
+    assert minors and all(f"{m}.0" in requires for m in minors), minors
+    assert f"{sys.version_info.major}.{sys.version_info.minor}" in minors
+    urls = PROJECT["urls"]
+    assert urls and all(url.startswith("https://") and " " not in url for url in urls.values()), urls
+    keywords = PROJECT["keywords"]
+    assert len(keywords) >= 5 and len(set(keywords)) == len(keywords)
+    assert all(k == k.lower() and " " not in k for k in keywords), keywords
+
+
+def test_the_mujoco_bound_is_the_tested_mujoco() -> None:
+    (mujoco,) = (Requirement(d) for d in PROJECT["dependencies"] if Requirement(d).name == "mujoco")
+    assert mujoco.extras == {"sysid"}
+    installed = importlib.metadata.version("mujoco")
+    # The version every figure and test was measured with is inside the bound; the next minor (whose
+    # physics moved the pinned grasp outcomes) and the next major are outside it.
+    assert installed in mujoco.specifier, (installed, str(mujoco.specifier))
+    assert any(s.operator in ("<", "<=", "==", "~=") for s in mujoco.specifier), "mujoco has no upper bound"
+    major, minor = (int(p) for p in installed.split(".")[:2])
+    assert f"{major}.{minor + 1}.0" not in mujoco.specifier and f"{major + 1}.0.0" not in mujoco.specifier
 
 
 def _run(argv: list[str], cwd: Path, timeout_s: float = 600.0) -> subprocess.CompletedProcess[str]:
@@ -77,6 +130,15 @@ def test_a_non_editable_install_into_a_fresh_venv_gives_working_commands(tmp_pat
     assert built.returncode == 0, built.stdout + built.stderr
     wheels = list(dist.glob("spirob_teleop-*.whl"))
     assert len(wheels) == 1, wheels
+    # The metadata pyproject declares reaches the wheel (the build backend accepted every field).
+    with zipfile.ZipFile(wheels[0]) as whl:
+        (meta_name,) = (n for n in whl.namelist() if n.endswith(".dist-info/METADATA"))
+        meta = HeaderParser().parsestr(whl.read(meta_name).decode())
+    assert meta.get_all("Classifier") == PROJECT["classifiers"]
+    assert sorted(meta.get_all("Project-URL") or []) == sorted(
+        f"{k}, {v}" for k, v in PROJECT["urls"].items()
+    )
+    assert meta["Keywords"].split(",") == PROJECT["keywords"]
 
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=300)

@@ -116,7 +116,8 @@ class LinkRecording:
     What the board reports goes to the Foxglove channels a ``spirob-hil`` recording has: telemetry in the
     same JSON layout (``/telemetry``), its poses as transforms and the arm's shape (``/tf``,
     ``/arm/scene``), and the link's state changes with the board's own as events (``/events``).
-    ``publish_time`` is the host's monotonic clock, ``log_time`` the Unix time of the same instant.
+    ``log_time`` and ``publish_time`` are both the Unix time of the instant the host handled the message
+    (the host's monotonic clock plus the recording's ``clock_offset_ns``).
     """
 
     def __init__(self, path: Path, metadata: Mapping[str, str], *, tlog: Path | None = None) -> None:

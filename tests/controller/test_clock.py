@@ -40,9 +40,37 @@ def test_realtime_sleep_returns_at_or_after_the_deadline() -> None:
         deadline = c.now_us() + 300
         c.sleep_until_us(deadline)
         assert c.now_us() >= deadline
-    before = c.now_us()
-    c.sleep_until_us(before - 1_000_000)  # past deadline: no sleep (nothing to assert on time)
-    assert c.now_us() >= before
+
+
+def test_realtime_sleep_is_one_absolute_sleep_and_none_for_a_past_deadline(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Which sleep is asked for, not how long it took (no wall-clock bounds): the syscall is recorded.
+    c = RealTimeClock(fifo=False, spin_us=0)
+    if c._nanosleep is None:
+        pytest.skip("no clock_nanosleep in this libc")
+    calls: list[tuple[int, int, int, int]] = []
+
+    def fake_nanosleep(clock_id: int, flags: int, ts_ref: object, remain: object) -> int:
+        calls.append((clock_id, flags, c._ts.tv_sec, c._ts.tv_nsec))
+        return 0
+
+    monkeypatch.setattr(c, "_nanosleep", fake_nanosleep)
+    c.sleep_until_us(c.now_us() - 1_000_000)  # past: returns at once, no sleep asked for
+    assert calls == []
+    deadline = c.now_us() + 2_000
+    c.sleep_until_us(deadline)
+    # One absolute (TIMER_ABSTIME = 1) CLOCK_MONOTONIC (1) sleep to the deadline itself, then the deadline.
+    assert calls == [(1, 1, deadline // 1_000_000, deadline % 1_000_000 * 1000)]
+    assert c.now_us() >= deadline
+    # Without clock_nanosleep: a relative time.sleep, again none for a past deadline.
+    slept: list[float] = []
+    monkeypatch.setattr(c, "_nanosleep", None)
+    monkeypatch.setattr("controller.clock.time.sleep", slept.append)
+    c.sleep_until_us(c.now_us() - 1_000_000)
+    assert slept == []
+    c.sleep_until_us(c.now_us() + 20_000)
+    assert len(slept) == 1 and 0 < slept[0] <= 0.02
 
 
 def test_realtime_running_restores_gc_and_scheduler() -> None:

@@ -14,7 +14,14 @@ from foxglove.messages import LogLevel
 from hil import foxglove_log, recording
 from hil.cli.main import main
 from protocol.messages import GraspState, Mode, Phase, Telemetry
-from tests.support.foxglove_check import Checked, check_recording, poses_array, protobuf_class
+from tests.support.foxglove_check import (
+    Checked,
+    check_recording,
+    frame_parents,
+    poses_array,
+    protobuf_class,
+    transforms_to_poses,
+)
 
 
 @pytest.fixture(scope="module")
@@ -71,11 +78,82 @@ def test_transforms_reproduce_the_plants_poses(hil_run: Checked) -> None:
     for _, publish_ns, msg in tfs:
         positions, quats = poses_array(msg, units)
         want_p, want_q = plant[publish_ns]
-        np.testing.assert_array_equal(positions, want_p)
-        np.testing.assert_array_equal(quats, want_q)
+        # Composed down the tree (world -> drone -> arm_base -> unit), the plant's world poses again.
+        np.testing.assert_allclose(positions, want_p, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(quats, want_q, rtol=0, atol=1e-12)
         first_tip = positions[-1] if first_tip is None else first_tip
         moved = max(moved, float(np.linalg.norm(positions[-1] - first_tip)))
     assert moved > 0.01, "the arm never moved: the comparison proves little"
+
+
+def test_frames_form_a_tree_world_drone_arm_base_units(hil_run: Checked) -> None:
+    tfs = [m for _, _, m in hil_run.messages[foxglove_log.TF]]
+    units = len(tfs[0].transforms) - 2
+    assert units > 5
+    want = {
+        "drone": "world",
+        "arm_base": "drone",
+        **{foxglove_log.unit_frame(i): "arm_base" for i in range(units)},
+    }
+    base_in_drone = []
+    for msg in tfs:
+        assert frame_parents(msg) == want
+        # Parents come before their children (a reader that resolves in order never meets an unknown frame).
+        seen = {"world"}
+        for t in msg.transforms:
+            assert t.parent_frame_id in seen
+            seen.add(t.child_frame_id)
+        by_child = {t.child_frame_id: t for t in msg.transforms}
+        b = by_child["arm_base"]
+        base_in_drone.append([b.translation.x, b.translation.y, b.translation.z, b.rotation.w, b.rotation.x])
+        u0 = by_child[foxglove_log.unit_frame(0)]  # the base unit is the arm's base frame itself
+        assert abs(u0.rotation.w) == pytest.approx(1.0, abs=1e-12)
+        assert max(abs(u0.translation.x), abs(u0.translation.y), abs(u0.translation.z)) < 1e-12
+    # The arm's base is rigid on the drone: one pose in the drone's frame for the whole run (hanging
+    # below its origin).
+    np.testing.assert_allclose(base_in_drone, [base_in_drone[0]] * len(base_in_drone), rtol=0, atol=1e-9)
+    assert base_in_drone[0][2] < 0
+
+
+def _quat_about(axis: list[float], angle_rad: float) -> np.ndarray[Any, Any]:
+    a = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    return np.array([np.cos(angle_rad / 2), *(np.sin(angle_rad / 2) * a)])
+
+
+def test_tree_composes_back_to_world_poses_and_follows_the_drone() -> None:
+    rng = np.random.default_rng(26)
+    n = 6
+    positions = rng.normal(size=(n, 3))
+    quats = rng.normal(size=(n, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    cls = protobuf_class("foxglove.FrameTransforms", foxglove_log.CHANNELS[foxglove_log.TF].schema_data)
+    msg: Any = cls.FromString(foxglove_log.frame_transforms(5, positions, quats))
+    got_p, got_q = poses_array(msg, n - 1)
+    np.testing.assert_allclose(got_p, positions, rtol=0, atol=1e-12)
+    # q and -q are one rotation; composing keeps the sign here, so compare directly.
+    np.testing.assert_allclose(got_q, quats, rtol=0, atol=1e-12)
+    # Move and turn the drone, carrying the arm with it (a rigid motion of everything): only the
+    # world -> drone transform changes, so Foxglove moves the arm when the drone's frame moves.
+    turn = _quat_about([0.3, -1.0, 0.2], 0.7)
+    shift = np.array([1.5, -2.0, 0.25])
+    moved_p = np.array([shift + _rotate(turn, p) for p in positions])
+    moved_q = np.array([foxglove_log._quat_mul(turn, q) for q in quats])
+    moved: Any = cls.FromString(foxglove_log.frame_transforms(5, moved_p, moved_q))
+    before = {t.child_frame_id: t for t in msg.transforms}
+    for t in moved.transforms:
+        if t.child_frame_id == "drone":
+            continue
+        b = before[t.child_frame_id]
+        got = [t.translation.x, t.translation.y, t.translation.z, t.rotation.w, t.rotation.x, t.rotation.y]
+        want = [b.translation.x, b.translation.y, b.translation.z, b.rotation.w, b.rotation.x, b.rotation.y]
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    world = transforms_to_poses(moved)
+    np.testing.assert_allclose(world["unit_04"][0], moved_p[5], rtol=0, atol=1e-12)
+    # Only the drone: one transform; no poses at all: none.
+    assert [(p, c) for p, c, _, _ in foxglove_log.tree_poses(positions[:1], quats[:1])] == [
+        ("world", "drone")
+    ]
+    assert foxglove_log.tree_poses(np.zeros((0, 3)), np.zeros((0, 4))) == []
 
 
 def _rotate(q: np.ndarray[Any, Any], v: np.ndarray[Any, Any]) -> np.ndarray[Any, Any]:
@@ -91,7 +169,7 @@ def test_scene_draws_each_unit_from_its_joint_to_the_next(hil_run: Checked) -> N
     assert 1 <= len(scenes) <= 3  # the first poses, then once a second of board time
     _, publish_ns, update = scenes[-1]
     tf = next(m for _, t, m in checked.messages[foxglove_log.TF] if t == publish_ns)
-    units = len(tf.transforms) - 1
+    units = len(tf.transforms) - 2  # the drone and the arm's base are frames too
     positions, quats = poses_array(tf, units)
     entities = {e.id: e for e in update.entities}
     assert set(entities) == {"drone", *(foxglove_log.unit_frame(i) for i in range(units))}

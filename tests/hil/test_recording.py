@@ -10,8 +10,11 @@ import time
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
 
 from hil import recording
+from hil.mcap_bounded import RecordingError
 from hil.recording import Recorder, read_metadata, read_records
 
 
@@ -45,6 +48,36 @@ def test_a_port_recording_logs_unix_time(tmp_path: Path) -> None:
     assert record.time_us == mono_us
     assert before_ns - 1000 <= record.log_time_ns <= after_ns
     assert read_metadata(path)["clock_offset_ns"] == str(record.log_time_ns - mono_us * 1000)
+    # publish_time is the same Unix time (format 3): within a day of now, not 1970.
+    with open(path, "rb") as f:
+        ((_, _, message),) = make_reader(f).iter_messages()
+    assert message.publish_time == message.log_time == record.log_time_ns
+    assert abs(message.publish_time - time.time_ns()) < 86_400 * 10**9
+
+
+def _write(path: Path, meta: dict[str, str], times_ns: list[tuple[int, int]]) -> None:
+    with open(path, "wb") as f:
+        writer = Writer(f)
+        writer.start(profile=recording.PROFILE, library="test")
+        writer.add_metadata(recording.PROFILE, meta)
+        channel = writer.register_channel(recording.LINK_TX, recording.RAW_ENCODING, schema_id=0)
+        for log_ns, publish_ns in times_ns:
+            writer.add_message(channel, log_time=log_ns, data=b"x", publish_time=publish_ns)
+        writer.finish()
+
+
+def test_board_time_reads_the_same_in_every_format(tmp_path: Path) -> None:
+    offset = 1_790_000_000 * 10**9
+    # Format 2 kept the board's clock in publish_time; format 3 has publish_time = log_time.
+    _write(tmp_path / "f2.mcap", {"format": "2", "clock_offset_ns": str(offset)}, [(offset + 5000, 5000)])
+    _write(tmp_path / "f3.mcap", {"format": "3", "clock_offset_ns": str(offset)}, [(offset + 5000,) * 2])
+    _write(tmp_path / "f1.mcap", {}, [(5000, 5000)])
+    for name in ("f1", "f2", "f3"):
+        (record,) = read_records(tmp_path / f"{name}.mcap")
+        assert record.time_us == 5, name
+    _write(tmp_path / "bad.mcap", {"format": "3", "clock_offset_ns": "soon"}, [(5000, 5000)])
+    with pytest.raises(RecordingError, match="clock_offset_ns 'soon' is not an integer"):
+        list(read_records(tmp_path / "bad.mcap"))
 
 
 def test_close_twice_and_write_after_close(tmp_path: Path) -> None:

@@ -96,10 +96,10 @@ def test_a_client_subscribes_and_decodes_the_arms_transforms(peer: LinkPeer) -> 
             sent = list(received)
     units = len(sent[0].positions_m) - 1
     positions, quats = poses_array(msg, units)
-    # The transforms are the poses of one SimPoses the board sent, number for number.
+    # The transforms, composed down the tree, are the poses of one SimPoses the board sent.
     assert any(
-        np.array_equal(positions, np.asarray(p.positions_m, dtype=np.float64))
-        and np.array_equal(quats, np.asarray(p.quats_wxyz, dtype=np.float64))
+        np.allclose(positions, np.asarray(p.positions_m, dtype=np.float64), rtol=0, atol=1e-9)
+        and np.allclose(quats, np.asarray(p.quats_wxyz, dtype=np.float64), rtol=0, atol=1e-9)
         for p in sent
     )
 

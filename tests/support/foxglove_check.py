@@ -105,20 +105,58 @@ def check_recording(path: Path) -> Checked:
     return out
 
 
-def transforms_to_poses(msg: Any) -> dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]:
-    """child frame -> (position, quaternion w x y z) of a decoded ``foxglove.FrameTransforms``."""
-    out = {}
+def _quat_mul(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    aw, av = a[0], a[1:]
+    bw, bv = b[0], b[1:]
+    return np.array([aw * bw - av @ bv, *(aw * bv + bw * av + np.cross(av, bv))])
+
+
+def _rotate(q: npt.NDArray[np.float64], v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    conj = q * np.array([1.0, -1.0, -1.0, -1.0])
+    return _quat_mul(_quat_mul(q, np.array([0.0, *v])), conj)[1:]
+
+
+def frame_parents(msg: Any) -> dict[str, str]:
+    """child frame -> parent frame of a decoded ``foxglove.FrameTransforms``; each child once."""
+    parents: dict[str, str] = {}
     for t in msg.transforms:
-        assert t.parent_frame_id == "world"
+        assert t.child_frame_id not in parents, f"{t.child_frame_id} has two parents"
+        parents[t.child_frame_id] = t.parent_frame_id
+    return parents
+
+
+def transforms_to_poses(msg: Any) -> dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]:
+    """child frame -> world (position, quaternion w x y z) of a decoded ``foxglove.FrameTransforms``:
+    each transform composed with its parent's up to ``world`` (computed here, independently of the
+    code that wrote them), as Foxglove's 3D panel does. Every frame must reach ``world``."""
+    local = {}
+    for t in msg.transforms:
         p = np.array([t.translation.x, t.translation.y, t.translation.z])
         q = np.array([t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z])
-        out[t.child_frame_id] = (p, q)
+        local[t.child_frame_id] = (t.parent_frame_id, p, q)
+    assert len(local) == len(msg.transforms), "a frame with two parents"
+    out: dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = {}
+
+    def world(frame: str, depth: int = 0) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        if frame == "world":
+            return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+        assert depth <= len(local), f"a cycle through {frame}"
+        assert frame in local, f"frame {frame} does not reach world"
+        if frame not in out:
+            parent, p, q = local[frame]
+            pp, pq = world(parent, depth + 1)
+            out[frame] = (pp + _rotate(pq, p), _quat_mul(pq, q))
+        return out[frame]
+
+    for frame in local:
+        world(frame)
     return out
 
 
 def poses_array(msg: Any, units: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Drone then units base to tip, as (n, 3) positions and (n, 4) quaternions, from ``/tf``."""
+    """Drone then units base to tip, as (n, 3) world positions and (n, 4) quaternions, from ``/tf``
+    (the tree composed by :func:`transforms_to_poses`)."""
     frames = transforms_to_poses(msg)
     names = ["drone", *(f"unit_{i:02d}" for i in range(units))]
-    assert set(frames) == set(names), sorted(frames)
+    assert set(frames) == {*names, "arm_base"}, sorted(frames)
     return np.array([frames[n][0] for n in names]), np.array([frames[n][1] for n in names])

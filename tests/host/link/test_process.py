@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import multiprocessing as mp
+import queue
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -40,7 +41,7 @@ class Link:
         items: list[tuple[Any, ...]] = []
         deadline = time.monotonic() + duration_s
         while (left := deadline - time.monotonic()) > 0:
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(queue.Empty):
                 items.append(self.events.get(timeout=left))
         return items
 
@@ -49,7 +50,7 @@ class Link:
         items: list[tuple[Any, ...]] = []
         deadline = time.monotonic() + load_scaled_s(20.0)
         while not any(i[0] == "state" for i in items) and time.monotonic() < deadline:
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(queue.Empty):
                 items.append(self.events.get(timeout=0.1))
         return items
 
@@ -57,7 +58,7 @@ class Link:
         self.conn.send(("stop",))
         deadline = time.monotonic() + 5.0
         while self.proc.is_alive() and time.monotonic() < deadline:
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(queue.Empty):
                 while True:
                     self.events.get_nowait()
             self.proc.join(timeout=0.05)

@@ -19,7 +19,7 @@ from host.app import HostApp
 from host.object_spec import DEFAULT_OBJECT
 from host.options import HostOptions, build_parser
 from host.panel.teleop import PanelConfig
-from protocol.messages import GraspState, Mode, Phase
+from protocol.messages import AckResult, CommandCode, GraspState, Mode, Phase
 from tests.support.chromium import CHROMIUM, chromium_context, lever_button, page_load, page_load_ms
 from tests.support.realtime_guard import timed_out, wait_for
 
@@ -81,7 +81,19 @@ def test_the_default_scenes_object_is_grasped_from_the_panel(app: HostApp, page:
     assert _wait(lambda: telemetry().grasp_state in (GraspState.HOLD, GraspState.FAILED), 30.0), telemetry()
     t = telemetry()
     assert t.grasp_state == GraspState.HOLD, f"the grasp ended {t.grasp_state.name}: {t}"
-    assert t.phase == Phase.OK and m.last_ack is not None
+    assert t.phase == Phase.OK
+    # The board's final answer to the panel's GRASP (not its IN_PROGRESS, not another command's ack):
+    # ACCEPTED "holding", sent when the grasp reached HOLD (it may arrive just after that telemetry).
+
+    def grasp_held_ack() -> bool:
+        ack = m.last_ack
+        return ack is not None and (ack.command, ack.result, ack.text) == (
+            CommandCode.GRASP,
+            AckResult.ACCEPTED,
+            "holding",
+        )
+
+    assert _wait(grasp_held_ack, 5.0), m.last_ack
 
     page.get_by_role("button", exact=True, name="Release").click()
     assert _wait(lambda: telemetry().grasp_state != GraspState.HOLD, 10.0), telemetry()

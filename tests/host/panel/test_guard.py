@@ -9,11 +9,13 @@ import asyncio
 import logging
 import time
 from collections.abc import Iterator
+from http import HTTPStatus
 
 import msgspec
 import pytest
 import viser
 import websockets.asyncio.client as ws_client
+from websockets.exceptions import InvalidStatus
 
 from host.app import HostApp
 from host.options import HostOptions
@@ -40,6 +42,8 @@ def _open(url: str, origin: str | None, payloads: list[bytes | str]) -> str:
                     await conn.send(p)
                 await asyncio.sleep(0.3)
                 return "open"
+        except InvalidStatus as exc:  # the handshake answered with an HTTP status: which one
+            return f"HTTP {exc.response.status_code}"
         except Exception as exc:
             return type(exc).__name__
 
@@ -51,15 +55,17 @@ def test_origin_and_token_are_checked_in_the_handshake(app: HostApp) -> None:
     port = app.server.get_port()
     ws, own = f"ws://127.0.0.1:{port}/", f"http://127.0.0.1:{port}"
     assert _open(f"{ws}?token={TOKEN}", own, []) == "open"
-    assert _open(f"{ws}?token={TOKEN}", "http://127.0.0.1:1", []) == "InvalidStatus"
-    assert _open(f"{ws}?token={TOKEN}", "null", []) == "InvalidStatus"  # a file:// page
-    assert _open(f"{ws}?token={TOKEN}", None, []) == "InvalidStatus"
+    assert _open(f"{ws}?token={TOKEN}", "http://127.0.0.1:1", []) == "HTTP 403"
+    assert _open(f"{ws}?token={TOKEN}", "null", []) == "HTTP 403"  # a file:// page
+    assert _open(f"{ws}?token={TOKEN}", None, []) == "HTTP 403"
     # A rebound name: Origin and Host agree, but a loopback panel answers only loopback names.
-    assert app.guard.check(
-        _Conn(), _Req("/", {"Host": f"evil.test:{port}", "Origin": f"http://evil.test:{port}"})
+    rebound = {"Host": f"evil.test:{port}", "Origin": f"http://evil.test:{port}"}
+    assert app.guard.check(_Conn(), _Req(f"/?token={TOKEN}", rebound)) == (
+        HTTPStatus.FORBIDDEN,
+        "Origin refused\n",
     )
-    assert _open(ws, own, []) == "InvalidStatus"
-    assert _open(f"{ws}?token=wrong", own, []) == "InvalidStatus"
+    assert _open(ws, own, []) == "HTTP 403"
+    assert _open(f"{ws}?token=wrong", own, []) == "HTTP 403"
     assert app.guard.stats.origin_refused_n == 4 and app.guard.stats.token_refused_n == 2
 
 

@@ -192,8 +192,8 @@ def test_panel_end_to_end(app: HostApp, browser: Any, tmp_path: Path) -> None:
     b = client_of(app, {a})
     page_b.get_by_role("button", exact=True, name="Take control").click()
     assert _wait(lambda: arb.pending == b)
-    time.sleep(0.5)
-    assert arb.holder == a, "a second tab took control silently"
+    # Polled, not slept: the first sample in 1 s where the holder is not A fails at once.
+    assert _stays(lambda: arb.holder == a, 1.0), f"a second tab took control silently: {arb.holder}"
     page_b.get_by_text("Request sent; waiting for the holder.").wait_for(timeout=10_000)
     # The holder hands it over explicitly; the new holder starts from SAFE.
     page_a.get_by_role("button", exact=True, name="Hand control over").click(timeout=10_000)
@@ -359,3 +359,13 @@ def test_panel_refuses_other_origins_and_missing_tokens() -> None:
 
 def _wait(cond: Callable[[], bool], timeout_s: float = 20.0) -> bool:
     return wait_for(cond, timeout_s, 0.05)
+
+
+def _stays(cond: Callable[[], bool], duration_s: float) -> bool:
+    """``cond`` holds at every sample (every 20 ms) for ``duration_s``; False at the first that fails."""
+    deadline = time.monotonic() + duration_s
+    while time.monotonic() < deadline:
+        if not cond():
+            return False
+        time.sleep(0.02)
+    return bool(cond())
