@@ -37,7 +37,6 @@ _WALL_CLOCK_MARKS = frozenset({"realtime", "mavproxy", "browser"})
 
 _SERIAL_PATHS = (
     "tests/host/",
-    "tests/test_examples.py",
     "tests/test_docs.py",
     "tests/test_packaging.py",
     "tests/hil/test_board.py",

@@ -16,7 +16,16 @@ def test_examples_exist() -> None:
     assert len(EXAMPLES) >= 4
 
 
-@pytest.mark.parametrize("example", EXAMPLES, ids=[p.name for p in EXAMPLES])
+WALL_CLOCK = frozenset({"03_host_panel.py", "04_drone_link.py"})
+"""The examples that run a real-time board, a link process or a host: marked ``realtime`` (they need the
+machine to themselves); the others are lockstep simulations and computations."""
+
+
+@pytest.mark.parametrize(
+    "example",
+    [pytest.param(p, marks=pytest.mark.realtime) if p.name in WALL_CLOCK else p for p in EXAMPLES],
+    ids=[p.name for p in EXAMPLES],
+)
 def test_example_runs(example: Path, tmp_path: Path) -> None:
     proc = subprocess.run(
         [sys.executable, str(example)], cwd=tmp_path, capture_output=True, text=True, timeout=180
@@ -25,6 +34,7 @@ def test_example_runs(example: Path, tmp_path: Path) -> None:
     assert proc.stdout.strip()
 
 
+@pytest.mark.realtime
 def test_the_host_example_fails_with_one_line_and_exit_1() -> None:
     """A demo that cannot run says why in one line and exits 1 (never a traceback, never exit 0)."""
     import socket

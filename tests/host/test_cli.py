@@ -398,9 +398,12 @@ def test_a_killed_link_process_is_restarted_and_the_board_held_zero_current() ->
         assert wait_for(lambda: client.state is LinkState.CONNECTED and len(after_restart) >= 20, 30.0)
         assert client._proc.pid != old_pid and client._proc.is_alive()
         # No RC reached the board while no link process ran (a spawn takes far longer than its 30 ms RC
-        # timeout); the new process sent SAFE frames first: from its first frame on, the board is in
-        # SAFE with the right lever DOWN and sends zero current, and stays there.
-        first = after_restart[0]
+        # timeout); the new process sent SAFE frames first: from the first of its frames the board took
+        # (a telemetry frame can leave before that frame arrives, still showing the last lever it had),
+        # the board shows the right lever DOWN; it is in SAFE and sends zero current throughout.
+        took = after_restart[0].rc_frames_ok
+        first = next((t for t in after_restart if t.rc_frames_ok > took), None)
+        assert first is not None, f"the board took no RC frame from the new link process: {after_restart[-1]}"
         assert first.mode == Mode.SAFE and first.right_lever == Lever.DOWN, first
         assert all(t.commanded_current == (0, 0, 0) for t in after_restart), after_restart[-1]
         assert all(t.mode == Mode.SAFE for t in after_restart)
