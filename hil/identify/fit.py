@@ -260,20 +260,12 @@ def _spans(recordings: Sequence[MotorData], options: FitOptions) -> list[tuple[M
 
 def _spec(design: SpiralDesign, model: ModelConfig) -> Any:
     spec = mujoco.MjSpec.from_string(build_mjcf(design, None, model))
-    for k in range(3):
-        spec.add_sensor(
-            name=f"len_{k}",
-            type=mujoco.mjtSensor.mjSENS_JOINTPOS,
-            objtype=mujoco.mjtObj.mjOBJ_JOINT,
-            objname=f"spool_{k}",
-        )
-    for k in range(3):
-        spec.add_sensor(
-            name=f"vel_{k}",
-            type=mujoco.mjtSensor.mjSENS_JOINTVEL,
-            objtype=mujoco.mjtObj.mjOBJ_JOINT,
-            objname=f"spool_{k}",
-        )
+    sensors = mujoco.mjtSensor
+    for prefix, kind in (("len", sensors.mjSENS_JOINTPOS), ("vel", sensors.mjSENS_JOINTVEL)):
+        for k in range(3):
+            spec.add_sensor(
+                name=f"{prefix}_{k}", type=kind, objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=f"spool_{k}"
+            )
     spec.add_sensor(
         name="tip",
         type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
