@@ -74,7 +74,11 @@ def configure_identify(p: argparse.ArgumentParser) -> None:
         f"(default {FitOptions().budget_s:g})",
     )
     p.add_argument(
-        "--max-iters", type=int, default=FitOptions().max_iters, metavar="N", help="solver iterations at most"
+        "--max-iters",
+        type=int,
+        default=FitOptions().max_iters,
+        metavar="N",
+        help=f"solver iterations at most (default {FitOptions().max_iters}; unconverged: nothing identified)",
     )
     p.add_argument(
         "--jobs", type=int, metavar="N", help="worker processes for the rollouts (default: one per core)"
