@@ -30,6 +30,7 @@ import multiprocessing as mp
 import multiprocessing.connection
 import signal
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import TracebackType
@@ -325,16 +326,28 @@ def poses_message(time_us: int, positions_m: Any, quats_wxyz: Any) -> SimPoses:
 # --- real time ------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class BoardStall:
+    """A board that stalls itself (fault injection): its control task sleeps ``for_s`` every ``every_s``
+    of its own clock, as a firmware blocked on a flash write or a lock would. What the harness's tests
+    use to prove that a stalled board fails its checks and is never excused as a starved machine."""
+
+    every_s: float
+    for_s: float
+
+
 def run_realtime(
     board: VirtualBoard,
     clock: Clock,
     duration_us: int | None = None,
     stop: threading.Event | None = None,
+    stall: BoardStall | None = None,
 ) -> None:
     """Drive ``board`` in real time: one tick per control period on absolute deadlines.
 
     A late tick is skipped, never caught up in a burst (the plant then lags the wall clock by that
     period, as a real arm would not, but the firmware sees true time). Zero current on the way out.
+    ``stall`` makes the control task stall itself (:class:`BoardStall`).
     """
     period = board.period_us
     offset = 0  # clock time minus plant time, fixed at the start
@@ -350,8 +363,13 @@ def run_realtime(
             board.firmware.start(deadline - offset)  # the firmware's task grid is this loop's grid
         return deadline
 
+    next_stall_us = None if stall is None else clock.now_us() + int(stall.every_s * 1e6)
+
     def step(now_us: int) -> int:
-        nonlocal deadline
+        nonlocal deadline, next_stall_us
+        if stall is not None and next_stall_us is not None and now_us >= next_stall_us:
+            time.sleep(stall.for_s)  # the injected stall, inside the control task
+            next_stall_us = now_us + int(stall.every_s * 1e6)
         board.firmware_tick(now_us - offset)
         # The next tick's physics now, not after the wake-up: the firmware runs at its deadline and takes
         # in what arrived meanwhile at that time (stamped before a long step, a 40 ms step read as 40 ms of
@@ -406,6 +424,7 @@ def _child_main(
     listen: str | None,
     listen_any: bool,
     fifo: bool,
+    stall: BoardStall | None = None,
 ) -> None:
     """Entry of the board process: open the endpoint, report its URL, run until told to stop."""
     stop = threading.Event()
@@ -426,7 +445,7 @@ def _child_main(
 
     threading.Thread(target=watch_parent, name="parent-watch", daemon=True).start()
     try:
-        run_realtime(board, RealTimeClock(fifo=fifo), stop=stop)
+        run_realtime(board, RealTimeClock(fifo=fifo), stop=stop, stall=stall)
     finally:
         board.close()
 
@@ -475,6 +494,7 @@ class VirtualBoardProcess:
         listen_any: allow a ``listen`` address other than loopback, as the CLI's ``--listen-any``.
         pty: serve on a pty (the default when ``listen`` is None).
         fifo: ask for SCHED_FIFO in the child (it says so in its log when refused).
+        stall: make the board's control task stall itself (fault injection, :class:`BoardStall`).
 
     Raises:
         ValueError: ``listen`` is malformed, or not loopback without ``listen_any``.
@@ -488,8 +508,10 @@ class VirtualBoardProcess:
         listen_any: bool = False,
         pty: bool = False,
         fifo: bool = True,
+        stall: BoardStall | None = None,
     ) -> None:
         self.config = config if config is not None else BoardConfig(rc="link")
+        self.stall = stall
         self.listen = None if pty else listen
         self.listen_any = listen_any
         if self.listen is not None:
@@ -511,7 +533,7 @@ class VirtualBoardProcess:
         parent, child = ctx.Pipe()
         proc = ctx.Process(
             target=_child_main,
-            args=(child, self.config, self.listen, self.listen_any, self.fifo),
+            args=(child, self.config, self.listen, self.listen_any, self.fifo, self.stall),
             name="virtual-board",
         )
         proc.start()

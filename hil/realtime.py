@@ -65,7 +65,7 @@ from hil.port_host import PortHost
 from hil.radio import RadioScript
 from hil.recording import Recorder
 from hil.run_record import RunRecord, Samples, ScenarioResult
-from hil.scenarios import SCENARIOS, Plan, judge
+from hil.scenarios import SCENARIOS, Plan, judge, largest_unplanned_gap_us
 from protocol.dbus import FRAME_LEN, Lever, RcFrame
 from protocol.messages import (
     AckResult,
@@ -423,8 +423,13 @@ def _record(host: PortHost, plan: Plan, config: FirmwareConfig, t0_us: int, dura
     )
 
 
-def _counters(host: PortHost, run: RunRecord, faults: FaultSet) -> dict[str, int]:
+def _counters(host: PortHost, run: RunRecord, plan: Plan, faults: FaultSet) -> dict[str, int]:
     out: dict[str, int] = {}
+    # The host's own sender, outside the board: its largest unplanned gap tells a stalled host from a
+    # stalled board when the board's RC gap check fails.
+    send_gap = largest_unplanned_gap_us(run.rc_sent_us, plan, run.duration_us)
+    if send_gap is not None:
+        out["host_rc_send_gap_max_us"] = send_gap
     if host.telemetry:
         last = host.telemetry[-1]
         for name in (
@@ -555,4 +560,6 @@ def run_scenario_on_port(
             if recorder is not None:
                 recorder.close()
     run = _record(host, plan, config, t0, duration)
-    return ScenarioResult(name, seed, judge(scenario, run, plan), duration, _counters(host, run, fault_set))
+    return ScenarioResult(
+        name, seed, judge(scenario, run, plan), duration, _counters(host, run, plan, fault_set)
+    )

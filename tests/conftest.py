@@ -7,9 +7,10 @@
 - Hypothesis has no deadline: tests never assert wall-clock times, and a loaded machine makes one example
   slow without making it wrong.
 - Real-time tests (``@pytest.mark.realtime``) the machine starved are skipped as ``starved:``
-  (``tests/support/realtime_guard.py``), and so
-  are MAVProxy and browser tests (``mavproxy``, ``browser``) whose
-  waits timed out on a starved machine; the end of the run counts them, warns about a file whose every
+  (``tests/support/realtime_guard.py``), and so are MAVProxy and browser tests (``mavproxy``,
+  ``browser``) whose waits timed out on a starved machine. Starved means that others (processes outside
+  this run's tree, stolen time) were busy meanwhile: ``tests/support/machine.py`` samples that from the
+  start of the first such test. The end of the run counts the skips, warns about a file whose every
   such test was skipped, and with ``CI`` set fails the run for it: CI never passes on an all-skipped file.
 """
 
@@ -24,6 +25,7 @@ from collections.abc import Iterator
 import pytest
 from hypothesis import settings
 
+from tests.support import machine
 from tests.support.realtime_guard import STARVED_PREFIX
 
 settings.register_profile("spirob", deadline=None)
@@ -59,6 +61,12 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.serial)
 
 
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Start sampling the others' work before the first test that may be judged starved."""
+    if any(not _WALL_CLOCK_MARKS.isdisjoint(item.keywords) for item in session.items):
+        machine.monitor()
+
+
 @pytest.fixture(autouse=True)
 def _no_leaked_threads_or_processes() -> Iterator[None]:
     before = {t.ident for t in threading.enumerate()}
@@ -66,7 +74,12 @@ def _no_leaked_threads_or_processes() -> Iterator[None]:
     # Give stopping threads a bounded moment to finish joining.
     leaked: list[threading.Thread] = []
     for t in threading.enumerate():
-        if t.ident in before or not t.is_alive() or isinstance(t, threading._DummyThread):
+        if (
+            t.ident in before
+            or not t.is_alive()
+            or isinstance(t, threading._DummyThread)
+            or t.name == "machine-monitor"
+        ):
             continue  # a dummy: a thread of a native library (foxglove-sdk's) that called into Python
         t.join(timeout=2.0)
         if t.is_alive():

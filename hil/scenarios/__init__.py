@@ -20,7 +20,17 @@ from hil.faults import Fault
 from hil.radio import RadioScript
 from hil.recording import Recorder
 from hil.run_record import TICK_US, Check, RunRecord, ScenarioResult
-from hil.scenarios.base import MANUAL, MS, RC_GAP_CHECK, SAFE, Plan, Scenario, rc, rc_gap_check
+from hil.scenarios.base import (
+    MANUAL,
+    MS,
+    RC_GAP_CHECK,
+    SAFE,
+    Plan,
+    Scenario,
+    largest_unplanned_gap_us,
+    rc,
+    rc_gap_check,
+)
 from hil.scenarios.drone_manoeuvre import DroneManoeuvre
 from hil.scenarios.excitation import Excitation
 from hil.scenarios.grasp import Grasp
@@ -51,6 +61,7 @@ __all__ = [
     "ScenarioResult",
     "board_config",
     "judge",
+    "largest_unplanned_gap_us",
     "rc",
     "run_scenario",
     "scenario_names",

@@ -167,6 +167,19 @@ def rearmed(run: RunRecord, plan: Plan, name: str = "|current| after re-arming t
     return Check(name, run.max_current(rearm_pull_us(plan) + AFTER_REARM_US), 1, ">=", "raw")
 
 
+def largest_unplanned_gap_us(times_us: Sequence[int], plan: Plan, duration_us: int) -> int | None:
+    """The largest interval between consecutive RC instants in ``[0, duration_us)`` that no planned RC cut
+    of ``plan`` explains (None: no instant in the run)."""
+    cuts = [
+        (f.start_us, f.end_us if f.end_us is not None else 1 << 62) for f in plan.faults if f.kind in _RC_CUTS
+    ]
+    seen = [t for t in times_us if 0 <= t < duration_us]
+    if not seen:
+        return None
+    gaps = [b - a for a, b in itertools.pairwise(seen) if not any(a < e and b > s for s, e in cuts)]
+    return max(gaps, default=0)
+
+
 def rc_gap_check(run: RunRecord, plan: Plan) -> Check:
     """The run's own validity: the RC stream reached the board without a gap the scenario did not plan.
 
@@ -175,13 +188,8 @@ def rc_gap_check(run: RunRecord, plan: Plan) -> Check:
     the run says nothing about the checks that follow. Measured on the board's own receive times
     (``RawRc``); from the host's send times when the board reports none, with the link's delay taken off.
     """
-    cuts = [
-        (f.start_us, f.end_us if f.end_us is not None else 1 << 62) for f in plan.faults if f.kind in _RC_CUTS
-    ]
     board_times = [t for t, f in run.rc if f.is_valid()]
-    times = board_times or run.rc_sent_us
-    seen = [t for t in times if 0 <= t < run.duration_us]
-    gaps = [b - a for a, b in itertools.pairwise(seen) if not any(a < e and b > s for s, e in cuts)]
+    gap = largest_unplanned_gap_us(board_times or run.rc_sent_us, plan, run.duration_us)
     bound = (
         REQUIRED.failsafe.rc_timeout_us
         if board_times
@@ -189,7 +197,7 @@ def rc_gap_check(run: RunRecord, plan: Plan) -> Check:
     )
     return Check(
         f"{RC_GAP_CHECK} (longer: the host or the link stalled; the run is void)",
-        float(max(gaps, default=0)) if seen else math.nan,
+        math.nan if gap is None else float(gap),
         bound,
         "<=",
         "us",
