@@ -396,7 +396,14 @@ def judge_motor(motor: int, stats: MotorStats | None, *, ticks: int, window_us: 
 
 
 def judge_rc(
-    stats: RcStats, *, source: str, from_link: bool, start_us: int, end_us: int, rc_timeout_us: int
+    stats: RcStats,
+    *,
+    source: str,
+    from_link: bool,
+    start_us: int,
+    end_us: int,
+    rc_timeout_us: int,
+    loop_stalled: bool = False,
 ) -> Check:
     """The radio: valid frames only, at the DR16's period, no gap as long as the RC timeout.
 
@@ -407,8 +414,11 @@ def judge_rc(
         start_us: the window's start.
         end_us: the window's end.
         rc_timeout_us: the firmware's RC timeout (``FailsafeConfig.rc_timeout_us``).
+        loop_stalled: the loop itself missed deadlines: bursts and gaps may be its own doing (a reader
+            that stalls a whole frame period reads two frames as one 36-byte burst).
     """
     name = "rc"
+    stall_fix = "the board's own loop stalled (see the lateness line): fix that first"
     window = f"{(end_us - start_us) / 1e6:.1f} s"
     n = len(stats.valid_us)
     if from_link:
@@ -447,7 +457,7 @@ def judge_rc(
             name,
             Status.FAIL,
             f"{detail}, {stats.bytes_dropped} bytes in bursts that were not 18 bytes",
-            wiring_fix,
+            stall_fix if loop_stalled else wiring_fix,
         )
     if n < 2:
         return Check(name, Status.FAIL, f"{detail} in {window}", absent_fix)
@@ -472,7 +482,9 @@ def judge_rc(
             name,
             Status.FAIL,
             f"{detail}: the board latches RC_LOST after {_ms(rc_timeout_us)}",
-            "frames arrive in bursts: on a USB-serial adapter set its latency timer to 1 ms; check the "
+            stall_fix
+            if loop_stalled
+            else "frames arrive in bursts: on a USB-serial adapter set its latency timer to 1 ms; check the "
             f"antennas and the radio's range ({_HW})"
             if not from_link
             else "the host or its link stalls: a quieter host computer, or USB instead of Wi-Fi",
@@ -664,6 +676,7 @@ def run_preflight(
         parser = probe.link.parser
         probe.link_stats.frames_ok = parser.frames_ok
         probe.link_stats.bad_bytes = parser.bytes_skipped + probe.link.crc_errors
+    late = judge_lateness(lateness)
     checks: list[Check] = [
         judge_clock(
             kinds[0] if kinds else clock.kind,
@@ -671,7 +684,7 @@ def run_preflight(
             absolute_sleeps=clock.absolute_sleeps,
             backwards=probe.backwards,
         ),
-        judge_lateness(lateness),
+        late,
         judge_can(
             opened=can_error if bus is None else None,
             frames_sent=bus.frames_sent if bus is not None else 0,
@@ -696,6 +709,7 @@ def run_preflight(
                 start_us=start_us,
                 end_us=end_us,
                 rc_timeout_us=cfg.failsafe.rc_timeout_us,
+                loop_stalled=late.failed,
             )
         )
     if link_error is not None:
