@@ -4,19 +4,8 @@ One bounded run of the 1 kHz loop (:data:`WINDOW_US`, 2 s, on the clock the firm
 **zero current** commanded on every tick and the bus's current limit set to 0 besides, so nothing a
 check does can move a motor. Each tick sends one 0x200 frame of zeros, drains the motors' feedback,
 polls the RC source and reads the host link, exactly the I/O of the firmware's own control tick; the
-loop's start lateness is the real-time test. Then one line per check, each failure with its fix:
-
-=========  ===========================================================================================
-check      passes when
-=========  ===========================================================================================
-clock      SCHED_FIFO in force (unless ``--no-fifo``), absolute-deadline sleeps, time never went back
-lateness   no tick a whole period late, p99 start lateness <= :data:`LATENESS_P99_MAX_US`
-can        every zero-current command frame went out (a bus nobody acknowledges fails here)
-motor n    0x200+n answered on at least half the ticks; temperature <= :data:`TEMPERATURE_MAX_C`;
-           with zero current the rotor stayed within one turn and reported |current| < 0.5 A
-rc         valid DBUS frames only, one every 7 or 14 ms, no gap as long as the RC timeout (30 ms)
-link       the host's ``Heartbeat`` arrives, no gap as long as the host timeout (skipped without a link)
-=========  ===========================================================================================
+loop's start lateness is the real-time test. Then one line per check (clock, lateness, can, motor 1-3,
+rc, link), each failure with its fix; what each passes on is the table of docs/hardware.md.
 
 The judgements are pure functions of what the loop measured (``judge_*``), so their logic is tested with
 made-up figures; :func:`run_preflight` measures and judges.
@@ -64,7 +53,7 @@ WINDOW_US = 2_000_000
 """How long the checks listen (and the lateness test runs): 2 s at 1 kHz, 2000 ticks."""
 LATENESS_P99_MAX_US = 200
 """Largest p99 tick start lateness that passes. Measured on the project's 2-core VM under SCHED_FIFO with
-absolute sleeps: p99 22-29 µs (docs/realtime.md); without SCHED_FIFO 3-6 % of deadlines are missed."""
+absolute sleeps: p99 22-29 µs (``controller.clock``); without SCHED_FIFO 3-6 % of deadlines are missed."""
 TEMPERATURE_MAX_C = 80
 """Hottest motor temperature (feedback byte 6) that passes; a C610 may report 0, which passes."""
 ROTOR_TRAVEL_MAX_COUNTS = ANGLE_COUNTS
@@ -317,14 +306,7 @@ def judge_lateness(stats: LatenessStats) -> Check:
 
 
 def judge_can(*, opened: str | None, frames_sent: int, send_errors: int, ticks: int) -> Check:
-    """The CAN bus: opened, and every zero-current frame sent.
-
-    Args:
-        opened: None when the bus opened, else why it did not.
-        frames_sent: command frames that went out.
-        send_errors: failed sends and receives (``MotorBus.can_errors``).
-        ticks: ticks that tried to send.
-    """
+    """The CAN bus: opened (``opened`` None, else why not), and a zero-current frame sent on every tick."""
     name = "can"
     if opened is not None:
         return Check(
@@ -347,13 +329,9 @@ def judge_can(*, opened: str | None, frames_sent: int, send_errors: int, ticks: 
 
 
 def judge_motor(motor: int, stats: MotorStats | None, *, ticks: int, window_us: int) -> Check:
-    """One motor: answers, a sane temperature, still and currentless under zero command.
+    """Motor 1..3 (id 0x200 + motor): answers, a sane temperature, still and currentless at zero command.
 
-    Args:
-        motor: 1..3 (CAN id 0x200 + motor).
-        stats: what it sent; None: the bus did not open (the check is skipped).
-        ticks: ticks of the window (a C610 answers about once per tick).
-        window_us: the window's length.
+    ``stats`` None: the bus did not open (skipped). A C610 answers about once per tick.
     """
     can_id = FEEDBACK_ID_BASE + motor
     name = f"motor {motor} (0x{can_id:03X})"
@@ -411,8 +389,7 @@ def judge_rc(
         stats: what the source delivered.
         source: where the frames come from, for the messages (a port, or the host link).
         from_link: the frames are the host's ``VirtualRc`` (no UART).
-        start_us: the window's start.
-        end_us: the window's end.
+        start_us: the window's start (``end_us``: its end).
         rc_timeout_us: the firmware's RC timeout (``FailsafeConfig.rc_timeout_us``).
         loop_stalled: the loop itself missed deadlines: bursts and gaps may be its own doing (a reader
             that stalls a whole frame period reads two frames as one 36-byte burst).
@@ -495,15 +472,7 @@ def judge_rc(
 def judge_link(
     stats: LinkStats | None, *, port: str, start_us: int, end_us: int, host_timeout_us: int
 ) -> Check:
-    """The host link: the host's heartbeats arrive, with no gap as long as the host timeout.
-
-    Args:
-        stats: what came in; None: no ``--link`` (skipped).
-        port: the link's port, for the messages.
-        start_us: the window's start.
-        end_us: the window's end.
-        host_timeout_us: the firmware's host timeout (``FailsafeConfig.host_timeout_us``).
-    """
+    """The host link: heartbeats arrive, no gap as long as the host timeout (``stats`` None: skipped)."""
     name = "link"
     if stats is None:
         return Check(name, Status.SKIP, "no --link: the board runs without a host")
