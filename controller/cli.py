@@ -13,6 +13,10 @@ and ``~/.canrc``), as ``can.util.load_config`` reads it. ``--can-interface fake`
 trio. ``--can-log`` writes every frame through python-can's ``can.Logger`` (``.log`` candump, ``.blf``).
 Without ``--rc`` the sticks come from the host's virtual RC frames over ``--link``. A missing or busy port
 is a one-line error and exit status 2.
+
+``--preflight`` runs the pre-arm checks instead (``controller.preflight``): 2 s of the 1 kHz loop with zero
+current commanded, then one line per check (motors, RC, clock, lateness, host link), each failure with its
+fix; exit status 1 when any check fails. A port that does not open is one of those failed checks.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from controller.cli_kit import (
+    EXIT_FAILURE,
     EXIT_OK,
     EXIT_USAGE,
     Parser,
@@ -42,6 +47,7 @@ from controller.config import FirmwareConfig
 from controller.errors import ConfigError, PortError
 from controller.firmware import Firmware
 from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus
+from controller.preflight import WINDOW_US, run_preflight
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import SerialTransport, Transport
 
@@ -94,6 +100,12 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     )
     p.add_argument("--config", metavar="JSON", help="FirmwareConfig fields as a JSON object")
     p.add_argument("--no-fifo", action="store_true", help="do not ask for SCHED_FIFO")
+    p.add_argument(
+        "--preflight",
+        action="store_true",
+        help=f"pre-arm checks instead of running: {WINDOW_US / 1e6:.0f} s at zero current, one line per "
+        "check (motors, RC, clock, lateness, host link), exit 1 if any fails",
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="log at INFO level")
     return p
 
@@ -107,6 +119,11 @@ def parse_args(argv: Sequence[str] | None = None, prog: str = PROG) -> argparse.
             parser.prog,
             "--can is gone: use --can-interface and --can-channel (python-can's names, e.g. "
             "--can-interface slcan --can-channel /dev/ttyACM0), or --can-interface fake",
+        )
+        raise SystemExit(EXIT_USAGE)
+    if args.preflight and args.duration is not None:
+        error_line(
+            parser.prog, f"--duration does not apply to --preflight (it listens {WINDOW_US / 1e6:.0f} s)"
         )
         raise SystemExit(EXIT_USAGE)
     if args.rc is None and args.link is None:
@@ -211,6 +228,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
     )
     try:
         config = _load_config(args)
+        if args.preflight:
+            return _preflight(args, config)
         with ExitStack() as stack:
             bus = _open_bus(args)
             stack.callback(bus.shutdown)
@@ -235,6 +254,56 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         error_line(None, str(exc))
         return EXIT_USAGE
     return EXIT_OK
+
+
+def _preflight(args: argparse.Namespace, config: FirmwareConfig) -> int:
+    """``--preflight``: open what opens (a port that does not is a failed check), check, print, judge."""
+    with ExitStack() as stack:
+        bus: MotorBus | None = None
+        can_error = rc_error = link_error = None
+        try:
+            bus = _open_bus(args)
+            stack.callback(bus.shutdown)
+        except PortError as exc:
+            can_error = str(exc)
+        link: Transport | None = None
+        if args.link:
+            try:
+                link = SerialTransport(args.link)
+                stack.callback(link.close)
+            except PortError as exc:
+                link_error = str(exc)
+        rc: RcSource | None = None
+        if args.rc:
+            try:
+                rc = DbusSerialSource(args.rc)
+            except PortError as exc:
+                rc_error = str(exc)
+            rc_name = args.rc
+        else:
+            rc = LinkRcSource() if link is not None else None
+            rc_error = None if link is not None else f"no RC: the link {args.link} did not open"
+            rc_name = f"the host (VirtualRc on {args.link})"
+        if rc is not None:
+            stack.callback(rc.close)
+        stop = stack.enter_context(stop_on_signals())
+        report = run_preflight(
+            RealTimeClock(fifo=not args.no_fifo),
+            bus,
+            rc,
+            link,
+            config=config,
+            fifo_wanted=not args.no_fifo,
+            can_error=can_error,
+            rc_error=rc_error,
+            link_error=link_error,
+            rc_name=rc_name,
+            link_name=args.link or "",
+            stop=stop,
+        )
+    for line in report.lines():
+        print(line)
+    return EXIT_OK if report.passed else EXIT_FAILURE
 
 
 def script_main() -> int:

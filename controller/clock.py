@@ -77,6 +77,11 @@ class Clock(ABC):
         """Context held by a real-time loop for its whole run (default: nothing to set up)."""
         return contextlib.nullcontext()
 
+    @property
+    def absolute_sleeps(self) -> bool:
+        """:meth:`sleep_until_us` sleeps to an absolute deadline (a relative sleep drifts; default True)."""
+        return True
+
 
 StopSignal = threading.Event | Callable[[], bool] | None
 """What ends a periodic loop early: an event that gets set, or a callable that returns True."""
@@ -205,6 +210,11 @@ class RealTimeClock(Clock):
     def kind(self) -> ClockKind:
         """``REALTIME_FIFO`` while SCHED_FIFO is in force, else ``REALTIME_NORMAL``."""
         return ClockKind.REALTIME_FIFO if self.fifo_active else ClockKind.REALTIME_NORMAL
+
+    @property
+    def absolute_sleeps(self) -> bool:
+        """``clock_nanosleep(TIMER_ABSTIME)`` was found (else sleeps fall back to relative ``time.sleep``)."""
+        return self._nanosleep is not None
 
     def now_us(self) -> int:
         """CLOCK_MONOTONIC in integer µs."""
