@@ -16,7 +16,7 @@ def test_examples_exist() -> None:
     assert len(EXAMPLES) >= 4
 
 
-WALL_CLOCK = frozenset({"03_host_panel.py", "04_drone_link.py"})
+WALL_CLOCK = frozenset({"03_host_panel.py", "04_drone_link.py", "06_scripted_grasp.py"})
 """The examples that run a real-time board, a link process or a host: marked ``realtime`` (they need the
 machine to themselves); the others are lockstep simulations and computations."""
 
