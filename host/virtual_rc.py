@@ -406,7 +406,8 @@ class ScriptRun:
             return
         self.radio = self.script.steps[index].apply(self.radio)
 
-    def _fail(self, why: str) -> None:
+    def fail(self, why: str) -> None:
+        """End the script as failed: ``why``, with the running step and what the board last reported."""
         step = self.step
         label = "script"
         if step is not None:
@@ -430,14 +431,14 @@ class ScriptRun:
             return
         if not step.allows(t.phase, t.grasp_state):
             what = f"grasp {t.grasp_state.name}" if t.grasp_state == GraspState.FAILED else t.phase.name
-            self._fail(f"the board entered {what}")
+            self.fail(f"the board entered {what}")
             return
         if self._echo_us is None:
             if not self.radio.echoed_by(t):
                 return
             self._echo_us = t.time_us
         if step.keep is not None and not step.keep.met(t):
-            self._fail(f"{step.keep.describe()} did not hold")
+            self.fail(f"{step.keep.describe()} did not hold")
             return
         long_enough = t.time_us - self._echo_us >= round(step.for_s * 1e6)
         if long_enough and (step.until is None or step.until.met(t)):
@@ -451,11 +452,11 @@ class ScriptRun:
         limit_s = step.timeout_s * self.timeout_scale
         if host_s - self._step_started_s > limit_s:
             if self._echo_us is None:
-                self._fail(f"the board did not report this step's radio within {limit_s:.0f} s")
+                self.fail(f"the board did not report this step's radio within {limit_s:.0f} s")
             elif step.until is not None:
-                self._fail(f"{step.until.describe()} not reached within {limit_s:.0f} s")
+                self.fail(f"{step.until.describe()} not reached within {limit_s:.0f} s")
             else:
-                self._fail(f"{step.for_s:g} s of board time did not pass within {limit_s:.0f} s")
+                self.fail(f"{step.for_s:g} s of board time did not pass within {limit_s:.0f} s")
 
 
 Say = Callable[[str, str], None]
@@ -512,7 +513,7 @@ class ScriptDriver:
         a, run, stop = self.arbiter, self.run, self._worker.stop_event
         if a.request_control(CLI_CLIENT) is not ControlResult.GRANTED:
             with self._lock:
-                run._fail("a browser tab holds control")
+                run.fail("a browser tab holds control")
         else:
             with self._lock:
                 radio = run.start(time.monotonic())
@@ -533,7 +534,7 @@ class ScriptDriver:
                     self._say("info", f"{_NAME} step {step.number}/{n}: {step.describe()}")
                 if not self._push(radio):
                     with self._lock:
-                        run._fail("the command line lost control of the radio")
+                        run.fail("the command line lost control of the radio")
                     break
                 stop.wait(_POLL_S)
         with self._lock:
