@@ -39,6 +39,10 @@ from hil.recording import (
 _INPUTS = frozenset({recording.DBUS_RX, recording.CAN_RX, recording.LINK_RX, recording.POSES})
 _OUTPUTS = frozenset({recording.CAN_TX, recording.LINK_TX})
 
+HOST_SOURCE = "spirob-host"
+"""Metadata ``source`` of a ``spirob-host`` recording (``spirob-host (panel)`` from the panel's switch):
+the link's bytes as the host saw them, on the host's clock, no tick marks; never replayable."""
+
 MAX_SEGMENT_RECORDS = 100_000
 """Records between two tick marks a replay holds (a lockstep tick has a handful)."""
 MAX_SEGMENT_BYTES = 64 << 20
@@ -125,6 +129,11 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
             "this records a run against a port (the link as the host saw it): only a lockstep "
             "recording can be replayed (spirob-hil run ... --record without --port)"
         )
+    if meta.get("source", "").startswith(HOST_SOURCE):
+        raise HilError(
+            "a spirob-host recording holds the board link as the host saw it, not the board's CAN and "
+            "DBUS inputs nor its ticks: the board cannot replay it (play it with spirob-host --replay FILE)"
+        )
     _check_format(meta)
     config, rc_kind = _firmware_from(meta)
     bus = ReplayBus(config.motor.current_limit_raw)
@@ -207,6 +216,13 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
     segment_bytes = 0
     for rec in read_records(path, topics=_INPUTS | _OUTPUTS | {recording.TICK}):
         if rec.topic != recording.TICK:
+            if tick_us is None and rec.topic in _OUTPUTS:
+                # The board emits only from a tick, after its mark: outputs before any mark were not
+                # recorded in lockstep (a host's or a port run's file without its metadata).
+                raise HilError(
+                    f"{rec.topic} output before any {recording.TICK} mark: not a lockstep recording, "
+                    "the board cannot replay it"
+                )
             segment.append(rec)
             segment_bytes += len(rec.data)
             if len(segment) > MAX_SEGMENT_RECORDS or segment_bytes > MAX_SEGMENT_BYTES:

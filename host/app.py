@@ -17,10 +17,11 @@ import logging
 import socket
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from controller.cli_kit import EXIT_FAILURE, EXIT_OK, EXIT_USAGE
+from controller.cli_kit import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, error_line
 from host.errors import HostError
 from host.excite import ExcitationDriver, ExciteConfig, operator_lines
 from host.link.client import BoardClient, load_scaled_s
@@ -29,6 +30,7 @@ from host.link.recording import LinkRecording
 from host.link.replay import ReplaySource
 from host.link.source import BoardSource
 from host.options import (
+    PROG,
     HostOptions,
     check_signing_timestamp_writable,
     check_ui_port_free,
@@ -45,7 +47,7 @@ from host.panel.scene import ArmGeometry, DronePose, SceneObject, ned_to_scene, 
 from host.plant_model import resolve_preset, shadow_plant_factory, virtual_board_config
 from host.run_summary import RunSummary, SummaryReport
 from host.shadow import ShadowPlant
-from host.virtual_rc import VirtualRcDriver
+from host.virtual_rc import ScriptDriver, ScriptState, VirtualRcDriver
 
 __all__ = ["HostApp"]
 
@@ -97,6 +99,8 @@ class HostApp:
         self.drone_link: Any = None
         self.gamepad: Any = None
         self.virtual_rc: VirtualRcDriver | None = None
+        self.script: ScriptDriver | None = None
+        """``--virtual-rc-script``: the radio script played on the board."""
         self.excite: ExcitationDriver | None = None
         """``--excite``: the excitation played on the board."""
         self.preset: Any = None
@@ -178,6 +182,12 @@ class HostApp:
         if o.virtual_rc is not None:
             self.virtual_rc = VirtualRcDriver(arbiter, board, o.virtual_rc)
             self.virtual_rc.start()
+        if o.virtual_rc_script is not None and client is not None:
+            self.script = ScriptDriver(
+                arbiter, o.virtual_rc_script, self._say("script"), timeout_scale=load_scaled_s(1.0)
+            )
+            client.add_listener(self.script.on_board_message)
+            self.script.start()
         if o.gamepad is not None:
             self._start_gamepad(o.gamepad)
 
@@ -254,6 +264,20 @@ class HostApp:
         client.add_listener(self.excite.on_board_message)
         client.add_state_listener(self.excite.on_link_state)
         self.excite.start()
+
+    def _say(self, source: str) -> Callable[[str, str], None]:
+        """Lines for the operator from ``source``: ``info`` to stdout, ``error`` as one line on stderr;
+        both also in the panel's event console."""
+        notices = self.notices
+
+        def say(level: str, text: str) -> None:
+            if level == "error":
+                error_line(PROG, text)
+            else:
+                print(f"{PROG}: {text}", flush=True)
+            notices.log(source, level, text)
+
+        return say
 
     def _start_gamepad(self, path: str) -> None:
         from host.gamepad import Gamepad
@@ -366,9 +390,9 @@ class HostApp:
 
         Returns:
             The exit status: 2 if the ``--replay`` file was refused (``replay.error``), 1 if a
-            ``--virtual-rc`` run ended latched in a failsafe, saw a fault or no
-            telemetry at all (:meth:`SummaryReport.failure`), or an ``--excite`` profile did not play to
-            its end (the run ends with it), else 0.
+            ``--virtual-rc`` or ``--virtual-rc-script`` run ended latched in a failsafe, saw a fault or no
+            telemetry at all (:meth:`SummaryReport.failure`), a radio script did not reach its every step
+            or an ``--excite`` profile did not play to its end (the run ends with either), else 0.
         """
         stop = stop or threading.Event()
         end = None if duration_s is None else time.monotonic() + duration_s
@@ -383,6 +407,8 @@ class HostApp:
                 break
             if self.excite is not None and self.excite.done.is_set():
                 break  # the run ends with its excitation
+            if self.script is not None and self.script.done.is_set():
+                break  # and with its radio script
             if now >= next_status:
                 next_status = now + 10.0
                 _log.info("%s", self.status_line())
@@ -393,12 +419,17 @@ class HostApp:
             why = "the run was interrupted" if stop.is_set() else "--duration ran out"
             outcome = self.excite.stop(f"{why} before the profile ended")
             excite_failed = outcome is None or not outcome.completed
+        script_failed = False
+        if self.script is not None:
+            why = "the run was interrupted" if stop.is_set() else "--duration ran out"
+            script_failed = self.script.stop(f"{why} before the script ended") is not ScriptState.DONE
         self.report = self.take_report()
         if self.replay is not None and self.replay.error is not None:
             return EXIT_USAGE
-        if self.options.virtual_rc is not None and self.report.failure() is not None:
+        scripted = self.options.virtual_rc is not None or self.script is not None
+        if scripted and self.report.failure() is not None:
             return EXIT_FAILURE
-        return EXIT_FAILURE if excite_failed else EXIT_OK
+        return EXIT_FAILURE if excite_failed or script_failed else EXIT_OK
 
     def take_report(self) -> SummaryReport:
         """The run's summary so far, with the virtual radio's gaps from the link (when there is one)."""
@@ -430,6 +461,8 @@ class HostApp:
         if self.virtual_rc is not None:
             self.virtual_rc.stop()
             self.virtual_rc = None
+        if self.script is not None:
+            self.script.stop("the host closed before the script ended")
         if self.replay is not None:
             self.replay.stop()
         if self.gamepad is not None:

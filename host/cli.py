@@ -5,9 +5,11 @@ on http://127.0.0.1:8080. ``--port`` connects to a real board (``/dev/ttyACM0``)
 instead. Start-up errors (wrong port, busy port, UI port taken, bad flags) print one line and exit 2;
 a board that vanishes mid-run is retried until it comes back, with the panel showing "disconnected".
 
-Exit status: 0 normal end (``--duration`` elapsed, Ctrl-C, replay finished headless), 1 runtime failure
-or a ``--virtual-rc`` run that ended latched in a failsafe, saw a fault or got no telemetry, 2 start-up or
-usage error (a ``--replay`` file the bounded reader refuses too, even mid-replay). A summary of the run
+Exit status: 0 normal end (``--duration`` elapsed, Ctrl-C, replay finished headless, a
+``--virtual-rc-script`` that reached its every step), 1 runtime failure, a ``--virtual-rc`` or
+``--virtual-rc-script`` run that ended latched in a failsafe, saw a fault or got no telemetry, or a radio
+script that did not reach a step, 2 start-up or usage error (a ``--replay`` file the bounded reader
+refuses too, even mid-replay; a radio script that is not valid). A summary of the run
 (time per mode and phase, failsafes, faults, RC gaps) is printed at exit.
 """
 
@@ -30,6 +32,7 @@ from host.app import HostApp
 from host.errors import HostError
 from host.object_spec import describe_object
 from host.options import PROG, HostOptions, build_parser
+from host.virtual_rc import ScriptState
 
 __all__ = ["main"]
 
@@ -87,8 +90,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 for line in report.lines():
                     print(f"{PROG}: {line}", flush=True)
                 failure = report.failure()
-                if status == EXIT_FAILURE and failure is not None:
-                    error_line(PROG, f"--virtual-rc run failed: {failure}")
+                script = app.script
+                if script is not None and script.run.state is not ScriptState.DONE:
+                    pass  # the script said why in its own error line
+                elif status == EXIT_FAILURE and failure is not None:
+                    flag = "--virtual-rc-script" if script is not None else "--virtual-rc"
+                    error_line(PROG, f"{flag} run failed: {failure}")
             return status
         except KeyboardInterrupt:  # Ctrl-C outside the main thread's handler: a normal end too
             return EXIT_OK

@@ -21,6 +21,7 @@ from host.errors import HostError
 from host.gamepad import DEFAULT_MAPPING, GamepadMapping, format_mapping, parse_mapping
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
 from host.panel.arbiter import new_token
+from host.virtual_rc import RadioScript, ScriptError
 from protocol.dbus import Lever
 
 if TYPE_CHECKING:
@@ -110,6 +111,14 @@ def build_parser() -> argparse.ArgumentParser:
         choices=sorted(VIRTUAL_RC_LEVERS),
         help="drive the virtual radio from the command line: right lever DOWN first (start-up gate), "
         "then SAFE / MANUAL / GRASP; a browser tab can ask for control and gets it",
+    )
+    src.add_argument(
+        "--virtual-rc-script",
+        type=Path,
+        metavar="FILE",
+        help="play a timeline of lever and stick positions (TOML [[step]] tables, docs/host.md) on the "
+        "virtual radio; the run ends with it: exit 0 only if every step was reached, e.g. "
+        "examples/06_scripted_grasp.toml",
     )
     src.add_argument(
         "--no-shadow",
@@ -265,6 +274,7 @@ class HostOptions:
         foxglove_port: serve the Foxglove channels live on 127.0.0.1 at this port (None = not).
         foxglove_origins: browser origins the live server lets in besides none (``--foxglove-origin``).
         virtual_rc: right lever the command line drives the virtual radio to (None = it does not).
+        virtual_rc_script: the radio script the command line plays (``--virtual-rc-script``; None: none).
         mavlink: MAVLink connection string.
         mav_sysid: drone system id.
         mav_compid: our component id.
@@ -294,6 +304,7 @@ class HostOptions:
     foxglove_port: int | None = None
     foxglove_origins: tuple[str, ...] = ()
     virtual_rc: Lever | None = None
+    virtual_rc_script: RadioScript | None = None
     mavlink: str | None = None
     mav_sysid: int = 1
     mav_compid: int = 25
@@ -323,6 +334,8 @@ class HostOptions:
                 raise HostError("--replay and --record cannot be combined")
             if ns.virtual_rc is not None:
                 raise HostError("--virtual-rc needs a board; it cannot be used with --replay")
+            if ns.virtual_rc_script is not None:
+                raise HostError("--virtual-rc-script needs a board; it cannot be used with --replay")
             if ns.gamepad is not None:
                 raise HostError("--gamepad needs a board; it cannot be used with --replay")
             if ns.excite is not None:
@@ -343,6 +356,7 @@ class HostOptions:
         if ns.port is not None:
             check_board_url(ns.port)
         _check_excite_and_preset(ns)
+        script = _script_from_args(ns)
         objects = _objects_from_args(ns)
         gamepad_map = _gamepad_from_args(ns)
         if ns.mavlink is not None:
@@ -381,6 +395,7 @@ class HostOptions:
             foxglove_port=ns.foxglove,
             foxglove_origins=_foxglove_origins(ns),
             virtual_rc=VIRTUAL_RC_LEVERS[ns.virtual_rc] if ns.virtual_rc else None,
+            virtual_rc_script=script,
             mavlink=ns.mavlink,
             mav_sysid=ns.mav_sysid,
             mav_compid=ns.mav_compid,
@@ -410,6 +425,24 @@ def _check_excite_and_preset(ns: argparse.Namespace) -> None:
         )
     if ns.preset is not None and ns.port is not None and ns.no_shadow:
         raise HostError("--preset with --port is the shadow plant's model; it cannot go with --no-shadow")
+
+
+def _script_from_args(ns: argparse.Namespace) -> RadioScript | None:
+    """``--virtual-rc-script``: the script read and checked, alone on the radio.
+
+    Raises:
+        HostError: another driver of the radio, ``--excite``, or a script that is not valid (one line).
+    """
+    path = ns.virtual_rc_script
+    if path is None:
+        return None
+    for flag, given in (("--virtual-rc", ns.virtual_rc), ("--gamepad", ns.gamepad), ("--excite", ns.excite)):
+        if given is not None:
+            raise HostError(f"--virtual-rc-script and {flag} cannot be combined (both drive the board)")
+    try:
+        return RadioScript.load(path)
+    except ScriptError as exc:
+        raise HostError(f"--virtual-rc-script {path}: {exc}") from None
 
 
 def _gamepad_from_args(ns: argparse.Namespace) -> GamepadMapping:

@@ -93,6 +93,25 @@ def test_readme_names_every_spirob_hil_subcommand_and_benchmark() -> None:
     assert all(f"bench/{b}" in README for b in benches), benches
 
 
+_OUTPUT_FLAGS = ("--record", "--report", "-o", "--out")
+"""The flags through which a spirob-host or spirob-hil command writes files or directories."""
+
+
+def test_readme_commands_write_under_runs_which_git_ignores() -> None:
+    """A fresh clone stays clean: what the README's commands write goes under ``runs/`` (issue 25)."""
+    commands = re.findall(r"^\.venv/bin/spirob-(?:host|hil) .*$", README, re.M)
+    assert len(commands) > 10, commands
+    outputs = []
+    for command in commands:
+        words = command.split("#")[0].split()
+        outputs += [words[i + 1] for i, w in enumerate(words[:-1]) if w in _OUTPUT_FLAGS]
+    assert len(outputs) >= 8, outputs
+    elsewhere = [path for path in outputs if not path.startswith("runs/")]
+    assert not elsewhere, elsewhere
+    assert "mkdir -p runs" in README  # --record and -o need their directory; --report creates its own
+    assert "/runs/" in (ROOT / ".gitignore").read_text(encoding="utf-8").splitlines()
+
+
 def test_readme_links_resolve() -> None:
     for target in re.findall(r"\]\(([^)#]+)\)", README):
         if "://" not in target:

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from tests.support.realtime_guard import retry_void
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = sorted((ROOT / "examples").glob("[0-9][0-9]_*.py"))
@@ -16,9 +19,16 @@ def test_examples_exist() -> None:
     assert len(EXAMPLES) >= 4
 
 
-WALL_CLOCK = frozenset({"03_host_panel.py", "04_drone_link.py"})
+WALL_CLOCK = frozenset({"03_host_panel.py", "04_drone_link.py", "06_scripted_grasp.py"})
 """The examples that run a real-time board, a link process or a host: marked ``realtime`` (they need the
 machine to themselves); the others are lockstep simulations and computations."""
+
+
+def _starved(proc: subprocess.CompletedProcess[str]) -> str | None:
+    """A failed run whose host summary shows the link's RC frames more than 30 ms apart was starved by the
+    machine (the board rightly latched RC_LOST): void, not a result."""
+    m = re.search(r"RC gaps over 30 ms: [1-9]\d*.*", proc.stdout)
+    return None if proc.returncode == 0 or m is None else f"the link's RC frames were late: {m.group(0)}"
 
 
 @pytest.mark.parametrize(
@@ -27,9 +37,12 @@ machine to themselves); the others are lockstep simulations and computations."""
     ids=[p.name for p in EXAMPLES],
 )
 def test_example_runs(example: Path, tmp_path: Path) -> None:
-    proc = subprocess.run(
-        [sys.executable, str(example)], cwd=tmp_path, capture_output=True, text=True, timeout=180
-    )
+    def run() -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, str(example)], cwd=tmp_path, capture_output=True, text=True, timeout=180
+        )
+
+    proc = retry_void(run, _starved) if example.name in WALL_CLOCK else run()
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert proc.stdout.strip()
 

@@ -4,13 +4,19 @@ Everything a browser tab (or the command line: ``--virtual-rc``, ``--gamepad``) 
 :class:`ControlArbiter`, which checks who is asking, clamps every value again on the server side, and
 forwards it to the board: the operator's radio (sticks and levers) as one DBUS frame pushed to the link
 once per change (``BoardClient.set_rc``: the link process's 14 ms RC slot is the only clock that samples
-it; None when nobody holds control, then no RC is sent and the board falls to zero current after its
-30 ms RC timeout), and commands through ``BoardClient.send``.
+it), and commands through ``BoardClient.send``.
+
+The radio never falls silent on purpose: like a DT7 lying on the table, it transmits whether anyone holds
+control or not. Nobody holding control (at start, after a release, after the holder's tab closed) means
+the *idle* frame: sticks centred and both levers DOWN (SAFE, zero current; docs/host.md says why a
+released tab is not left where its lever was). An RC loss on the board is then a real one: a dead link
+process, a host frozen past its lease (``host.link.process``), a board link that went down.
 
 Control ownership: exactly one client holds control. Anyone authorised may ask for it; if nobody holds
 it the request is granted, otherwise the holder is asked and must grant it (or release it): a second tab
 never takes control silently. Whoever receives control starts from SAFE (right lever DOWN, sticks
-centred), and so does everyone after the board link (re)connects. E-stop is open to every authorised
+centred), and so does everyone after the board link (re)connects; so does the idle radio when control is
+given up. E-stop is open to every authorised
 client. A board's answer refusing a command is told to the tab that sent that command code in the last
 5 s (else to everybody: a command from MAVLink, or from a tab that left).
 """
@@ -67,7 +73,8 @@ class BoardSend(Protocol):
 
 
 RcOut = Callable[[RcFrame | None], None]
-"""Takes the operator's DBUS frame from now on (``BoardClient.set_rc``); None: no RC."""
+"""Takes the operator's DBUS frame from now on (``BoardClient.set_rc``; the arbiter never passes None,
+which would silence the radio)."""
 
 
 def new_token() -> str:
@@ -157,10 +164,13 @@ class ControlArbiter:
         self._holder: int | None = None
         self._pending: int | None = None
         self._authorised: set[int] = set()
-        self._frame: RcFrame | None = None
-        """The frame last given to ``rc_out``."""
+        self._frame = self._op_frame()
+        """The frame last given to ``rc_out``: the idle radio from the start (a link started later
+        begins with it)."""
         self._ack_owner: dict[int, tuple[int, float]] = {}
         """Command code -> (client, host time s) of the last command with that code."""
+        if rc_out is not None:
+            rc_out(self._frame)
 
     # ------------------------------------------------------------------ authorisation and control
 
@@ -193,7 +203,9 @@ class ControlArbiter:
     def _set_holder(self, client: int | None) -> None:
         self._holder = client
         self._pending = None
-        self._op = _Operator()  # whoever gets control starts from SAFE
+        # Whoever gets control starts from SAFE; control given up (or its tab gone) leaves the idle
+        # radio: sticks centred, both levers DOWN.
+        self._op = _Operator()
         self._publish()
 
     def request_control(self, client: int) -> ControlResult:
@@ -254,15 +266,16 @@ class ControlArbiter:
 
     # ------------------------------------------------------------------ the operator's radio
 
+    def _op_frame(self) -> RcFrame:
+        op = self._op
+        s = op.sticks
+        return RcFrame((s[0], s[1], s[2], s[3]), int(op.right_lever), int(op.left_lever))
+
     def _publish(self, force: bool = False) -> None:
         """Hand the radio's frame to the link if it changed (called with the lock held, so frames
-        reach the link in the order they were decided)."""
-        if self._holder is None:
-            frame = None
-        else:
-            op = self._op
-            s = op.sticks
-            frame = RcFrame((s[0], s[1], s[2], s[3]), int(op.right_lever), int(op.left_lever))
+        reach the link in the order they were decided). With nobody holding control this is the idle
+        frame (``_set_holder`` reset it), or DOWN after an E-stop."""
+        frame = self._op_frame()
         if frame == self._frame and not force:
             return
         self._frame = frame
@@ -333,10 +346,16 @@ class ControlArbiter:
             d = op.direct_tensions_n
             return (s[0], s[1], s[2], s[3]), op.right_lever, op.left_lever, (d[0], d[1], d[2])
 
-    def rc_frame(self) -> RcFrame | None:
-        """The DBUS frame the link is sending for the holder; None when nobody holds control (no RC)."""
+    def rc_frame(self) -> RcFrame:
+        """The DBUS frame the link is sending: the holder's, or the idle radio's when nobody holds
+        control."""
         with self._lock:
             return self._frame
+
+    @property
+    def idle(self) -> bool:
+        """Nobody holds control: the radio sends the idle frame (sticks centred, levers DOWN)."""
+        return self._holder is None
 
     # ------------------------------------------------------------------ commands
 

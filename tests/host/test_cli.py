@@ -6,7 +6,11 @@ real virtual board (``hil.board``).
 
 from __future__ import annotations
 
+import itertools
+import re
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -21,7 +25,7 @@ from host.options import HostOptions, build_parser
 from protocol.dbus import Lever
 from protocol.messages import Mode, Phase
 from tests.support.link_peer import LinkPeer
-from tests.support.realtime_guard import wait_for
+from tests.support.realtime_guard import retry_void, wait_for
 from tests.support.terminal import ctrl_c, start_in_own_group
 
 
@@ -475,3 +479,150 @@ def test_options_built_in_code_have_a_token_unless_told_otherwise() -> None:
     a, b = HostOptions(), HostOptions()
     assert a.token and b.token and a.token != b.token
     assert HostOptions(token=None).token is None  # only when asked for
+
+
+# ---------------------------------------------------------------------- the idle radio (nobody holds control)
+
+
+def _fresh_start(duration_s: str) -> subprocess.CompletedProcess[str]:
+    """A fresh `spirob-host` process on the virtual board, nobody holding control, for ``duration_s``."""
+    return subprocess.run(
+        [sys.executable, "-m", "host.cli", "--headless", "--duration", duration_s, "--log-level", "info"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def _rc_gaps_void(proc: subprocess.CompletedProcess[str]) -> str | None:
+    """A run whose link sent two RC frames more than 30 ms apart was starved by the machine (void)."""
+    m = re.search(r"RC gaps over 30 ms: (\d+)(?: \(longest ([\d.]+) ms\))?", proc.stdout)
+    if m is None or m.group(1) == "0":
+        return None
+    return f"the link sent RC frames {m.group(2)} ms apart ({m.group(1)} gaps over 30 ms)"
+
+
+@pytest.mark.realtime
+def test_a_fresh_start_shows_no_rc_lost() -> None:
+    """Nobody holds control: the virtual radio transmits anyway (as a DT7 does), so the board passes the
+    start-up gate and never latches RC_LOST; the run ends in SAFE, phase OK."""
+    proc = retry_void(lambda: _fresh_start("4"), _rc_gaps_void)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out
+    assert "RC_LOST" not in out and "failsafe latched" not in out, out
+    assert "failsafes: none" in proc.stdout, out
+    assert "ended in mode SAFE, phase OK" in proc.stdout, out
+    # The board heard the radio for the whole run (seconds of board time in phase OK, none in GATE after
+    # the first frames).
+    m = re.search(r"phase: (.*)", proc.stdout)
+    assert m is not None and "OK " in m.group(1), out
+
+
+def test_a_killed_link_process_is_an_rc_loss_while_nobody_holds_control() -> None:
+    """The idle radio must not hide a real loss: with no link process nobody transmits. The board's
+    telemetry is lost with the link meanwhile, so its own counters say it: across the gap the board took
+    too few RC frames to have had one every 30 ms (its RC-lost timeout), then the new process's SAFE
+    frames and the idle radio (DOWN) re-arm it: SAFE, zero current, phase OK, nobody holding control."""
+    import os
+    import signal
+
+    from host.link.process import RC_TIMEOUT_US
+    from host.link.source import LinkState
+    from protocol.messages import Message, Telemetry
+
+    seen: list[Telemetry] = []
+    with HostApp(HostOptions(ui=False)) as app:
+        app.start()
+        client, m, arbiter = app.client, app.board_state, app.arbiter
+        assert client is not None and m is not None and arbiter is not None
+
+        def collect(msg: Message) -> None:
+            if isinstance(msg, Telemetry):
+                seen.append(msg)
+
+        client.add_listener(collect)
+        assert wait_for(lambda: len(seen) > 5 and seen[-1].phase == Phase.OK, 30.0), seen[-1:]
+        assert arbiter.holder is None
+        n = len(seen)
+        os.kill(client._proc.pid, signal.SIGKILL)
+        assert wait_for(lambda: client.stats().process_restarts == 1, 10.0)
+        assert wait_for(lambda: client.state is LinkState.CONNECTED, 30.0)
+        assert wait_for(lambda: len(seen) > n + 50 and seen[-1].phase == Phase.OK, 10.0), seen[-1:]
+        # The longest stretch of board time without telemetry is the dead link.
+        a, b = max(itertools.pairwise(seen[n - 1 :]), key=lambda p: p[1].time_us - p[0].time_us)
+        gap_us, took = b.time_us - a.time_us, b.rc_frames_ok - a.rc_frames_ok
+        assert gap_us > 10 * RC_TIMEOUT_US, (a, b)
+        # ``took`` frames cut the gap into at most took + 1 intervals: one of them exceeded 30 ms.
+        assert (took + 1) * RC_TIMEOUT_US < gap_us, f"the board took {took} RC frames in {gap_us} us"
+        assert all(t.commanded_current == (0, 0, 0) and t.mode == Mode.SAFE for t in seen[n:])
+        assert arbiter.holder is None
+
+
+def test_a_frozen_host_is_an_rc_loss_while_nobody_holds_control() -> None:
+    """A host frozen past its lease (1 s): the link process stops the idle radio too, so the board
+    latches RC_LOST instead of hearing a radio nobody runs; with the host back the idle radio re-arms it."""
+    from protocol.messages import Message
+
+    release = threading.Event()
+    stalled = threading.Event()
+
+    def freeze(msg: Message) -> None:
+        # The dispatcher thread renews the lease: hold it inside a listener, once, past the lease.
+        if stalled.is_set() and not release.is_set():
+            release.wait(2.5)
+            release.set()
+
+    with HostApp(HostOptions(ui=False)) as app:
+        app.start()
+        client, m = app.client, app.board_state
+        assert client is not None and m is not None
+        assert wait_for(lambda: m.telemetry is not None and m.telemetry.phase == Phase.OK, 30.0), m.telemetry
+        assert app.take_report().failsafes == ()
+        client.add_listener(freeze)
+        stalled.set()
+        assert wait_for(release.is_set, 10.0)
+        assert wait_for(lambda: "RC_LOST" in [p for _, p in app.take_report().failsafes], 10.0)
+        assert client.stats().lease_expired >= 1
+        n = m.telemetry_count
+
+        def back_in_ok() -> bool:
+            return m.telemetry_count > n + 10 and m.telemetry is not None and m.telemetry.phase == Phase.OK
+
+        assert wait_for(back_in_ok, 10.0), m.telemetry
+        assert m.telemetry is not None and m.telemetry.mode == Mode.SAFE
+        assert app.arbiter is not None and app.arbiter.holder is None
+
+
+# ---------------------------------------------------------------------- spirob-hil replay of a host recording
+
+
+def test_spirob_hil_replay_refuses_a_host_recording_in_one_line(
+    peer: LinkPeer, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The board cannot replay what the host saw of the link: one line, exit 2 (not "N of N differ")."""
+    from hil.cli.main import main as hil_main
+    from hil.recording import Recorder, read_metadata, read_records
+
+    path = tmp_path / "host.mcap"
+    assert main(["--port", peer.url, "--headless", "--duration", "1", "--record", str(path)]) == 0
+    capsys.readouterr()
+    assert read_metadata(path)["source"] == "spirob-host"
+    assert hil_main(["replay", str(path)]) == 2
+    captured = capsys.readouterr()
+    line = one_error_line(captured.err)
+    assert "spirob-host recording" in line and "cannot replay" in line and "spirob-host --replay" in line
+    assert "differ" not in captured.out + captured.err
+    # The same file with the host's name taken out of its metadata (and a virtual board's firmware put
+    # in, as the host writes for its virtual board): refused by its content, the link's outputs before
+    # any tick mark.
+    from hil.board import BoardConfig
+
+    meta = {k: v for k, v in read_metadata(path).items() if k != "source"} | BoardConfig().describe()
+    anonymous = tmp_path / "anonymous.mcap"
+    with Recorder(anonymous, metadata=meta) as out:
+        for rec in read_records(path):
+            if rec.topic.startswith("/board/"):
+                out.write_raw(rec.topic, rec.time_us, rec.data)
+    assert hil_main(["replay", str(anonymous)]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "before any /board/tick mark: not a lockstep recording" in line, line

@@ -20,7 +20,7 @@ class Link:
     def __init__(self) -> None:
         self.sent: list[Message] = []
         self.origins: list[str] = []
-        self.frames: list[RcFrame | None] = []
+        self.frames: list[RcFrame | None] = []  # None would be silence
 
     def send(self, msg: Message, *, origin: str = "host") -> bool:
         self.sent.append(msg)
@@ -64,16 +64,49 @@ def test_new_holder_starts_safe_and_leaving_releases() -> None:
     assert link.frames[-1] == frame  # and that is what the link sends
     m.client_left(2)
     assert m.holder is None
-    assert m.rc_frame() is None  # nobody holds control: no RC at all
-    assert link.frames[-1] is None
+    assert m.rc_frame() == IDLE  # nobody holds control: the idle radio, never silence
+    assert link.frames[-1] == IDLE
+
+
+IDLE = RcFrame((0, 0, 0, 0), int(Lever.DOWN), int(Lever.DOWN))
+"""What the radio sends with nobody holding control: sticks centred, both levers DOWN."""
+
+
+def test_the_radio_transmits_the_idle_frame_from_the_start() -> None:
+    # A DT7 transmits whether anyone touches it or not: the link gets a frame before anyone takes control.
+    m, link, _ = make()
+    assert m.holder is None and m.idle
+    assert link.frames == [IDLE] and m.rc_frame() == IDLE
+    # Nobody holding control moves nothing: a tab without control cannot set the idle radio.
+    assert not m.set_lever(1, "right", Lever.MIDDLE) and not m.set_stick(1, 3, 500)
+    assert link.frames == [IDLE]
+    # The first holder starts from the same SAFE frame (unchanged: not pushed again).
+    m.request_control(1)
+    assert not m.idle and link.frames == [IDLE]
+
+
+@pytest.mark.parametrize("how", ["release", "tab closed"])
+def test_control_given_up_mid_drive_leaves_a_safe_idle_radio(how: str) -> None:
+    # A tab in GRASP with the left lever UP and a stick deflected: the radio it leaves behind is SAFE
+    # (right lever DOWN: zero current on the board) with every stick centred, not its last position.
+    m, link, _ = make()
+    m.request_control(1)
+    assert m.set_radio(1, (300, -200, 0, 500), Lever.UP, Lever.UP)
+    assert link.frames[-1] == RcFrame((300, -200, 0, 500), int(Lever.UP), int(Lever.UP))
+    if how == "release":
+        assert m.release_control(1)
+    else:
+        m.client_left(1)
+    assert m.idle and link.frames[-1] == IDLE and m.rc_frame() == IDLE
+    assert m.operator_input()[:3] == ((0, 0, 0, 0), Lever.DOWN, Lever.DOWN)
 
 
 def test_the_radio_reaches_the_link_once_per_change() -> None:
     """One sampler: the arbiter pushes a frame when the operator changes it, never on a clock."""
     m, link, _ = make()
-    assert link.frames == []  # nobody holds control: nothing pushed, no RC
+    assert link.frames == [RcFrame.neutral()]  # nobody holds control: the idle radio, pushed once
     m.request_control(1)
-    assert link.frames == [RcFrame.neutral()]  # the new holder's SAFE frame
+    assert link.frames == [RcFrame.neutral()]  # the new holder's SAFE frame: the same, not pushed again
     m.set_stick(1, 3, 300)
     m.set_stick(1, 3, 300)  # the same value again: nothing new to send
     m.set_stick(1, 3, 300.2)  # rounds to the same count

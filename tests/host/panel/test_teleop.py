@@ -226,9 +226,9 @@ def test_state_bar_toasts_space_and_parameters(app: HostApp, browser: Any) -> No
     assert m is not None and arb is not None and params is not None
     page_a = open_panel(browser, app)
     a = client_of(app, set())
-    # Nobody drives yet: no RC, the board waits (RC_LOST or GATE), the bar says how to start.
-    text = wait_bar(page_a, "Take control")
-    assert text.split(" · ")[0] in ("RC_LOST", "GATE"), text
+    # Nobody drives yet: the idle radio (levers DOWN) has passed the gate, SAFE; the bar says how to start.
+    text = wait_bar(page_a, "OK · SAFE", "Take control")
+    assert text.split(" · ")[0] == "OK", text
     page_a.get_by_role("button", exact=True, name="Take control").click()
     assert _wait(lambda: arb.holder == a)
     # The new holder sends the right lever DOWN: the gate opens, SAFE; the lever button shows it.
