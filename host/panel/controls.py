@@ -150,7 +150,7 @@ def build_control_panel(
             }
             centre = gui.add_button("Centre sticks  [C]", disabled=True)
             gui.add_markdown(
-                "Right stick: the arm bends that way (right = right, up = away in the stick view). "
+                "Right stick: the arm bends that way (up = toward the drone's nose, right = your right). "
                 "Left ↕ up: every cable tighter. Left ↔: not used by the board."
             )
         with gui.add_folder("Levers"):
