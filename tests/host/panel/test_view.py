@@ -51,6 +51,12 @@ X_SCALES_JS = (
 """Each chart's x range as uPlot holds it (viser's test point)."""
 CANVASES_JS = "() => Array.from(document.querySelectorAll('.uplot canvas')).map(c => c.toDataURL())"
 """Each chart's canvas as a PNG data URL."""
+SCENE_BOX_JS = """() => {
+    const r = Array.from(document.querySelectorAll('canvas')).map(c => c.getBoundingClientRect())
+        .sort((a, b) => b.width * b.height - a.width * a.height)[0];
+    return {x: r.x, y: r.y, width: r.width, height: r.height};
+}"""
+"""The 3-D view's box: the largest canvas on the page."""
 
 if shutil.which(CHROMIUM) is None:
     pytest.fail(f"{CHROMIUM} is not installed: the browser tests need it", pytrace=False)
@@ -190,7 +196,7 @@ def _history_s(board: Any) -> float:
 
 def _scene_pixels(page: Any, image: Any) -> Any:
     """The 3-D view's pixels left of the panel, from a screenshot of that region only."""
-    box = page.locator("canvas").first.bounding_box()
+    box = page.evaluate(SCENE_BOX_JS)  # the largest canvas: the 3-D view (the charts' are small)
     panel = page.get_by_text("SpiRob teleop").first.bounding_box()
     right = panel["x"] - 10 if panel else box["x"] + box["width"]
     clip = {"x": box["x"], "y": box["y"], "width": right - box["x"], "height": box["height"]}
