@@ -8,8 +8,8 @@ key   meaning                                                     default
 ===== =========================================================== ==========
 d     diameter                                                    (required)
 len   length along the axis                                       60mm
-x     centre, forward of the arm's base (the grasp side, cable 1) 0mm
-y     centre, to the base's left                                  0mm
+x     centre, right of the arm's base (the grasp side, cable 1)   0mm
+y     centre, forward of the base (toward the drone's nose)       0mm
 z     centre, above the arm's base (negative: below it)           (required)
 axis  the axis direction: ``x``, ``y`` or ``z``                   y
 ===== =========================================================== ==========
@@ -61,8 +61,8 @@ class ObjectSpec:
         shape: one of :data:`SHAPES`.
         diameter_m: diameter.
         length_m: length along the axis.
-        x_m: centre, forward of the base (the side of cable 1, where a grasp goes by default).
-        y_m: centre, to the base's left.
+        x_m: centre, right of the base (the side of cable 1, where a grasp goes by default).
+        y_m: centre, forward of the base (toward the drone's nose, ``host.panel.scene.NOSE_AXIS``).
         z_m: centre, above the base (negative: below).
         axis: ``"x"``, ``"y"`` or ``"z"`` (:data:`AXES`).
     """

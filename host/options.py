@@ -132,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=[],
         metavar="SPEC",
         help="virtual board only, repeatable: a fixed object in the scene, placed from the arm's base "
-        "(x forward, y left, z up), lengths with units: SHAPE:d=DIAMETER,z=HEIGHT[,x=..][,y=..][,len=..]"
+        "(x right, y forward, z up), lengths with units: SHAPE:d=DIAMETER,z=HEIGHT[,x=..][,y=..][,len=..]"
         "[,axis=x|y|z], SHAPE cylinder or capsule, e.g. cylinder:d=20mm,x=40mm,z=-110mm. "
         f"Default: one {describe_object(DEFAULT_OBJECT)}, a pole the grasp strategy wraps",
     )

@@ -13,7 +13,7 @@ from host.panel.board_state import BoardState
 from host.panel.scene import CAMERA_PRESETS
 from host.panel.state_bar import KEY_HOOK_HTML, pilot_state, state_bar_html
 from protocol.dbus import Lever
-from protocol.messages import CommandCode, Mode, TelemetryFlags
+from protocol.messages import ArmBlocker, CommandCode, Mode, Phase, TelemetryFlags
 
 __all__ = [
     "LEVER_OPTIONS",
@@ -150,7 +150,7 @@ def build_control_panel(
             }
             centre = gui.add_button("Centre sticks  [C]", disabled=True)
             gui.add_markdown(
-                "Right stick: the arm bends that way (right = right, up = away in the stick view). "
+                "Right stick: the arm bends that way (up = toward the drone's nose, right = your right). "
                 "Left ↕ up: every cable tighter. Left ↔: not used by the board."
             )
         with gui.add_folder("Levers"):
@@ -378,6 +378,11 @@ def refresh_control(
     if force or bar != h.shown.get("bar"):
         h.state_bar.content = bar
     flags = int(telemetry.flags) if telemetry is not None else 0
+    # Arm does something only while the board is not armed and no E-stop is latched (it refuses then).
+    arm_useful = not flags & TelemetryFlags.ARMED and not (
+        telemetry is not None
+        and (telemetry.phase == Phase.ESTOP or telemetry.arm_blocker == ArmBlocker.ESTOP_LATCHED)
+    )
     # What the board holds (it drops every hold on a mode change or failsafe): the toggles follow it.
     held = tuple(bool(flags & (TelemetryFlags.HOLD_1 << i)) for i in range(3))
     if mine:
@@ -402,6 +407,7 @@ def refresh_control(
         "sticks": None if mine else sticks,
         "held": held,
         "bar": bar,
+        "arm_useful": arm_useful,
     }
     if not force and state == h.shown:
         return
@@ -417,6 +423,7 @@ def refresh_control(
     h.estop.disabled = not authorised
     for w in h.action_widgets():
         w.disabled = not mine
+    h.arm.disabled = not (mine and arm_useful)
     if force or prev.get("mine") != mine or (not mine and prev.get("sticks") != sticks):
         # Whoever gets (or loses) control starts from SAFE: show the reset sticks. Watchers see
         # the holder's sticks (their own sliders are disabled).

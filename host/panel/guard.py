@@ -24,6 +24,9 @@ while the server starts, so every request passes :meth:`PanelGuard.check` first:
 
 Refusals are counted (:class:`GuardStats`) and logged at info level, one line each.
 
+The page it lets through is viser's ``index.html`` with its ``<title>`` set to :data:`PAGE_TITLE`
+(viser's client never sets ``document.title``: every tab was titled "Viser").
+
 A message on an open websocket that viser cannot decode (not msgpack, a text frame, an unknown type,
 missing fields) ends that connection inside viser's handler, which ``websockets`` logs with a
 traceback; a decoded one whose handler raises ends as an asyncio task error, traced too. Both are
@@ -34,6 +37,8 @@ rest at debug level (:meth:`PanelGuard.attach`).
 from __future__ import annotations
 
 import asyncio
+import dataclasses
+import gzip
 import hmac
 import http
 import http.cookies
@@ -48,12 +53,16 @@ from host.errors import HostError
 from host.http_headers import header_problem
 from host.options import is_loopback
 
-__all__ = ["GuardStats", "PanelGuard", "request_token", "start_guarded_server"]
+__all__ = ["PAGE_TITLE", "GuardStats", "PanelGuard", "request_token", "retitle_page", "start_guarded_server"]
 
 _log = logging.getLogger(__name__)
 
 COOKIE_PREFIX = "spirob_token_"
 """Cookie name prefix; the panel's port follows, so two hosts on one machine keep their own tokens."""
+
+PAGE_TITLE = "SpiRob Teleop"
+"""The browser tab's title."""
+_VISER_TITLE = b"<title>Viser</title>"
 
 _START_LOCK = threading.Lock()
 """Serialises the window in which ``websockets.asyncio.server.serve`` is wrapped (see below)."""
@@ -90,6 +99,36 @@ def _host_port(host_header: str) -> int | None:
         return urllib.parse.urlsplit("//" + host_header).port
     except ValueError:
         return None
+
+
+def retitle_page(response: Any, cache: dict[bytes, bytes] | None = None) -> Any:
+    """``response`` with viser's page title replaced by :data:`PAGE_TITLE` (other responses unchanged).
+
+    Args:
+        response: a ``websockets`` HTTP response (``status_code``, ``reason_phrase``, ``headers``,
+            ``body``), its body plain or gzip-encoded.
+        cache: original body -> rewritten body (viser serves the same bytes every time).
+    """
+    if response is None or not str(response.headers.get("Content-Type", "")).startswith("text/html"):
+        return response
+    body: bytes = response.body
+    new = cache.get(body) if cache is not None else None
+    if new is None:
+        zipped = response.headers.get("Content-Encoding") == "gzip"
+        try:
+            page = gzip.decompress(body) if zipped else body
+        except (OSError, EOFError):
+            return response
+        if _VISER_TITLE not in page:
+            return response
+        page = page.replace(_VISER_TITLE, f"<title>{PAGE_TITLE}</title>".encode(), 1)
+        new = gzip.compress(page) if zipped else page
+        if cache is not None:
+            cache[body] = new
+    if "Content-Length" in response.headers:  # ``Headers`` holds several values per name: replace, not add
+        del response.headers["Content-Length"]
+    response.headers["Content-Length"] = str(len(new))
+    return dataclasses.replace(response, body=new)
 
 
 def request_token(path: str, headers: Any) -> str | None:
@@ -131,6 +170,7 @@ class PanelGuard:
         """The server's port, once it listens (:meth:`attach`)."""
         self._lock = threading.Lock()
         self._ws_filter: logging.Filter | None = None
+        self._pages: dict[bytes, bytes] = {}
 
     def _malformed(self, what: object) -> None:
         with self._lock:
@@ -245,7 +285,7 @@ class PanelGuard:
             refused = self.check(connection, request)
             if refused is not None:
                 return refused
-            response = inner(connection, request) if inner is not None else None
+            response = retitle_page(inner(connection, request) if inner is not None else None, self._pages)
             given = urllib.parse.parse_qs(urllib.parse.urlsplit(request.path).query).get("token")
             if response is not None and self.token is not None and given:
                 # The page came with a valid token: the cookie takes it to the websocket, whose URL

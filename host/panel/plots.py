@@ -4,6 +4,15 @@ Controls (shared by every tab: the charts are one set): pause, the window length
 which cables are shown. Each chart's y range is computed here, never left to uPlot's auto-scaling:
 an empty chart shows its physical range (0..tension ceiling, ±1 A, 0..10 mm), and a flat trace gets a
 minimum span around its value instead of an arbitrary 0..100.
+
+The x axis is pinned too, to ``[-window, 0]`` (``auto: false``), never left to uPlot. Why (viser 1.1.1's
+``UplotComponent.tsx``): any change of a chart's ``scales`` makes uplot-react destroy and rebuild the
+chart, and for an *auto* x scale viser keeps the user's zoom as bounds relative to the data, read back
+from the chart in an effect clean-up. Read from a chart just rebuilt, whose scales uPlot has not yet
+committed (min and max still null), they default to 0 and 1: the relative bounds become 1.0..1.1 of the
+data's span, i.e. x = 0..1 s, one dot at t = 0, and every later update keeps that window until the page
+is reloaded. A fixed x range skips that code (viser returns early for a non-auto x scale) and is pinned
+again by the init hook of every rebuilt chart.
 """
 
 from __future__ import annotations
@@ -53,18 +62,28 @@ def _series(label: str, stroke: str, dash: bool = False) -> dict[str, Any]:
     return s
 
 
-def fixed_scales(lo: float, hi: float) -> dict[str, Any]:
-    """A chart's ``scales``: relative time on x, a fixed y range."""
-    return {"x": {"time": False, "auto": True}, "y": {"auto": False, "range": [lo, hi]}}
+def fixed_scales(lo: float, hi: float, window_s: float) -> dict[str, Any]:
+    """A chart's ``scales``: x fixed to the last ``window_s`` seconds (relative time, 0 = newest), y fixed
+    to ``lo..hi`` (see the module's docstring for why neither is left to uPlot)."""
+    return {
+        "x": {"time": False, "auto": False, "range": [-float(window_s), 0.0]},
+        "y": {"auto": False, "range": [lo, hi]},
+    }
 
 
-def _add_plot(server: viser.ViserServer, title: str, series: tuple[dict[str, Any], ...], empty: Any) -> Any:
+def _add_plot(
+    server: viser.ViserServer,
+    title: str,
+    series: tuple[dict[str, Any], ...],
+    empty: tuple[float, float],
+    window_s: float,
+) -> Any:
     """One uPlot with an empty sample per series, a relative-time x axis and a fixed y range."""
     return server.gui.add_uplot(
         data=tuple(np.zeros(1) for _ in series),
         series=series,  # type: ignore[arg-type]
         title=title,
-        scales=fixed_scales(*empty),
+        scales=fixed_scales(*empty, window_s),
         aspect=1.6,
     )
 
@@ -136,15 +155,14 @@ def build_plot_panel(
         history_s: the longest window (the model's history).
     """
     gui = server.gui
+    window_s = min(window_s, history_s)
     x: dict[str, Any] = {"label": "t [s]"}
     cables = tuple(enumerate(_CABLE_STROKES))
     with gui.add_folder("Plots", order=_ORDER_PLOTS):
         pause = gui.add_checkbox(
             "Pause", initial_value=False, hint="Freeze the charts (the board keeps running)"
         )
-        window = gui.add_slider(
-            "Window [s]", min=1.0, max=history_s, step=1.0, initial_value=min(window_s, history_s)
-        )
+        window = gui.add_slider("Window [s]", min=1.0, max=history_s, step=1.0, initial_value=window_s)
         cable = gui.add_dropdown("Cables", CABLE_CHOICES, initial_value=CABLE_CHOICES[0])
         show = {
             "tensions": gui.add_checkbox("Show tensions", initial_value=True),
@@ -160,6 +178,7 @@ def build_plot_panel(
                 *(_series(f"T{i + 1} est", c) for i, c in cables),
             ),
             _EMPTY_RANGE["tensions"],
+            window_s,
         )
         currents = _add_plot(
             server,
@@ -170,12 +189,14 @@ def build_plot_panel(
                 *(_series(f"I{i + 1} meas", c) for i, c in cables),
             ),
             _EMPTY_RANGE["currents"],
+            window_s,
         )
         lengths = _add_plot(
             server,
             "Cable paid in [mm]",
             (x, *(_series(f"L{i + 1}", c) for i, c in cables)),
             _EMPTY_RANGE["lengths"],
+            window_s,
         )
     h = PlotHandles(tensions, currents, lengths, pause, window, cable, show)
     for name, box in show.items():

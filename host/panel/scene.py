@@ -14,6 +14,14 @@ whole arm at once; viser keeps only the newest state per node, so a slow browser
 The unit meshes are oriented without assuming how the MJCF places a unit in its body frame: a unit's
 axis is the direction to the next body, expressed in the unit's own frame (the tip reuses its
 neighbour's), so the drawing follows the plant whatever its convention.
+
+**Directions** (the arm's frame = the plant's drone body, body 0): the right stick bends the arm toward
+``atan2(ch1, ch0)`` from cable 1 (``controller.cables``), cable 1 at +x, so stick right = +x and stick
+forward = +y. The drone is drawn with its nose along **+y** (:data:`NOSE_AXIS`): stick forward bends the
+arm toward the nose and stick right toward the right of a pilot behind the drone, as on a DT7 flying the
+drone itself. On the real drone that is how the arm is mounted: cable 1 on the drone's right, cables 2
+and 3 at 120° steps counter-clockwise seen from above. A MAVLink pose (forward-left-up body) is turned
+into the arm's frame by :func:`arm_frame`.
 """
 
 from __future__ import annotations
@@ -34,11 +42,13 @@ import viser.transforms as vtf
 
 __all__ = [
     "CAMERA_PRESETS",
+    "NOSE_AXIS",
     "ArmGeometry",
     "DronePose",
     "SceneHandles",
     "SceneObject",
     "arm_drawing",
+    "arm_frame",
     "build_scene",
     "camera_view",
     "default_hanging_pose",
@@ -52,6 +62,11 @@ FloatArray = npt.NDArray[np.float64]
 
 DRONE_HEIGHT_M = 1.2
 """Where the drone hovers when no pose source says otherwise."""
+NOSE_AXIS = (0.0, 1.0, 0.0)
+"""The drone's nose in the arm's frame: +y, where the right stick's forward bends the arm (the pilot's
+right, stick right, is +x)."""
+_FLU_TO_ARM = (math.sqrt(0.5), 0.0, 0.0, -math.sqrt(0.5))
+"""The arm's frame in a forward-left-up drone body: yawed -90°, so the arm's +y is the body's +x (nose)."""
 _TRAIL_LEN = 150
 _CABLE_RADIUS = 0.55
 """Cable attachment radius as a fraction of the unit width (the unit mesh's surface is at 0.5)."""
@@ -176,6 +191,13 @@ def ned_to_scene(position: Any, attitude: Any) -> DronePose:
     t_frd_flu = np.diag([1.0, -1.0, -1.0])
     wxyz = vtf.SO3.from_matrix(t_enu_ned @ r_ned_frd @ t_frd_flu).wxyz
     return DronePose(pos, (float(wxyz[0]), float(wxyz[1]), float(wxyz[2]), float(wxyz[3])))
+
+
+def arm_frame(drone: DronePose) -> DronePose:
+    """The pose of the arm's frame (the scene's body 0) for a drone pose in forward-left-up axes
+    (:func:`ned_to_scene`): same position, yawed so that :data:`NOSE_AXIS` points along the drone's nose."""
+    q = quat_mul(np.asarray(drone.wxyz, dtype=np.float64), np.asarray(_FLU_TO_ARM, dtype=np.float64))
+    return DronePose(drone.position_m, _wxyz(q))
 
 
 def quat_mul(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -321,7 +343,7 @@ def _drone_mesh() -> trimesh.Trimesh:
 
 
 def _heading_mesh() -> trimesh.Trimesh:
-    """An arrow along body +x from the hub past the front rotors (the heading marker)."""
+    """An arrow along :data:`NOSE_AXIS` (+y) from the hub past the front rotors (the heading marker)."""
     shaft = trimesh.creation.cylinder(radius=0.008, height=0.3, sections=12)
     shaft.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, (0.0, 1.0, 0.0)))
     shaft.apply_translation((0.15 + 0.06, 0.0, 0.03))
@@ -330,6 +352,7 @@ def _heading_mesh() -> trimesh.Trimesh:
     head.apply_translation((0.36, 0.0, 0.03))
     mesh = trimesh.util.concatenate([shaft, head])
     assert isinstance(mesh, trimesh.Trimesh)
+    mesh.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, (0.0, 0.0, 1.0)))  # x -> y
     return mesh
 
 
@@ -343,15 +366,16 @@ def camera_view(
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
     """Camera position and look-at point of a preset.
 
-    The sticks bend the arm in the world's x-y plane (``controller.cables.CableMapper``: right stick
-    right = toward +x, up = toward +y), so the default view looks along +y from behind: stick right is
-    screen right and stick up is away from the viewer; ``top`` keeps that layout seen from above
-    (stick up = screen up). ``behind`` and ``side`` follow the drone's yaw (its nose is body +x).
+    Every preset follows the yaw of the arm's frame, whose :data:`NOSE_AXIS` (+y) is stick forward and
+    the drone's nose: ``sticks`` looks forward from behind at the arm's height (stick right = screen
+    right, stick forward = away), ``behind`` from behind and above the drone, ``side`` from the drone's
+    left, ``top`` from above (stick forward = screen up; tilted back a little so the arm is not hidden
+    under the drone, and because an orbit camera cannot look along its own up axis), ``tip`` at the tip.
 
     Args:
         preset: one of :data:`CAMERA_PRESETS`.
         centre_m: the point to look at (the arm's middle).
-        drone: the drone's pose.
+        drone: the pose of the arm's frame (body 0, see :func:`arm_frame`).
         tip_m: the arm's tip.
 
     Raises:
@@ -359,24 +383,23 @@ def camera_view(
     """
     c = np.asarray(centre_m, dtype=np.float64)
     q = np.asarray(drone.wxyz, dtype=np.float64)
-    nose = quat_rotate(q, np.array([1.0, 0.0, 0.0]))
+    nose = quat_rotate(q, np.asarray(NOSE_AXIS, dtype=np.float64))
     nose[2] = 0.0
-    nose = _normalize(nose, (1.0, 0.0, 0.0))
+    nose = _normalize(nose, NOSE_AXIS)
     left = np.array([-nose[1], nose[0], 0.0])
     up = np.array([0.0, 0.0, 1.0])
     c = c - 0.05 * up  # a little below the arm's middle: the drone above and the arm's sweep below fit
     if preset == "sticks":
-        pos, look = c + np.array([0.0, -1.1, 0.35]), c
-    elif preset == "behind":
         pos, look = c - 1.1 * nose + 0.35 * up, c
+    elif preset == "behind":
+        pos, look = c - 1.3 * nose + 0.9 * up, c
     elif preset == "side":
         pos, look = c + 1.1 * left + 0.1 * up, c
     elif preset == "top":
-        # Not straight down: an orbit camera cannot look along its own up axis.
-        pos, look = c + np.array([0.0, -0.02, 1.4]), c
+        pos, look = c - 0.6 * nose + 1.3 * up, c
     elif preset == "tip":
         t = np.asarray(tip_m, dtype=np.float64)
-        pos, look = t + np.array([0.0, -0.35, 0.15]), t
+        pos, look = t - 0.35 * nose + 0.15 * up, t
     else:
         raise ValueError(f"camera preset must be one of {', '.join(CAMERA_PRESETS)}, got {preset!r}")
     return (float(pos[0]), float(pos[1]), float(pos[2])), (float(look[0]), float(look[1]), float(look[2]))
@@ -466,7 +489,7 @@ class SceneView:
         self._label_text = ""
         pos, _ = default_hanging_pose(geom)
         self.drone = DronePose((float(pos[0][0]), float(pos[0][1]), float(pos[0][2])))
-        """The drone's pose last drawn (for the camera presets)."""
+        """The pose of the arm's frame (body 0) last drawn (for the camera presets)."""
         self.centre_m = _xyz(np.mean(pos, axis=0))
         """The middle of the arm last drawn."""
         self.tip_m = _xyz(pos[-1])
@@ -486,15 +509,15 @@ class SceneView:
         Args:
             positions: (1 + n, 3) body positions.
             quats: (1 + n, 4) body orientations.
-            drone_override: a drone pose from another source (MAVLink); the arm keeps its pose relative
-                to the drone body.
+            drone_override: a drone pose from another source (MAVLink, forward-left-up body axes); the
+                arm keeps its pose relative to the drone body, its frame turned by :func:`arm_frame`.
             label: text of the pose-source label (None: unchanged).
             trail: extend the tip trail.
         """
         positions = np.asarray(positions, dtype=np.float64)
         quats = np.asarray(quats, dtype=np.float64)
         if drone_override is not None:
-            positions, quats = _reroot(positions, quats, drone_override)
+            positions, quats = _reroot(positions, quats, arm_frame(drone_override))
         drawing = arm_drawing(positions, quats, self.geom)
         n = len(drawing.unit_positions)
         colors = None
@@ -631,7 +654,7 @@ def build_scene(
                 wxyz=obj.wxyz,
             )
         )
-    # The drone's nose (body +x, FLU): a child of /drone, so viser poses it with the drone.
+    # The drone's nose (NOSE_AXIS, stick forward): a child of /drone, so viser poses it with the drone.
     nose = _heading_mesh()
     heading_h = scene.add_mesh_simple(
         "/drone/heading",
@@ -639,7 +662,9 @@ def build_scene(
         faces=np.asarray(nose.faces, dtype=np.uint32),
         color=(230, 50, 50),
     )
-    scene.add_label("/drone/heading/label", text="nose", position=(0.42, 0.0, 0.04))
+    scene.add_label(
+        "/drone/heading/label", text="nose", position=(0.42 * NOSE_AXIS[0], 0.42 * NOSE_AXIS[1], 0.04)
+    )
     handles = SceneHandles(drone_h, heading_h, units_h, cables_h, trail_h, label_h, objs)
     return SceneView(server, geom, handles)
 

@@ -50,6 +50,14 @@ def _lever(value: int) -> str:
     return Lever(value).name if value in (1, 2, 3) else "-"
 
 
+_RE_ARM = {
+    Phase.RC_LOST: "RC is back",
+    Phase.HOST_LOST: "the host heartbeat is back",
+    Phase.MOTOR_FAULT: "every motor answers again",
+}
+"""Latched phases whose cause is gone (the board's ``arm_blocker`` moved on to the lever): what came back."""
+
+
 def pilot_state(
     telemetry: Telemetry | None,
     link_state: LinkState,
@@ -58,6 +66,14 @@ def pilot_state(
     holder_known: bool,
 ) -> PilotState:
     """The state bar's content for one tab.
+
+    Every word comes from the board: its phase, mode, ``ARMED`` and ``RC_OK`` flags, the levers of the
+    last frame it accepted, its grasp state and above all its ``arm_blocker`` (what holds its arming gate
+    shut, in the firmware's own order: E-stop, motor, RC, host heartbeat, DISARM, right lever). The phase
+    says what happened; the blocker says what is still missing: a latched ``RC_LOST`` whose radio is back
+    is blocked by the right lever, not by the RC. Who holds control decides whose step it is: a tab that
+    does not hold control is told to take it (or that someone else drives); the radio keeps transmitting
+    while nobody holds control, so that is not an RC loss.
 
     Args:
         telemetry: the latest telemetry (None before the first).
@@ -75,44 +91,79 @@ def pilot_state(
     t = telemetry
     flags = TelemetryFlags(t.flags)
     armed = bool(flags & TelemetryFlags.ARMED)
-    head = f"{t.phase.name} · {t.mode.name} · {'ARMED' if armed else 'disarmed'}"
+    head = f"{t.phase.name} · {t.mode.name} · {'ARMED' if armed else 'not armed'}"
     head += f" · right lever {_lever(t.right_lever)}"
     blocker = t.arm_blocker
+    take = "press Take control: this tab then becomes the radio"
     if t.phase == Phase.ESTOP or blocker == ArmBlocker.ESTOP_LATCHED:
         step = "E-stop latched: clear it (Clear E-stop), then re-arm through SAFE (right lever DOWN)"
         if not mine:
             step = "E-stop latched: take control, clear it (Clear E-stop), then re-arm through SAFE"
         return PilotState("red", head, step, estop=True)
-    if t.phase == Phase.MOTOR_FAULT or blocker == ArmBlocker.MOTOR_FAULT:
-        return PilotState("red", head, "a motor is silent: check power and CAN, then re-arm through SAFE")
+    if blocker == ArmBlocker.MOTOR_FAULT:
+        return PilotState("red", head, "a motor is silent (zero current): check its power and CAN")
     if not mine:
         if holder_known:
             return PilotState("grey", head, "watching: another tab or the command line drives")
-        return PilotState("grey", head, "press Take control: this tab then becomes the radio")
-    if blocker == ArmBlocker.RC_INVALID or t.phase == Phase.RC_LOST:
-        return PilotState("orange", head, "waiting for valid RC frames from this tab (zero current)")
-    if blocker == ArmBlocker.LEVER_NOT_DOWN:
-        return PilotState("orange", head, "move the right lever DOWN, then MIDDLE to drive")
-    if blocker == ArmBlocker.HOST_MISSING or t.phase == Phase.HOST_LOST:
-        return PilotState("orange", head, "no host heartbeat: wait for the link, then re-arm through SAFE")
+        if blocker == ArmBlocker.RC_INVALID:
+            return PilotState("orange", head, f"no RC reaches the board (zero current); {take}")
+        return PilotState("grey", head, take)
+    if blocker == ArmBlocker.RC_INVALID:
+        return PilotState(
+            "orange", head, "no valid RC reaches the board (zero current): see Health (link, RC late)"
+        )
+    if blocker == ArmBlocker.HOST_MISSING:
+        return PilotState("orange", head, "no host heartbeat (zero current): wait for the link")
     if blocker == ArmBlocker.DISARMED:
-        return PilotState("blue", head, "press Arm (the board was disarmed)")
-    if t.phase == Phase.GATE:
-        return PilotState("orange", head, "move the right lever DOWN, then MIDDLE to drive")
+        return PilotState("blue", head, "press Arm (the host disarmed the board)")
+    if blocker == ArmBlocker.LEVER_NOT_DOWN:
+        came_back = _RE_ARM.get(t.phase)
+        if came_back is not None:
+            return PilotState(
+                "orange", head, f"{came_back}: move the right lever DOWN to re-arm (zero current)"
+            )
+        return PilotState("orange", head, "move the right lever DOWN to arm, then MIDDLE to drive")
+    if not armed:  # nothing blocks the gate any more: it opens on the board's next tick
+        return PilotState("blue", head, "arming: the gate opens on the board's next tick")
     if t.mode == Mode.SAFE:
         return PilotState("blue", head, "move the right lever to MIDDLE to drive (UP: grasp)")
     if t.mode == Mode.MANUAL:
         return PilotState(
             "green",
             head,
-            "driving: right stick bends, left ↕ up tightens all cables; lever DOWN stops",
+            "driving: right stick bends, left ↕ up tightens all cables; right lever DOWN stops",
         )
     if t.mode == Mode.GRASP:
-        grasp = GraspState(t.grasp_state).name if t.grasp_state in GraspState._value2member_map_ else "?"
-        return PilotState(
-            "green", f"{head} · grasp {grasp}", "left lever UP grasps, DOWN releases; right lever DOWN stops"
-        )
-    return PilotState("green", head, "DIRECT: cable tensions from the Direct mode sliders; lever DOWN stops")
+        return _grasp_state(t, head)
+    return PilotState(
+        "green", head, "DIRECT: cable tensions from the Direct mode sliders; right lever DOWN stops"
+    )
+
+
+def _grasp_state(t: Telemetry, head: str) -> PilotState:
+    """GRASP mode's next step from the grasp state and the left lever the board saw: only a lever's
+    *change* acts (``controller.modes``: an edge to UP grasps, an edge to DOWN releases)."""
+    known = t.grasp_state in GraspState._value2member_map_
+    grasp = GraspState(t.grasp_state) if known else None
+    head = f"{head} · grasp {grasp.name if grasp is not None else '?'}"
+    left_down = t.left_lever == Lever.DOWN
+    release = "press Release (or left lever UP, then DOWN)" if left_down else "left lever DOWN releases"
+    if grasp in (GraspState.IDLE, None):
+        if t.left_lever == Lever.UP:  # requested (packing first), or GRASP was entered with it UP
+            step = "left lever UP: the grasp reaches once the arm is packed (if not: lever DOWN, then UP)"
+        else:
+            step = "left lever UP grasps (or press Grasp)"
+    elif grasp in (GraspState.REACH, GraspState.WRAP):
+        step = f"grasping ({grasp.name}): wait; {release}"
+    elif grasp == GraspState.HOLD:
+        step = f"holding the object: {release}"
+    elif grasp == GraspState.RELEASE:
+        step = "releasing: wait until IDLE"
+    elif left_down:  # FAILED: an edge to UP grasps again
+        step = "the grasp failed (no contact): left lever UP tries again"
+    else:
+        step = "the grasp failed (no contact): left lever DOWN releases, then UP tries again"
+    return PilotState("green", head, f"{step}; right lever DOWN stops")
 
 
 def state_bar_html(state: PilotState) -> str:

@@ -181,7 +181,7 @@ class TeleopPanel:
             self.console = server.gui.add_html(console_html([]))
         self._console_seq = 0
         self.health = build_health_panel(server)
-        self._y_ranges: dict[str, tuple[float, float]] = {}
+        self._scales: dict[str, tuple[float, float, float]] = {}
         self._params: dict[int, ParamHandles] = {}
         self._controls: dict[int, ControlHandles] = {}
         self._controls_lock = threading.Lock()
@@ -227,9 +227,12 @@ class TeleopPanel:
         sv = self.scene
         position, look_at = camera_view(preset, sv.centre_m, sv.drone, sv.tip_m)
         with client.atomic():
+            # Position first, then the look-at point: viser's position setter moves the look-at point
+            # by the same offset (it keeps the view direction), so the other order aimed every preset
+            # but the one already shown at empty ground or sky.
             client.camera.up_direction = (0.0, 0.0, 1.0)
-            client.camera.look_at = look_at
             client.camera.position = position
+            client.camera.look_at = look_at
 
     def controls(self) -> dict[int, ControlHandles]:
         """Control handles per connected tab (a copy)."""
@@ -345,7 +348,8 @@ class TeleopPanel:
         if bool(p.pause.value):
             return
         data = self.board.history.snapshot(max_points=None)
-        x, series = plot_frame(data, float(p.window.value), str(p.cables.value), self.config.plot_points)
+        window_s = float(p.window.value)
+        x, series = plot_frame(data, window_s, str(p.cables.value), self.config.plot_points)
         with self.server.atomic():
             for chart in CHART_COLUMNS:
                 handle = p.chart(chart)
@@ -353,9 +357,10 @@ class TeleopPanel:
                     continue
                 empty = (0.0, self.arbiter.limits.tension_max_n) if chart == "tensions" else None
                 rng = y_range(np.concatenate(series[chart]), chart, empty)
-                if self._y_ranges.get(chart) != rng:
-                    self._y_ranges[chart] = rng
-                    handle.scales = fixed_scales(*rng)
+                # A new range rebuilds the chart in the browser (uplot-react): sent only when it changes.
+                if self._scales.get(chart) != (*rng, window_s):
+                    self._scales[chart] = (*rng, window_s)
+                    handle.scales = fixed_scales(*rng, window_s)
                 handle.data = (x, *series[chart])
 
     def update_health(self) -> None:

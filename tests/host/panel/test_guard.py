@@ -167,3 +167,31 @@ def test_duplicate_or_malformed_host_and_origin_get_400_counted_in_one_line(
     own = f"http://127.0.0.1:{port}"
     assert _raw_upgrade(port, [f"Host: 127.0.0.1:{port}", f"Origin: {own}"]).startswith("HTTP/1.1 101")
     assert app.guard.stats.bad_headers_n == 1
+
+
+def test_page_title_is_the_products() -> None:
+    """viser's page says "Viser"; the guard serves it as SpiRob Teleop, gzip or not, other files untouched."""
+    import dataclasses
+    import gzip
+
+    from websockets.datastructures import Headers
+    from websockets.http11 import Response
+
+    from host.panel.guard import PAGE_TITLE, retitle_page
+
+    page = b"<html><head><title>Viser</title></head><body></body></html>"
+    want = f"<title>{PAGE_TITLE}</title>".encode()
+    cache: dict[bytes, bytes] = {}
+    for enc, body in (("identity", page), ("gzip", gzip.compress(page))):
+        headers = Headers(**{"Content-Type": "text/html; charset=utf-8", "Content-Length": str(len(body))})
+        headers["Content-Encoding"] = enc
+        out = retitle_page(Response(200, "OK", headers, body), cache)
+        text = gzip.decompress(out.body) if enc == "gzip" else out.body
+        assert want in text and b"Viser" not in text
+        assert out.headers.get_all("Content-Length") == [str(len(out.body))]
+    assert PAGE_TITLE == "SpiRob Teleop" and len(cache) == 2
+    js = Response(200, "OK", Headers(**{"Content-Type": "application/javascript"}), b"<title>Viser</title>")
+    assert retitle_page(js, cache) is js
+    assert retitle_page(None) is None
+    broken = Response(200, "OK", Headers(**{"Content-Type": "text/html", "Content-Encoding": "gzip"}), b"x")
+    assert dataclasses.asdict(retitle_page(broken)) == dataclasses.asdict(broken)

@@ -58,3 +58,13 @@ def test_health_checks_grade_against_thresholds() -> None:
     )
     page = health_html(list(checks.values()))
     assert page.count('data-level="bad"') == 2 and "ok &lt; 500 µs" in page
+
+
+def test_scales_pin_both_axes() -> None:
+    """Neither axis is left to uPlot: an auto x scale collapsed to 0..1 s in viser 1.1.1 whenever a new
+    y range rebuilt the chart (host.panel.plots' docstring)."""
+    from host.panel.plots import fixed_scales
+
+    s = fixed_scales(-1.0, 2.5, 10.0)
+    assert s["x"] == {"time": False, "auto": False, "range": [-10.0, 0.0]}
+    assert s["y"] == {"auto": False, "range": [-1.0, 2.5]}

@@ -43,21 +43,43 @@ def test_quaternion_helpers() -> None:
 
 
 def test_camera_presets_follow_the_stick_axes() -> None:
-    from host.panel.scene import CAMERA_PRESETS, camera_view
+    from host.panel.scene import CAMERA_PRESETS, NOSE_AXIS, camera_view
 
+    assert NOSE_AXIS == (0.0, 1.0, 0.0)  # stick forward (+y) is the nose; stick right (+x) the pilot's right
     drone = DronePose((0.0, 0.0, 1.0))
     centre, tip = (0.0, 0.0, 0.9), (0.0, 0.0, 0.76)
     views = {p: camera_view(p, centre, drone, tip) for p in CAMERA_PRESETS}
-    # Stick view: from -y looking +y, so stick right (+x) is screen right and stick up (+y) is away.
-    pos, look = views["sticks"]
-    assert pos[1] < look[1] and abs(pos[0] - look[0]) < 1e-9
-    assert views["top"][0][2] > 1.5 and views["tip"][1] == tip
-    # Behind the drone follows its yaw: nose (body +x) turned to +y puts the camera at -y.
+    # Stick view and behind: from -y looking +y, so stick right (+x) is screen right and forward is away.
+    for preset in ("sticks", "behind"):
+        pos, look = views[preset]
+        assert pos[1] < look[1] - 1.0 and abs(pos[0] - look[0]) < 1e-9, preset
+    assert views["behind"][0][2] > views["sticks"][0][2]  # behind the drone: from above it
+    pos, look = views["side"]  # from the drone's left (-x)
+    assert pos[0] < look[0] - 1.0
+    pos, look = views["top"]  # above, tilted back: forward is screen up
+    assert pos[2] > look[2] + 1.0 and pos[1] < look[1]
+    assert views["tip"][1] == tip
+    # Every preset follows the yaw: the nose turned to -x (yaw 90°) puts the stick view's camera at +x.
     yawed = DronePose((0.0, 0.0, 1.0), (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)))
-    pos, look = camera_view("behind", centre, yawed, tip)
-    assert pos[1] < look[1] - 1.0 and abs(pos[0]) < 1e-6
+    pos, look = camera_view("sticks", centre, yawed, tip)
+    assert pos[0] > look[0] + 1.0 and abs(pos[1]) < 1e-6
+    for preset in CAMERA_PRESETS:
+        p, a = camera_view(preset, centre, drone, tip)
+        assert math.dist(p, a) > 0.3, preset  # never at the point it looks at
     with pytest.raises(ValueError, match="camera preset"):
         camera_view("nowhere", centre, drone, tip)
+
+
+def test_a_mavlink_drone_pose_keeps_stick_forward_at_its_nose() -> None:
+    """A forward-left-up drone pose (MAVLink): the arm's +y (stick forward) turned onto the drone's nose."""
+    from host.panel.scene import NOSE_AXIS, arm_frame
+
+    for yaw in (0.0, 0.7, math.pi / 2, -2.0):
+        flu = DronePose((1.0, 2.0, 3.0), (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)))
+        arm = arm_frame(flu)
+        nose = quat_rotate(np.array(flu.wxyz), np.array([1.0, 0.0, 0.0]))
+        assert np.allclose(quat_rotate(np.array(arm.wxyz), np.array(NOSE_AXIS)), nose)
+        assert arm.position_m == flu.position_m
 
 
 def test_ned_to_scene_turns_the_drones_pose_z_up() -> None:
