@@ -199,14 +199,13 @@ def main() -> int:
         synth_fps = (ws_frames[0] - f0) / (time.monotonic() - t0)
         app.panel.start()
 
-        # 2. Stick latency: take control, gate (DOWN), MANUAL (MIDDLE), arm, then move the left stick up.
+        # 2. Stick latency: take control, gate (DOWN: the board arms), MANUAL (MIDDLE), then left stick up.
         page.get_by_role("button", exact=True, name="Take control").click()
         page.get_by_text("You hold control.").wait_for(timeout=10_000)
         # The lever button in the position this tab sends is marked "● DOWN".
         page.get_by_role("button", name=re.compile(r"^(● )?DOWN$")).first.click()
         time.sleep(0.5)
         page.get_by_role("button", name=re.compile(r"^(● )?MIDDLE$")).first.click()
-        page.get_by_role("button", exact=True, name="Arm").click()
         time.sleep(1.0)
         # The stick moves by keyboard on the focused slider thumb (End = full up, Home = full down), and
         # the move is timestamped inside the page at the keydown event (wall clock, same machine), so
