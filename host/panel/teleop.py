@@ -84,6 +84,8 @@ class PanelConfig:
         plot_window_s: seconds shown in the plots at first (the Window slider changes it, up to the
             board state's history).
         plot_points: most points per plotted series.
+        shadows: the scene's main light casts shadows (three cascaded shadow maps: on a machine without
+            a GPU, where the browser renders in software, most of each frame's cost).
     """
 
     scene_hz: float = 60.0
@@ -91,6 +93,7 @@ class PanelConfig:
     health_hz: float = 4.0
     plot_window_s: float = 10.0
     plot_points: int = 400
+    shadows: bool = True
 
 
 def harden(server: viser.ViserServer) -> None:
@@ -171,6 +174,8 @@ class TeleopPanel:
         server.gui.configure_theme(control_width="large", show_logo=False, show_share_button=False)
         self._framed = False
         self.scene: SceneView = build_scene(server, self.geometry, objects)
+        if not self.config.shadows:
+            server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self._frame_camera()
         self.plots = build_plot_panel(server, window_s=self.config.plot_window_s, history_s=board.history_s)
         self.recorder = recorder

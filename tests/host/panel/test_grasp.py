@@ -26,7 +26,7 @@ from tests.support.realtime_guard import timed_out, wait_for
 pytestmark = pytest.mark.browser
 
 TOKEN = "t0ken-for-test"
-PANEL = PanelConfig(scene_hz=8.0, plot_hz=2.0, health_hz=4.0)
+PANEL = PanelConfig(scene_hz=8.0, plot_hz=2.0, health_hz=4.0, shadows=False)
 
 if shutil.which(CHROMIUM) is None:
     pytest.fail(f"{CHROMIUM} is not installed: the browser tests need it", pytrace=False)

@@ -46,10 +46,11 @@ from tests.support.realtime_guard import timed_out, wait_for
 
 pytestmark = pytest.mark.browser
 
-# Slow panel rates: the viser client renders on demand, so fewer scene updates = less software
+# Slow panel rates and no shadow maps: the viser client renders on demand, so fewer scene updates (and
+# no three cascaded shadow passes per frame) = less software
 # rendering competing for the 2 cores with everything else under test.
 TOKEN = "t0ken-for-test"
-PANEL = PanelConfig(scene_hz=8.0, plot_hz=2.0, health_hz=4.0)
+PANEL = PanelConfig(scene_hz=8.0, plot_hz=2.0, health_hz=4.0, shadows=False)
 FAKE = os.environ.get("SPIROB_BROWSER_FAKE_BOARD") == "1"
 
 if shutil.which(CHROMIUM) is None:

@@ -37,7 +37,7 @@ from tests.support.realtime_guard import timed_out, wait_for
 
 pytestmark = pytest.mark.browser
 
-PANEL = PanelConfig(scene_hz=4.0, plot_hz=2.0, health_hz=4.0)
+PANEL = PanelConfig(scene_hz=4.0, plot_hz=2.0, health_hz=4.0, shadows=False)
 VIEWPORT = {"width": 800, "height": 560}
 ARM_BLUE_MIN = 40
 """Arm-coloured pixels a view of the arm shows at least (the hanging arm from the top view: ~150)."""
