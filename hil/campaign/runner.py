@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from hil.campaign.spec import CampaignError, Run, build_design, build_firmware
+from hil.sim.spiral import SpiralDesign
 from hil.trial.grasp import GraspSetup, grasp_trial
 
 __all__ = [
@@ -36,6 +37,7 @@ __all__ = [
     "check_ray_address",
     "execute_local",
     "execute_ray",
+    "grasp_setup",
     "run_one",
     "stable_row",
 ]
@@ -73,8 +75,8 @@ def run_one(run: Run) -> dict[str, Any]:
     return row
 
 
-def _grasp(run: Run) -> dict[str, Any]:
-    i = run.inputs
+def grasp_setup(i: Mapping[str, Any]) -> tuple[GraspSetup, SpiralDesign]:
+    """The grasp trial and the arm of a grasp run's inputs."""
     design, model = build_design(i, physics="fine")
     optional = {
         "mass_kg": i.get("object.mass_kg"),
@@ -92,6 +94,11 @@ def _grasp(run: Run) -> dict[str, Any]:
         seed=i["seed"],
         **{k: v for k, v in optional.items() if v is not None},
     )
+    return setup, design
+
+
+def _grasp(run: Run) -> dict[str, Any]:
+    setup, design = grasp_setup(run.inputs)
     out = grasp_trial(setup, design).as_dict()
     del out["setup"]  # the row's inputs say it
     return out

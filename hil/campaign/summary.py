@@ -19,7 +19,7 @@ import numpy as np
 from hil.experiments.common import pyplot, save_figure
 from hil.experiments.stats import wilson_interval
 
-__all__ = ["DesignRate", "design_rates", "success_maps"]
+__all__ = ["DesignRate", "campaign_pictures", "design_rates", "success_maps"]
 
 _CHOICE_PREFIXES = ("design.", "controller.")
 _MAP_BINS_N = 8
@@ -157,3 +157,48 @@ def success_maps(rows: Sequence[Mapping[str, Any]], out_dir: Path) -> list[Path]
         )
         paths.append(save_figure(fig, out_dir / f"map_{i:02d}.png"))
     return paths
+
+
+def campaign_pictures(
+    rows: Sequence[Mapping[str, Any]], out_dir: Path
+) -> tuple[list[tuple[str, Any]], list[str]]:
+    """Pictures of a grasp campaign's representative runs: the best design's first success and the first
+    failure of the campaign, each run again filmed and checked to measure exactly what its row recorded
+    (:func:`hil.render.film_grasp_trial`).
+
+    Returns:
+        ``([(heading, Pictures), ...], notes)`` for :func:`hil.report.write_index`.
+    """
+    from hil.campaign.runner import grasp_setup
+    from hil.render import Pictures, film_grasp_trial, render_film
+
+    grasps = [r for r in rows if r["inputs"].get("kind") == "grasp" and r["outcome"] != "error"]
+    if not grasps:
+        return [], ["a scenario campaign: its runs' pictures come from spirob-hil run NAME --report DIR"]
+    best = design_rates(grasps)[0]
+    picks = [
+        (
+            "success",
+            next((r for r in grasps if r["outcome"] == "success" and _choice(r) == dict(best.choice)), None),
+        ),
+        ("failure", next((r for r in grasps if r["outcome"] == "failure"), None)),
+    ]
+    out: list[tuple[str, Pictures]] = []
+    for label, row in picks:
+        if row is None:
+            continue
+        i = row["inputs"]
+        heading = (
+            f"a {label}: {_label(row)}; object {1000 * i['object.diameter_m']:.0f} mm at "
+            f"x = {1000 * i['object.x_m']:.0f} mm, z = {1000 * i['object.z_m']:.0f} mm, seed {i['seed']} "
+            f"(run {row['key']})"
+        )
+        setup, design = grasp_setup(i)
+        film, note = film_grasp_trial(setup, design, row["measured"])
+        pics = Pictures(note=note) if film is None else render_film(film, out_dir, f"run-{label}")
+        out.append((heading, pics))
+    return out, []
+
+
+def _label(row: Mapping[str, Any]) -> str:
+    return " ".join(f"{k.partition('.')[2]}={_fmt(v)}" for k, v in _choice(row).items()) or "default design"
