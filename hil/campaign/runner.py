@@ -39,6 +39,7 @@ __all__ = [
     "execute_ray",
     "grasp_setup",
     "run_one",
+    "scenario_measured",
     "stable_row",
 ]
 
@@ -105,18 +106,26 @@ def _grasp(run: Run) -> dict[str, Any]:
 
 
 def _scenario(run: Run) -> dict[str, Any]:
+    return scenario_measured(run.inputs)[0]
+
+
+def scenario_measured(
+    i: Mapping[str, Any], report_dir: Path | None = None
+) -> tuple[dict[str, Any], tuple[str, ...]]:
+    """Run a scenario run's inputs: what its row records, and (with ``report_dir``) its report's lines."""
     from hil.faults import Fault
     from hil.scenarios import run_scenario  # the catalogue imports every scenario: only for a scenario run
 
-    i = run.inputs
     design, model = build_design(i)
     faults = [Fault.parse(s) for s in i.get("scenario.faults", [])]
-    result = run_scenario(i["scenario.name"], seed=i["seed"], design=design, model=model, faults=faults)
+    result = run_scenario(
+        i["scenario.name"], seed=i["seed"], design=design, model=model, faults=faults, report_dir=report_dir
+    )
     out = result.as_dict()
     for k in ("name", "seed"):
         del out[k]
     out["success"] = out.pop("passed")
-    return out
+    return out, result.report_lines
 
 
 def _clean(value: Any) -> Any:

@@ -3,6 +3,7 @@ one line and the 2-D figures."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -10,11 +11,23 @@ import pytest
 from PIL import Image
 
 from hil.board import BoardConfig
+from hil.campaign.runner import run_one
+from hil.campaign.spec import load_campaign
+from hil.campaign.summary import campaign_pictures
 from hil.cli.main import main
 from hil.environment import Environment, Episode
 from hil.faults import Fault, FaultKind
 from hil.radio import RadioScript
-from hil.render import NO_GL, Film, FilmingEpisode, MomentWatcher, Pictures, render_film, render_moments
+from hil.render import (
+    NO_GL,
+    Film,
+    FilmingEpisode,
+    MomentWatcher,
+    Pictures,
+    render_film,
+    render_moments,
+    same_measurements,
+)
 from hil.report import write_index
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import Phase
@@ -151,3 +164,35 @@ def test_an_empty_film_says_so(tmp_path: Path) -> None:
         Film().nearest(0)
     with pytest.raises(ValueError, match="positive"):
         Film(period_us=0)
+
+
+def test_same_measurements_compares_as_a_results_file_keeps_them() -> None:
+    recorded = {"state": "HOLD", "t_hold_s": None, "extremes": {"tension_n": 1.5}, "setup": {"x_m": 1}}
+    rerun = {"state": "HOLD", "t_hold_s": math.nan, "extremes": {"tension_n": 1.5}, "setup": {"x_m": 2}}
+    assert same_measurements(recorded, rerun) == []  # NaN is JSON's null; the setup is the input
+    rerun["extremes"] = {"tension_n": 1.5000000001}
+    rerun["units_after"] = 3
+    assert same_measurements(recorded, rerun) == ["extremes", "units_after"]
+
+
+def test_a_scenario_campaign_pictures_its_runs_only_if_the_rerun_matches(tmp_path: Path) -> None:
+    campaign = load_campaign(
+        None, ["kind=scenario", "scenario.name=startup-gate", "scenario.faults=[[], ['rc-silence@0']]"]
+    )
+    rows = [run_one(r) for r in campaign.runs()]
+    assert [r["outcome"] for r in rows] == ["success", "failure"]
+    pictures, notes = campaign_pictures(rows, tmp_path)
+    assert pictures == []  # a scenario's pictures are in its own report, linked from the notes
+    text = "\n".join(notes)
+    for label in ("success", "failure"):
+        assert f"### a {label}: scenario startup-gate" in text
+        assert f"its report: [run-{label}/startup-gate.md](run-{label}/startup-gate.md)" in text
+        assert (tmp_path / f"run-{label}" / "startup-gate.png").exists()
+    assert "re-run differs" not in text
+    # a row the re-run does not reproduce: its pictures are not kept
+    rows[1]["measured"]["duration_s"] = 99.0
+    _, notes = campaign_pictures(rows, tmp_path / "tampered")
+    text = "\n".join(notes)
+    assert "re-run differs from the recorded run (duration_s): pictures skipped" in text
+    assert not (tmp_path / "tampered" / "run-failure").exists()
+    assert (tmp_path / "tampered" / "run-success" / "startup-gate.md").exists()
