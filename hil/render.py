@@ -16,10 +16,10 @@ that crashes ends the child, never the run. EGL is tried first, then OSMesa (``M
 them tries only that one; ``MUJOCO_GL=disable`` skips pictures). With no back end the report carries
 :data:`NO_GL` (one line) and its 2-D figures as before.
 
-Cost (measured on this project's 2-core machine, Mesa's llvmpipe through EGL): the child starts in about
-0.7 s (importing MuJoCo, a 0.15 s GL context), then 25-35 ms per 320x240 frame with shadows, reflections
-and multisampling off; a scenario's report (up to :data:`MAX_STILLS` stills and a GIF of up to
-:data:`VIDEO_FRAMES_MAX` frames) adds 2-4 s.
+Cost (``bench/render.py`` on this project's 2-core machine, Mesa's llvmpipe through EGL): the child's
+start and one 320x240 still take 0.86 s of CPU, each 240x180 GIF frame 53 ms with its encoding (shadows,
+reflections and multisampling off); a scenario's report (up to :data:`MAX_STILLS` stills and a GIF of up
+to :data:`VIDEO_FRAMES_MAX` frames) about 4 s of CPU. Every report states its own cost.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
@@ -54,6 +54,8 @@ __all__ = [
     "AFTER_SUPPORT_S",
     "MAX_STILLS",
     "NO_GL",
+    "OWN_STATES",
+    "RERUN",
     "Film",
     "FilmingEpisode",
     "MomentWatcher",
@@ -78,6 +80,8 @@ MOTION_MM: Final = 5.0
 """A GIF is made when the tip's path over the run spans more than this (a still arm needs no video)."""
 STILL_SIZE: Final = (320, 240)
 VIDEO_SIZE: Final = (240, 180)
+OWN_STATES: Final = "the run's own states (no re-simulation)"
+RERUN: Final = "a re-run of the recorded trial that measured exactly what it recorded"
 CHILD_TIMEOUT_S: Final = 300.0
 """A render child that takes longer is killed and its pictures skipped (one line)."""
 _STATE_SPEC: Final = int(
@@ -139,19 +143,15 @@ class Film:
     def mark(self, plant: Plant, t_us: int, label: str) -> bool:
         """Keep a still of this moment (False when :data:`MAX_STILLS` are kept already; ``end`` always
         fits: it replaces the last other still)."""
-        if (
-            self.stills
-            and self.stills[-1][0] == t_us
-            and self.stills[-1][2].shape == (mujoco.mj_stateSize(plant.mj_model, _STATE_SPEC),)
-        ):  # the same tick: one picture, both captions
-            t_last, label_last, _ = self.stills[-1]
-            self.stills[-1] = (t_last, f"{label_last}; {label}", self._state(plant))
+        state = self._state(plant)  # first: a rebuilt model clears what was kept
+        if self.stills and self.stills[-1][0] == t_us:  # the same tick: one picture, both captions
+            self.stills[-1] = (t_us, f"{self.stills[-1][1]}; {label}", state)
             return True
         if len(self.stills) >= MAX_STILLS:
             if label != "end":
                 return False
             self.stills.pop()
-        self.stills.append((t_us, label, self._state(plant)))
+        self.stills.append((t_us, label, state))
         return True
 
     def nearest(self, t_us: float) -> tuple[int, FloatArray]:
@@ -312,6 +312,7 @@ class Pictures:
         backend: the GL back end that rendered (``egl``, ``osmesa``; empty if none).
         render_s: wall-clock cost of the rendering (the child process included).
         frames_n: frames rendered.
+        source: where the states came from (:data:`OWN_STATES` or :data:`RERUN`).
     """
 
     stills: tuple[Picture, ...] = ()
@@ -320,7 +321,7 @@ class Pictures:
     backend: str = ""
     render_s: float = 0.0
     frames_n: int = 0
-    source: str = field(default="the run's own states (no re-simulation)")
+    source: str = OWN_STATES
 
     @property
     def paths(self) -> list[Path]:
@@ -418,6 +419,7 @@ def render_film(
     video_size: tuple[int, int] = VIDEO_SIZE,
     video_frames_max: int = VIDEO_FRAMES_MAX,
     timeout_s: float = CHILD_TIMEOUT_S,
+    source: str = OWN_STATES,
 ) -> Pictures:
     """Render a film's stills (``NAME-01-grasp-hold.png`` ...) and, where the arm moves, a GIF
     (``NAME.gif``) into ``out_dir``.
@@ -431,6 +433,7 @@ def render_film(
         still_size, video_size: (width, height) in pixels.
         video_frames_max: the most GIF frames.
         timeout_s: the render child's bound.
+        source: where the film's states come from, for the report (:data:`OWN_STATES`, :data:`RERUN`).
 
     Returns:
         The pictures, or a :class:`Pictures` whose ``note`` says in one line why there are none.
@@ -488,7 +491,7 @@ def render_film(
             except subprocess.TimeoutExpired:
                 return Pictures(note=f"pictures skipped: the renderer took over {timeout_s:g} s")
             if done.returncode == 0:
-                return Pictures(tuple(stills), clip, "", backend, time.perf_counter() - t0, frames_n=frames_n)
+                return Pictures(tuple(stills), clip, "", backend, time.perf_counter() - t0, frames_n, source)
             if done.returncode == NO_GL_EXIT or done.returncode < 0:
                 continue  # this back end cannot start (or its driver crashed): the next one
             last = (done.stderr.strip().splitlines() or ["no message"])[-1]

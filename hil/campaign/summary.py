@@ -172,7 +172,7 @@ def campaign_pictures(
         ``([(heading, Pictures), ...], notes)`` for :func:`hil.report.write_index`.
     """
     from hil.campaign.runner import grasp_setup
-    from hil.render import Pictures, film_grasp_trial, render_film
+    from hil.render import NO_GL, RERUN, Pictures, film_grasp_trial, gl_backends, render_film
 
     finished = [r for r in rows if r["outcome"] != "error"]
     if not finished:
@@ -196,6 +196,9 @@ def campaign_pictures(
         if i["kind"] != "grasp":
             notes += _scenario_pictures(label, row, out_dir / f"run-{label}")
             continue
+        if not gl_backends():  # MUJOCO_GL=disable: no trial is run again for nothing
+            out.append(("", Pictures(note=NO_GL)))
+            break
         heading = (
             f"a {label}: {_label(row)}; object {1000 * i['object.diameter_m']:.0f} mm at "
             f"x = {1000 * i['object.x_m']:.0f} mm, z = {1000 * i['object.z_m']:.0f} mm, seed {i['seed']} "
@@ -203,7 +206,9 @@ def campaign_pictures(
         )
         setup, design = grasp_setup(i)
         film, note = film_grasp_trial(setup, design, row["measured"])
-        pics = Pictures(note=note) if film is None else render_film(film, out_dir, f"run-{label}")
+        pics = (
+            Pictures(note=note) if film is None else render_film(film, out_dir, f"run-{label}", source=RERUN)
+        )
         out.append((heading, pics))
     return out, notes
 

@@ -123,7 +123,17 @@ def grasp_pictures(
     Returns:
         ``[(heading, Pictures), ...]`` for :func:`hil.report.write_index` (empty with no grasp).
     """
-    from hil.render import Pictures, film_grasp_trial, render_film  # only when a report asks for them
+    from hil.render import (  # only for a report
+        NO_GL,
+        RERUN,
+        Pictures,
+        film_grasp_trial,
+        gl_backends,
+        render_film,
+    )
+
+    if not gl_backends():  # MUJOCO_GL=disable: no trial is run again for nothing
+        return [("", Pictures(note=NO_GL))]
 
     picks = [
         (label, o)
@@ -142,6 +152,10 @@ def grasp_pictures(
         )
         film, note = film_grasp_trial(s, design, o.as_dict())
         slug = "held" if o.success else "failed"
-        pictures = Pictures(note=note) if film is None else render_film(film, out_dir, f"{name}-{slug}")
+        pictures = (
+            Pictures(note=note)
+            if film is None
+            else render_film(film, out_dir, f"{name}-{slug}", source=RERUN)
+        )
         out.append((heading, pictures))
     return out
