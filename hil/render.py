@@ -103,7 +103,7 @@ class Film:
 
     Args:
         period_us: simulated time between two video frames.
-        max_frames: the most frames kept (later ones are dropped: a bound, not a thinning).
+        max_frames: the most frames kept (then the film thins itself: see :meth:`capture`).
 
     A film holds one model: if the plant rebuilds its model mid-run (an object added), what was filmed
     before is dropped, since those states do not fit the new model.
@@ -134,9 +134,13 @@ class Film:
         return out
 
     def capture(self, plant: Plant, t_us: int) -> None:
-        """Keep a frame if one is due at ``t_us`` (the run's time)."""
-        if t_us < self._next_us or len(self.frames) >= self.max_frames:
+        """Keep a frame if one is due at ``t_us`` (the run's time); when ``max_frames`` are kept, every
+        other one is dropped and the period doubled, so a long run stays whole in bounded memory."""
+        if t_us < self._next_us:
             return
+        if len(self.frames) >= self.max_frames:
+            del self.frames[1::2]
+            self.period_us *= 2
         self.frames.append((t_us, self._state(plant)))
         self._next_us = t_us + self.period_us
 
@@ -458,11 +462,13 @@ def render_film(
     if video and len(frames) >= 2:
         span_s = (frames[-1][0] - frames[0][0]) / 1e6
         frame_ms = max(40, round(1000 * span_s / (len(frames) - 1)))
+        speed = 1000 * span_s / (frame_ms * (len(frames) - 1))
+        pace = "in real time" if abs(speed - 1) < 0.05 else f"at {speed:.2g}x real time"
         clip = Picture(
             out / f"{name}.gif",
             frames[0][0] / 1e6,
             f"animated GIF, {len(frames)} frames from {frames[0][0] / 1e6:.1f} s to "
-            f"{frames[-1][0] / 1e6:.1f} s, in real time",
+            f"{frames[-1][0] / 1e6:.1f} s, {pace}",
         )
     job = {
         "model": film.model,

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 from PIL import Image
@@ -156,6 +157,22 @@ def test_scenario_report_without_gl_is_one_line(
     assert index.count(NO_GL) == 1 and "![startup-gate](startup-gate.png)" in index
     assert (tmp_path / "startup-gate.png").stat().st_size > 10_000
     assert not list(tmp_path.glob("startup-gate-*.png")) and not list(tmp_path.glob("*.gif"))
+
+
+def test_a_long_film_thins_itself(filmed: tuple[Film, int]) -> None:
+    film, _ = filmed
+    plant_film = Film(period_us=1000, max_frames=4)
+
+    class _Plant:  # the film reads these four
+        mj_model, mj_data = film.model, None
+        unit_names, object_names = film.unit_names, film.object_names
+
+    fake = _Plant()
+    fake.mj_data = mujoco.MjData(film.model)
+    for t_us in range(0, 10_000, 1000):
+        plant_film.capture(fake, t_us)  # type: ignore[arg-type]
+    assert [t for t, _ in plant_film.frames] == [0, 4000, 8000]
+    assert plant_film.period_us == 4000 and len(plant_film.frames) <= 4
 
 
 def test_an_empty_film_says_so(tmp_path: Path) -> None:
