@@ -1,16 +1,21 @@
-"""Run reports: a table in the terminal and PNG plots of a run's signals over time."""
+"""Run reports: a table in the terminal, PNG plots of a run's signals over time, pictures of its moments
+rendered by MuJoCo (:mod:`hil.render`), and an index (``NAME.md``) that lists them."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 from rich.table import Table
 
 from hil.run_record import RunRecord, ScenarioResult
 from protocol.messages import Mode, Phase
+
+if TYPE_CHECKING:
+    from hil.render import Film, Pictures
 
 
 def results_table(results: Sequence[ScenarioResult], clock: str = "simulated time") -> Table:
@@ -122,3 +127,55 @@ def plot_run(run: RunRecord, out_dir: str | Path, name: str) -> Path:
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def write_index(
+    out_dir: str | Path,
+    name: str,
+    title: str,
+    figures: Sequence[Path],
+    pictures: Sequence[tuple[str, Pictures]],
+    notes: Sequence[str] = (),
+) -> Path:
+    """Write ``out_dir/NAME.md``: the report's 2-D figures, then each set of rendered pictures under its
+    heading with their times and what they show (or the one line saying why there are none), then notes.
+
+    Returns:
+        The index's path.
+    """
+    out = Path(out_dir)
+    lines = [f"# {title}", "", "## Figures", ""]
+    lines += [f"![{f.stem}]({f.name})" for f in figures] or ["none"]
+    lines += ["", "## Pictures", ""]
+    for heading, pics in pictures:
+        if heading:
+            lines += [f"### {heading}", ""]
+        if pics.note:
+            lines += [pics.note, ""]
+            continue
+        for p in pics.stills:
+            lines += [f"![{p.caption}]({p.path.name})", "", f"t = {p.t_s:.3f} s: {p.caption}", ""]
+        if pics.video is not None:
+            lines += [f"![video]({pics.video.path.name})", "", pics.video.caption, ""]
+        lines += [pics.lines()[-1], ""]
+    lines += list(notes)
+    if not pictures and not notes:
+        lines.append("none")
+    path = out / f"{name}.md"
+    path.write_text("\n".join(lines).rstrip("\n") + "\n", encoding="utf-8")
+    return path
+
+
+def write_run_report(run: RunRecord, film: Film, out_dir: str | Path, name: str) -> Pictures:
+    """A scenario's report: the 2-D plot (:func:`plot_run`), the pictures of its film (the run's own
+    states) and the index ``NAME.md`` listing both.
+
+    Returns:
+        The pictures (their ``note`` says in one line why there are none).
+    """
+    from hil.render import render_film
+
+    figure = plot_run(run, out_dir, name)
+    pictures = render_film(film, out_dir, name)
+    write_index(out_dir, name, f"scenario {name}", [figure], [("", pictures)])
+    return pictures

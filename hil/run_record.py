@@ -81,6 +81,8 @@ class ScenarioResult:
     counters: dict[str, int] = field(default_factory=dict)
     extremes: PhysicsExtremes | None = None
     """The plant's largest penetration, tension and limit overshoot over the run (None on a port)."""
+    report_lines: tuple[str, ...] = field(default=(), compare=False)
+    """With a report: its pictures, one line each, or the one line saying why there are none."""
 
     @property
     def passed(self) -> bool:

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from hil.campaign.spec import CampaignError, Run, build_design, build_firmware
+from hil.sim.spiral import SpiralDesign
 from hil.trial.grasp import GraspSetup, grasp_trial
 
 __all__ = [
@@ -36,7 +37,9 @@ __all__ = [
     "check_ray_address",
     "execute_local",
     "execute_ray",
+    "grasp_setup",
     "run_one",
+    "scenario_measured",
     "stable_row",
 ]
 
@@ -73,8 +76,8 @@ def run_one(run: Run) -> dict[str, Any]:
     return row
 
 
-def _grasp(run: Run) -> dict[str, Any]:
-    i = run.inputs
+def grasp_setup(i: Mapping[str, Any]) -> tuple[GraspSetup, SpiralDesign]:
+    """The grasp trial and the arm of a grasp run's inputs."""
     design, model = build_design(i, physics="fine")
     optional = {
         "mass_kg": i.get("object.mass_kg"),
@@ -92,24 +95,37 @@ def _grasp(run: Run) -> dict[str, Any]:
         seed=i["seed"],
         **{k: v for k, v in optional.items() if v is not None},
     )
+    return setup, design
+
+
+def _grasp(run: Run) -> dict[str, Any]:
+    setup, design = grasp_setup(run.inputs)
     out = grasp_trial(setup, design).as_dict()
     del out["setup"]  # the row's inputs say it
     return out
 
 
 def _scenario(run: Run) -> dict[str, Any]:
+    return scenario_measured(run.inputs)[0]
+
+
+def scenario_measured(
+    i: Mapping[str, Any], report_dir: Path | None = None
+) -> tuple[dict[str, Any], tuple[str, ...]]:
+    """Run a scenario run's inputs: what its row records, and (with ``report_dir``) its report's lines."""
     from hil.faults import Fault
     from hil.scenarios import run_scenario  # the catalogue imports every scenario: only for a scenario run
 
-    i = run.inputs
     design, model = build_design(i)
     faults = [Fault.parse(s) for s in i.get("scenario.faults", [])]
-    result = run_scenario(i["scenario.name"], seed=i["seed"], design=design, model=model, faults=faults)
+    result = run_scenario(
+        i["scenario.name"], seed=i["seed"], design=design, model=model, faults=faults, report_dir=report_dir
+    )
     out = result.as_dict()
     for k in ("name", "seed"):
         del out[k]
     out["success"] = out.pop("passed")
-    return out
+    return out, result.report_lines
 
 
 def _clean(value: Any) -> Any:

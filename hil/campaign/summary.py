@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +20,7 @@ import numpy as np
 from hil.experiments.common import pyplot, save_figure
 from hil.experiments.stats import wilson_interval
 
-__all__ = ["DesignRate", "design_rates", "success_maps"]
+__all__ = ["DesignRate", "campaign_pictures", "design_rates", "success_maps"]
 
 _CHOICE_PREFIXES = ("design.", "controller.")
 _MAP_BINS_N = 8
@@ -157,3 +158,82 @@ def success_maps(rows: Sequence[Mapping[str, Any]], out_dir: Path) -> list[Path]
         )
         paths.append(save_figure(fig, out_dir / f"map_{i:02d}.png"))
     return paths
+
+
+def campaign_pictures(
+    rows: Sequence[Mapping[str, Any]], out_dir: Path
+) -> tuple[list[tuple[str, Any]], list[str]]:
+    """Pictures of a campaign's representative runs: the best design's first success and the campaign's
+    first failure, each run again and shown only if it measures exactly what its row recorded (a grasp
+    filmed by :func:`hil.render.film_grasp_trial`; a scenario with its own report in ``run-success/`` or
+    ``run-failure/``, linked from the notes).
+
+    Returns:
+        ``([(heading, Pictures), ...], notes)`` for :func:`hil.report.write_index`.
+    """
+    from hil.campaign.runner import grasp_setup
+    from hil.render import NO_GL, RERUN, Pictures, film_grasp_trial, gl_backends, render_film
+
+    finished = [r for r in rows if r["outcome"] != "error"]
+    if not finished:
+        return [], ["no run finished: no pictures"]
+    best = design_rates(finished)[0]
+    picks = [
+        (
+            "success",
+            next(
+                (r for r in finished if r["outcome"] == "success" and _choice(r) == dict(best.choice)), None
+            ),
+        ),
+        ("failure", next((r for r in finished if r["outcome"] == "failure"), None)),
+    ]
+    out: list[tuple[str, Pictures]] = []
+    notes: list[str] = []
+    for label, row in picks:
+        if row is None:
+            continue
+        i = row["inputs"]
+        if i["kind"] != "grasp":
+            notes += _scenario_pictures(label, row, out_dir / f"run-{label}")
+            continue
+        if not gl_backends():  # MUJOCO_GL=disable: no trial is run again for nothing
+            out.append(("", Pictures(note=NO_GL)))
+            break
+        heading = (
+            f"a {label}: {_label(row)}; object {1000 * i['object.diameter_m']:.0f} mm at "
+            f"x = {1000 * i['object.x_m']:.0f} mm, z = {1000 * i['object.z_m']:.0f} mm, seed {i['seed']} "
+            f"(run {row['key']})"
+        )
+        setup, design = grasp_setup(i)
+        film, note = film_grasp_trial(setup, design, row["measured"])
+        pics = (
+            Pictures(note=note) if film is None else render_film(film, out_dir, f"run-{label}", source=RERUN)
+        )
+        out.append((heading, pics))
+    return out, notes
+
+
+def _scenario_pictures(label: str, row: Mapping[str, Any], out_dir: Path) -> list[str]:
+    """A scenario run again with its report into ``out_dir``, kept only if it measures what its row
+    recorded; the index's lines about it."""
+    from hil.campaign.runner import scenario_measured
+    from hil.render import same_measurements
+
+    i = row["inputs"]
+    name = i["scenario.name"]
+    lines = [f"### a {label}: scenario {name}, {_label(row)}, seed {i['seed']} (run {row['key']})", ""]
+    measured, report = scenario_measured(i, report_dir=out_dir)
+    differ = same_measurements(row["measured"], measured)
+    if differ:
+        shutil.rmtree(out_dir, ignore_errors=True)
+        return [
+            *lines,
+            f"re-run differs from the recorded run ({', '.join(differ[:3])}): pictures skipped",
+            "",
+        ]
+    link = f"{out_dir.name}/{name}.md"
+    return [*lines, f"its report: [{link}]({link})", "", *report, ""]
+
+
+def _label(row: Mapping[str, Any]) -> str:
+    return " ".join(f"{k.partition('.')[2]}={_fmt(v)}" for k, v in _choice(row).items()) or "default design"

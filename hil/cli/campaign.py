@@ -85,7 +85,13 @@ def configure_campaign(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help=f"start a run whose worker died again, up to N times (default {MAX_RETRIES_N})",
     )
-    p.add_argument("--report", type=Path, metavar="DIR", help="write a success map per design (PNG) into DIR")
+    p.add_argument(
+        "--report",
+        type=Path,
+        metavar="DIR",
+        help="write a success map per design (PNG) into DIR, pictures of a success and a failure "
+        "(rendered by MuJoCo) and campaign.md listing them",
+    )
     p.add_argument("--top", type=int, default=10, metavar="N", help="designs in the table (default 10)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
 
@@ -219,11 +225,21 @@ def _summarise(
     skipped_n: int,
     elapsed_s: float,
 ) -> int:
-    from hil.campaign.summary import design_rates, success_maps  # matplotlib only for the summary
+    from hil.campaign.summary import (  # matplotlib only for the summary
+        campaign_pictures,
+        design_rates,
+        success_maps,
+    )
+    from hil.report import write_index
 
     designs = design_rates(rows)
     errors_n = sum(r["outcome"] == "error" for r in rows)
     maps = success_maps(rows, args.report) if args.report is not None else []
+    pictures: list[tuple[str, Any]] = []
+    index = None
+    if args.report is not None:
+        pictures, notes = campaign_pictures(rows, args.report)
+        index = write_index(args.report, "campaign", f"{campaign.kind} campaign", maps, pictures, notes)
     if args.json:
         summary = {
             "file": str(out),
@@ -236,6 +252,8 @@ def _summarise(
             "runs_per_min": round(ran_n / elapsed_s * 60, 2) if ran_n and elapsed_s > 0 else None,
             "designs": [d.as_dict() for d in designs[: args.top]],
             "maps": [str(p) for p in maps],
+            "pictures": [str(p) for _, pics in pictures for p in pics.paths],
+            "report": None if index is None else str(index),
         }
         print(json.dumps(summary, allow_nan=False))
         return EXIT_FAILURE if errors_n else EXIT_OK
@@ -260,4 +278,9 @@ def _summarise(
     )
     for path in maps:
         console.print(f"map: {path}", highlight=False, soft_wrap=True)
+    for _, pics in pictures:
+        for line in [pics.note] if pics.note else [str(p) for p in pics.paths]:
+            console.print(f"pictures: {line}", highlight=False, soft_wrap=True)
+    if index is not None:
+        console.print(f"report: {index}", highlight=False, soft_wrap=True)
     return EXIT_FAILURE if errors_n else EXIT_OK

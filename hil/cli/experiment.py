@@ -9,7 +9,7 @@ import json
 import math
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rich.console import Console
@@ -20,9 +20,17 @@ from controller.cli_kit import EXIT_OK, finite_float, seed, writable_dir
 from controller.config import CONTROL_PERIOD_US
 from hil.cli.design import add_design_arguments, design_from_args, model_from_args
 from hil.experiments.catalogue import EXPERIMENTS, run_experiment
-from hil.experiments.common import PHYSICS, SIZES
+from hil.experiments.common import PHYSICS, SIZES, grasp_pictures
+from hil.experiments.outcomes import GraspOutcomes
+from hil.report import write_index
 
-__all__ = ["EXPERIMENT_HELP", "MAX_JOBS_N", "configure_experiment", "run_experiment_command"]
+if TYPE_CHECKING:
+    from hil.render import Pictures
+
+__all__ = ["EXPERIMENT_HELP", "MAX_JOBS_N", "NO_GRASP", "configure_experiment", "run_experiment_command"]
+
+NO_GRASP = "this experiment runs no grasp trial: no pictures (its figure is above)"
+"""The report's line for an experiment with no grasp to picture."""
 
 MAX_JOBS_N = 64
 """The most worker processes ``--jobs`` starts: each holds a MuJoCo plant; more than this is a typo."""
@@ -35,7 +43,13 @@ def configure_experiment(p: argparse.ArgumentParser) -> None:
     """Arguments of ``spirob-hil experiment``."""
     p.add_argument("name", choices=list(EXPERIMENTS), metavar="NAME", help=", ".join(EXPERIMENTS))
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
-    p.add_argument("--report", type=Path, metavar="DIR", help="write the experiment's PNG figure into DIR")
+    p.add_argument(
+        "--report",
+        type=Path,
+        metavar="DIR",
+        help="write the experiment's PNG figure into DIR, pictures of a grasp that succeeded and one that "
+        "did not (rendered by MuJoCo), and NAME.md listing them",
+    )
     p.add_argument("--seed", type=seed, default=0, help="seed of every random choice (default 0)")
     p.add_argument(
         "--size",
@@ -112,10 +126,15 @@ def run_experiment_command(args: argparse.Namespace) -> int:
             model=model,
         )
     elapsed = time.perf_counter() - t0
-    figure = None
+    figure = index = None
+    pictures: list[tuple[str, Pictures]] = []
     if args.report is not None:
         try:
             figure = result.figure(args.report)
+            if isinstance(result, GraspOutcomes):
+                pictures = grasp_pictures(result.outcomes, design, args.report, exp.name)
+            notes = [] if pictures else [NO_GRASP]
+            index = write_index(args.report, exp.name, f"experiment {exp.name}", [figure], pictures, notes)
         except OSError as exc:
             raise ValueError(f"cannot write into {args.report}: {exc.strerror or exc}") from exc
     if args.json:
@@ -129,6 +148,8 @@ def run_experiment_command(args: argparse.Namespace) -> int:
         out["elapsed_s"] = round(elapsed, 1)
         if figure is not None:
             out["figure"] = str(figure)
+            out["report"] = str(index)
+            out["pictures"] = [str(p) for _, pics in pictures for p in pics.paths]
         print(json.dumps(_clean(out), allow_nan=False, default=_json_default))
         return EXIT_OK
     table = Table(title=f"{exp.name}: {exp.summary}", title_justify="left")
@@ -146,7 +167,11 @@ def run_experiment_command(args: argparse.Namespace) -> int:
         f"size {args.size}; {elapsed:.0f} s"
     )
     if figure is not None:
-        console.print(f"figure: {figure}")
+        console.print(f"figure: {figure}", highlight=False, soft_wrap=True)
+        for _, pics in pictures:
+            for line in [pics.note] if pics.note else [str(p) for p in pics.paths]:
+                console.print(f"pictures: {line}", highlight=False, soft_wrap=True)
+        console.print(f"report: {index}", highlight=False, soft_wrap=True)
     return EXIT_OK
 
 

@@ -358,7 +358,12 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
         help="MCAP recording of every byte in and out of the board; with --port, of the link as the host "
         "sees it (a directory when several scenarios run)",
     )
-    p.add_argument("--report", metavar="DIR", help="write PNG plots of each run there")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write PNG plots of each run there, pictures of its moments rendered by MuJoCo (a GIF where "
+        "the arm moves) and NAME.md listing them",
+    )
     p.add_argument(
         "--fault",
         action="append",
@@ -473,6 +478,10 @@ def _run_run(args: argparse.Namespace) -> int:
             print(f"recorded {name} to {path}")
         if args.report:
             print(f"plots in {args.report}")
+            for r in results:
+                for line in r.report_lines:
+                    print(f"{r.name}: {line}")
+                print(f"{r.name}: report {Path(args.report) / (r.name + '.md')}")
     return EXIT_OK if all(r.passed for r in results) else EXIT_FAILURE
 
 

@@ -4,12 +4,17 @@ scene and its units are :mod:`hil.trial.scene`'s)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from hil.sim.config import PHYSICS_STEPS_S, ModelConfig
 from hil.sim.types import PhysicsExtremes
+
+if TYPE_CHECKING:
+    from hil.render import Pictures
+    from hil.sim.spiral import SpiralDesign
+    from hil.trial.grasp import GraspOutcome
 
 Progress = Callable[[int, int], None]
 """``progress(done, total)``: work units done so far (trials or simulated milliseconds)."""
@@ -107,3 +112,50 @@ def save_figure(fig: Any, path: Path) -> Path:
     fig.savefig(path, dpi=110)
     pyplot().close(fig)
     return path
+
+
+def grasp_pictures(
+    outcomes: Sequence[GraspOutcome], design: SpiralDesign, out_dir: Path, name: str
+) -> list[tuple[str, Pictures]]:
+    """Pictures of an experiment's representative grasps: its first that succeeded and its first that did
+    not, each run again filmed and checked to be the recorded trial (:func:`hil.render.film_grasp_trial`).
+
+    Returns:
+        ``[(heading, Pictures), ...]`` for :func:`hil.report.write_index` (empty with no grasp).
+    """
+    from hil.render import (  # only for a report
+        NO_GL,
+        RERUN,
+        Pictures,
+        film_grasp_trial,
+        gl_backends,
+        render_film,
+    )
+
+    if not gl_backends():  # MUJOCO_GL=disable: no trial is run again for nothing
+        return [("", Pictures(note=NO_GL))]
+
+    picks = [
+        (label, o)
+        for label, o in (
+            ("succeeded", next((o for o in outcomes if o.success), None)),
+            ("did not succeed", next((o for o in outcomes if not o.success), None)),
+        )
+        if o is not None
+    ]
+    out: list[tuple[str, Pictures]] = []
+    for label, o in picks:
+        s = o.setup
+        heading = (
+            f"a grasp that {label}: {1000 * s.diameter_m:.0f} mm object at x = {1000 * s.x_m:.0f} mm, "
+            f"z = {1000 * s.z_m:.0f} mm, strategy {'on' if s.strategy_on else 'off'}; ended {o.state}"
+        )
+        film, note = film_grasp_trial(s, design, o.as_dict())
+        slug = "held" if o.success else "failed"
+        pictures = (
+            Pictures(note=note)
+            if film is None
+            else render_film(film, out_dir, f"{name}-{slug}", source=RERUN)
+        )
+        out.append((heading, pictures))
+    return out

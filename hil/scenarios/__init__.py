@@ -15,7 +15,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from hil.board import BoardConfig
-from hil.environment import Environment
+from hil.environment import Environment, Episode
 from hil.faults import Fault
 from hil.radio import RadioScript
 from hil.recording import Recorder
@@ -138,7 +138,9 @@ def run_scenario(
         faults: faults added to the scenario's own.
         record: write an MCAP recording of every byte in and out of the board.
         progress: called as ``progress(ticks_done, ticks_total)`` every 100 ticks.
-        report_dir: write a PNG of the run's signals there (``NAME.png``).
+        report_dir: write the run's report there: a PNG of its signals (``NAME.png``), pictures of its
+            moments rendered from the run's own states and, where the arm moves, a GIF
+            (:mod:`hil.render`), listed in ``NAME.md``.
         options: the scenario's own options (``excitation``: ``profile_name``).
 
     Raises:
@@ -158,10 +160,18 @@ def run_scenario(
             meta["drone"] = repr(plan.drone)
         meta.update(scenario.recording_metadata())
         recorder = Recorder(record, metadata=meta)
+    watcher = None
+    report_lines: tuple[str, ...] = ()
+    episode: Episode = scenario
+    if report_dir is not None:  # the report's pictures are of this run's own states
+        from hil.render import Film, FilmingEpisode, MomentWatcher
+
+        watcher = MomentWatcher(Film())
+        episode = FilmingEpisode(scenario, watcher)
     try:
         env = Environment(
             config,
-            episode=scenario,
+            episode=episode,
             faults=plan.faults,
             radio=RadioScript(plan.radio),
             host_script=plan.host,
@@ -173,12 +183,14 @@ def run_scenario(
         with env:
             env.run(scenario.duration_us, progress=progress)
             run = env.record(scenario.duration_us)
+            if watcher is not None:
+                watcher.finish(env)
         checks = judge(scenario, run, plan)
-        if report_dir is not None:
-            from hil.report import plot_run  # matplotlib only when a report is asked for
+        if report_dir is not None and watcher is not None:
+            from hil.report import write_run_report  # matplotlib only when a report is asked for
 
-            plot_run(run, report_dir, name)
+            report_lines = tuple(write_run_report(run, watcher.film, report_dir, name).lines())
     finally:
         if recorder is not None:
             recorder.close()
-    return ScenarioResult(name, seed, checks, scenario.duration_us, run.counters, run.extremes)
+    return ScenarioResult(name, seed, checks, scenario.duration_us, run.counters, run.extremes, report_lines)

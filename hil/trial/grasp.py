@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -155,13 +156,17 @@ def grasp_rig(setup: GraspSetup, design: SpiralDesign) -> Rig:
     return rig
 
 
-def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspOutcome:
+def grasp_trial(
+    setup: GraspSetup, design: SpiralDesign | None = None, on_tick: Callable[[Rig], None] | None = None
+) -> GraspOutcome:
     """Run one grasp through the firmware's GRASP mode and measure it (pure; picklable in and out).
 
     Timeline: lever DOWN, then UP (GRASP mode) at 20 ms, left lever UP (grasp request) at 60 ms. The object
     waits out of reach on its support and is put at its place, still on its support, when the firmware
     starts the grasp (the drone bringing the ready arm next to it); the support is removed when the
     firmware reports HOLD; the trial ends ``hold_s`` later, or when the grasp FAILED.
+
+    ``on_tick(rig)`` is called after every tick (a report films the trial with it); it must only look.
     """
     design = design or SpiralDesign.paper_prototype()
     rig = grasp_rig(setup, design)
@@ -181,6 +186,8 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
     load_n = math.nan
     while rig.now_us < end_us:
         rig.step()
+        if on_tick is not None:
+            on_tick(rig)
         state = rig.firmware.grasp_state
         cur = plant.commanded_currents_raw()
         max_current = max(max_current, max(abs(c) for c in cur))
@@ -210,7 +217,7 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
     wrap_deg = contact_wrap_deg(plant, OBJ) if t_hold >= 0 else 0.0
     state_name = GraspState(rig.firmware.grasp_state).name
     if held and setup.release and setup.load_rate_n_per_s > 0:
-        load_n = _load_ramp(rig, setup)
+        load_n = _load_ramp(rig, setup, on_tick)
     out = GraspOutcome(
         setup,
         state_name,
@@ -231,7 +238,7 @@ def grasp_trial(setup: GraspSetup, design: SpiralDesign | None = None) -> GraspO
     return out
 
 
-def _load_ramp(rig: Rig, setup: GraspSetup) -> float:
+def _load_ramp(rig: Rig, setup: GraspSetup, on_tick: Callable[[Rig], None] | None = None) -> float:
     """Grow a force along ``setup.load_dir`` on the held object until it comes out; the force then [N]."""
     plant = rig.plant
     direction = np.asarray(setup.load_dir, dtype=np.float64)
@@ -244,6 +251,8 @@ def _load_ramp(rig: Rig, setup: GraspSetup) -> float:
         force = min(setup.load_cap_n, rate * (rig.now_us - t0))
         plant.apply_object_force(OBJ, tuple(float(v) for v in force * direction))
         rig.step()
+        if on_tick is not None:
+            on_tick(rig)
         moved_mm = float(np.dot(plant.object_pose(OBJ).pos_m - p0, direction)) * 1000
         if moved_mm > HELD_DROP_MM or not contact_units(plant, OBJ):
             return force

@@ -27,6 +27,7 @@ from hil.campaign.runner import ResultsFile, execute_local, run_one, stable_row
 from hil.campaign.spec import Campaign, CampaignError, Run, build_design, load_campaign, parse_campaign
 from hil.campaign.summary import design_rates, success_maps
 from hil.cli.main import main
+from hil.render import NO_GL
 
 ROOT = Path(__file__).resolve().parents[3]
 PYTHON = sys.executable
@@ -401,6 +402,15 @@ def test_a_grasp_campaign_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert rows[0.3]["outcome"] == "failure"  # 30 cm out: beyond the arm's reach
     assert (summary["designs"][0]["successes"], summary["designs"][0]["n"]) == (1, 2)
     assert summary["maps"] == [str(tmp_path / "maps" / "map_01.png")]
+    # the report pictures the success and the failure, each re-run filmed and matching its row
+    index = (tmp_path / "maps" / "campaign.md").read_text()
+    assert summary["report"] == str(tmp_path / "maps" / "campaign.md") and "](map_01.png)" in index
+    assert "### a success: " in index and "### a failure: " in index and "re-run differs" not in index
+    if NO_GL not in index:
+        names = [Path(p).name for p in summary["pictures"]]
+        assert "run-success.gif" in names and "run-failure-01-start.png" in names
+        assert any("grasp-hold" in n and n.startswith("run-success") for n in names)
+        assert all(f"]({n})" in index for n in names)
 
 
 # ---------------------------------------------------------------------- Ray

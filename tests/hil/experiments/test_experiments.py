@@ -9,6 +9,7 @@ from typing import Any
 
 import pytest
 
+from hil.cli.experiment import NO_GRASP
 from hil.cli.main import main
 from hil.experiments.base import Conditions
 from hil.experiments.catalogue import EXPERIMENTS, run_experiment
@@ -18,6 +19,7 @@ from hil.experiments.geometry import ArmFootprint
 from hil.experiments.packing import PackingResult
 from hil.experiments.strategy import StrategyParams, StrategyResult, arm_of, placements
 from hil.experiments.workspace import WorkspaceResult
+from hil.render import NO_GL
 from hil.sim.config import ArmConfig, ModelConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
@@ -92,6 +94,14 @@ def test_required_json_keys_through_the_cli(capsys: pytest.CaptureFixture[str], 
         for key in keys:
             assert isinstance(out[key], float)
         assert out["samples"] and Path(out["figure"]).exists()
+        index = Path(out["report"]).read_text()
+        if name != "strategy":
+            assert NO_GRASP in index and out["pictures"] == []
+        elif NO_GL not in index:  # a held grasp and one that failed, each re-run and matching its trial
+            assert "re-run differs" not in index
+            names = [Path(p).name for p in out["pictures"]]
+            assert "strategy-held.gif" in names and "strategy-failed.gif" in names
+            assert any(n.startswith("strategy-held-") and "grasp-hold" in n for n in names)
         if name == "strategy":  # intervals per arm, McNemar of each strategy-on arm against off
             assert set(out["arms"]) == {"off", "on", "oracle"}
             assert all(len(a["ci95"]) == 2 and a["n"] == 1 for a in out["arms"].values())
