@@ -99,9 +99,9 @@ def recording_meta() -> dict[str, str]:
     return {"format": "2", "firmware": json.dumps(FirmwareConfig().to_dict()), "rc": "link"}
 
 
-def preamble() -> bytes:
-    """Magic, header, metadata and the board -> host link channel."""
-    return MAGIC + header() + metadata(recording_meta()) + channel(LINK_TX_CHANNEL, "/board/link_tx")
+def preamble(topic: str = "/board/link_tx") -> bytes:
+    """Magic, header, metadata and channel :data:`LINK_TX_CHANNEL` (the board -> host link by default)."""
+    return MAGIC + header() + metadata(recording_meta()) + channel(LINK_TX_CHANNEL, topic)
 
 
 _INFO_FRAME = encode(Event(0, EventKind.INFO), 0)
@@ -230,8 +230,9 @@ CRAFTED: tuple[Crafted, ...] = (
         "two zstd chunks of 100 messages, cut in the middle of the second (a killed writer)",
         _truncated,
         None,
-        # replay: no tick records, nothing to compare (1); recover: the first chunk (0); host: plays it (0)
-        (1, 0, 0),
+        # replay: board outputs before any tick mark, not a lockstep recording (2); recover: the first chunk
+        # (0); host: plays it (0)
+        (2, 0, 0),
     ),
 )
 """Every crafted file, in the bench's order."""
