@@ -217,6 +217,14 @@ def run_tune_command(args: argparse.Namespace) -> int:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise UsageError(f"cannot write {path}: {exc.strerror or exc}", PROG) from None
+    study = None
+    if not on_ray:
+        from hil.tune.search import TuneError, open_study
+
+        try:
+            study = open_study(storage, args.study, spec, resume=args.resume)
+        except TuneError as exc:
+            raise UsageError(str(exc), PROG) from None
     err = Console(stderr=True)
     rows_path = storage.with_name(storage.name.removesuffix(".journal") + "-rows.jsonl")
     where = f"Ray at {args.ray_address}" if args.ray_address else "a local Ray" if args.ray else "processes"
@@ -248,7 +256,8 @@ def run_tune_command(args: argparse.Namespace) -> int:
                 say=progress.say,
             )
         else:
-            outcome = _search_local(args, spec, train, storage, cache, stop, progress)
+            assert study is not None
+            outcome = _search_local(args, study, spec, train, storage, cache, stop, progress)
         best_values, best_k, trials_n, pruned_n = outcome
         if stop.is_set():
             progress.say(
@@ -305,6 +314,7 @@ def _baselines() -> dict[str, dict[str, Any]]:
 
 def _search_local(
     args: argparse.Namespace,
+    study: Any,
     spec: TuneSpec,
     train: list[Any],
     storage: Path,
@@ -312,12 +322,8 @@ def _search_local(
     stop: threading.Event,
     progress: _Progress,
 ) -> tuple[dict[str, Any] | None, int, int, int]:
-    from hil.tune.search import TuneError, best_trial, finished_trials, open_study, search_local
+    from hil.tune.search import best_trial, finished_trials, search_local
 
-    try:
-        study = open_study(storage, args.study, spec, resume=args.resume)
-    except TuneError as exc:
-        raise UsageError(str(exc), PROG) from None
     before = len(finished_trials(study))
     if before:
         progress.say(f"tune: {before} trial(s) already in {storage}")

@@ -89,6 +89,8 @@ def open_study(path: Path, name: str, spec: TuneSpec, *, resume: bool) -> optuna
         TuneError: as above, or the file cannot be written.
     """
     _quiet_optuna()
+    if resume and not path.is_file():
+        raise TuneError(f"nothing to resume: no study file {path}")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         storage = JournalStorage(JournalFileBackend(str(path)))
