@@ -161,17 +161,18 @@ def _check_args(args: argparse.Namespace) -> None:
 class _Progress:
     """Progress lines on stderr: grasps done, their rate, the ETA of what is left (at most every 10 s)."""
 
-    def __init__(self, err: Console, total_grasps: int, budget_s: float | None) -> None:
+    def __init__(self, err: Console, total_grasps: int, budget_s: float | None, heldout_n: int) -> None:
         self.err = err
         self.total = total_grasps
         self.budget_s = budget_s
+        self.heldout_n = heldout_n
         self.t0 = time.monotonic()
         self.last = self.t0
         self.grasps = 0
         self._seen: set[str] = set()
 
     def row(self, ev: Evaluation) -> None:
-        fresh = set(ev.rows) - self._seen
+        fresh = set(ev.rows) - self._seen - ev.cached
         self._seen |= fresh
         self.grasps += len(fresh)
         now = time.monotonic()
@@ -189,8 +190,6 @@ class _Progress:
             left_s = min(left_s, max(0.0, self.budget_s - elapsed) + self.heldout_s(per_s))
         minutes, seconds = divmod(round(left_s), 60)
         return f"{per_s * 60:.1f} grasps/min, ETA {minutes}m{seconds:02d}s (at most)"
-
-    heldout_n = 0
 
     def heldout_s(self, per_s: float) -> float:
         return self.heldout_n / per_s
@@ -234,10 +233,8 @@ def run_tune_command(args: argparse.Namespace) -> int:
         highlight=False,
         soft_wrap=True,
     )
-    progress = _Progress(err, args.trials * len(train) + 3 * len(test), None)
-    progress.heldout_n = 3 * len(test)
-    if args.budget_min is not None:
-        progress.budget_s = args.budget_min * 60
+    budget_s = None if args.budget_min is None else args.budget_min * 60
+    progress = _Progress(err, args.trials * len(train) + 3 * len(test), budget_s, 3 * len(test))
     with stop_on_signals() as stop, ResultsFile(rows_path, resume=True) as cache:
         if on_ray:
             from hil.tune.ray_search import search_ray  # Ray is imported only here
@@ -288,7 +285,7 @@ def run_tune_command(args: argparse.Namespace) -> int:
     train_rate = Rate(best_k, len(train))
     header = file_header(
         preset=spec.preset,
-        made_by="spirob-hil tune " + shlex.join(sys.argv[2:] if sys.argv[1:2] == ["tune"] else []),
+        made_by=_command_line(args, spec),
         spec=spec,
         trials_n=trials_n,
         pruned_n=pruned_n,
@@ -298,6 +295,24 @@ def run_tune_command(args: argparse.Namespace) -> int:
     )
     write_tuned(output, controllers["tuned"], header)
     return _report(args, output, storage, train_rate, heldout, mcnemar, controllers["tuned"], ev.errors)
+
+
+def _command_line(args: argparse.Namespace, spec: TuneSpec) -> str:
+    """The command that asks the same question (the options that fix the study, and the search's)."""
+    mm = ",".join(f"{d * 1000:g}" for d in spec.diameters_m)
+    words = [
+        "spirob-hil", "tune", "--study", args.study, "--preset", spec.preset, "--diameters-mm", mm,
+        "--x-mm", f"{spec.x_range_m[0] * 1000:g},{spec.x_range_m[1] * 1000:g}",
+        f"--z-mm={spec.z_range_m[0] * 1000:g},{spec.z_range_m[1] * 1000:g}",
+        "--grid", f"{spec.grid[0]}x{spec.grid[1]}", "--train-seeds", str(spec.train_seeds),
+        "--test-seeds", str(spec.test_seeds), "--seed", str(spec.seed), "--prune", spec.prune,
+        "--trials", str(args.trials), "--jobs", str(args.jobs),
+    ]  # fmt: skip
+    if args.budget_min is not None:
+        words += ["--budget-min", f"{args.budget_min:g}"]
+    if args.ray:
+        words.append("--ray")
+    return shlex.join(words)
 
 
 def _with_timeout(values: Mapping[str, Any]) -> dict[str, Any]:

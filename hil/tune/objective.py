@@ -186,10 +186,12 @@ class Evaluation:
         pruned: stopped early: it could not beat the best.
         interrupted: stopped by Ctrl-C.
         wall_s: wall time.
+        cached: the run keys taken from the cache (not grasped now).
     """
 
     n: int
     rows: dict[str, dict[str, Any]] = field(default_factory=dict)
+    cached: set[str] = field(default_factory=set)
     pruned: bool = False
     interrupted: bool = False
     wall_s: float = 0.0
@@ -249,6 +251,7 @@ def evaluate(
     for r in runs:
         if cache is not None and r.key in cache.done:
             ev.rows[r.key] = cache.done[r.key]
+            ev.cached.add(r.key)
         else:
             todo.append(r)
 

@@ -292,3 +292,17 @@ def test_a_local_search_never_imports_ray(tmp_path: Path) -> None:
     )
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2 and "nothing to resume" in proc.stderr, proc.stderr
+
+
+@pytest.mark.ray
+def test_ray_tune_searches_with_optunas_sampler_and_resumes(tmp_path: Path) -> None:
+    """A local Ray of one CPU: the two baselines, then one more trial after a resume."""
+    storage, out = tmp_path / "r", tmp_path / "r.toml"
+    argv = ["tune", *REF, "--ray", "--jobs", "1", "--study", "r", "--storage", str(storage), "-o", str(out)]
+    assert main([*argv, "--trials", "2"]) == 0
+    trials = _journal_trials(storage / "study.journal", "r")
+    assert len(trials) == 2 and {t.params["grasp_strategy_on"] for t in trials} == {True, False}
+    assert all(max(t.intermediate_values) == 1 for t in trials)  # one placement each, reported
+    assert load_param_file(out)["grasp_strategy_on"] in (True, False)
+    assert main([*argv, "--trials", "3", "--resume"]) == 0
+    assert len(_journal_trials(storage / "study.journal", "r")) == 3
