@@ -90,7 +90,7 @@ def configure_tune(p: argparse.ArgumentParser) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--ray", action="store_true", help="Ray Tune on a local Ray of --jobs CPUs")
     where.add_argument("--ray-address", metavar="ADDR", help="search with Ray Tune on the cluster at ADDR")
-    s = p.add_argument_group("placements (fixed with the study; defaults shown)")
+    s = p.add_argument_group("the question: placements and pruning (fixed with the study; defaults shown)")
     s.add_argument("--preset", default=d.preset, help=f"plant model preset (default {d.preset})")
     s.add_argument(
         "--diameters-mm",

@@ -81,7 +81,8 @@ def compare_heldout(
         Per label, each placement's success (None: not run, after Ctrl-C), and the batch's evaluation.
     """
     per = {label: runs_for(values, test, spec) for label, values in controllers.items()}
-    every = [r for runs in per.values() for r in runs]
+    # A tuned controller equal to a baseline has the same runs (the same keys): grasped once.
+    every = list({r.key: r for runs in per.values() for r in runs}.values())
     kw = {} if executor is None else {"executor": executor}
     ev = evaluate(every, jobs=jobs, stop=stop, rule="none", cache=cache, **kw)  # type: ignore[arg-type]
     return {label: ev.outcomes(runs) for label, runs in per.items()}, ev

@@ -155,7 +155,7 @@ def search_ray(
                 )
             else:
                 ray.init(address=address, logging_level=logging.WARNING)
-        except (ConnectionError, RuntimeError, ValueError) as exc:
+        except Exception as exc:  # Ray says a node that timed out starting with a bare Exception
             raise TuneError(f"cannot start or join Ray at {address or 'a local node'}: {exc}") from None
         try:
             searcher = OptunaSearch(

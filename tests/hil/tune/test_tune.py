@@ -306,3 +306,47 @@ def test_ray_tune_searches_with_optunas_sampler_and_resumes(tmp_path: Path) -> N
     assert load_param_file(out)["grasp_strategy_on"] in (True, False)
     assert main([*argv, "--trials", "3", "--resume"]) == 0
     assert len(_journal_trials(storage / "study.journal", "r")) == 3
+
+
+def test_the_shipped_prototype_file_is_taken_by_every_consumer() -> None:
+    from host.param_push import wire_values
+
+    path = ROOT / "examples" / "params_prototype_tuned.toml"
+    values = load_param_file(path)
+    assert "grasp_strategy_on" in values
+    header = path.read_text().split("\n\n")[0]
+    assert "Held-out" in header and "Training success" in header and "Wilson" in header
+    assert len(wire_values(path)) == len(values)  # all run-time parameters: the host can send them all
+    sets = ["kind=grasp", "object.diameter_m=0.02", "object.x_m=0.04", "object.z_m=-0.11"]
+    assert load_campaign(None, sets, values).runs()
+
+
+def test_the_heldout_comparison_grasps_a_shared_run_once_and_pairs_by_placement() -> None:
+    import threading
+
+    from hil.tune.heldout import compare_heldout, paired
+
+    spec = TuneSpec(diameters_m=(0.02,), grid=(2, 1))
+    test = [(0.03, -0.1, 0.02), (0.05, -0.1, 0.02)]
+    ramp = firmware_values(baseline_points()["ramp"])
+    given: list[str] = []
+
+    def executor(runs: Any, jobs: int, stop: threading.Event) -> Any:
+        for r in runs:
+            given.append(r.key)
+            ok = r.inputs["controller.strategy_on"] is False and r.inputs["object.x_m"] < 0.04
+            yield {"key": r.key, "inputs": dict(r.inputs), "outcome": "success" if ok else "failure"}
+
+    outcomes, ev = compare_heldout(
+        spec,
+        test,
+        {"tuned": ramp, "default": firmware_values(baseline_points()["default"]), "ramp": ramp},
+        jobs=1,
+        stop=threading.Event(),
+        executor=executor,
+    )
+    assert len(given) == len(set(given)) == 4 and ev.complete
+    assert outcomes == {"tuned": [True, False], "default": [False, False], "ramp": [True, False]}
+    assert paired(outcomes["tuned"], outcomes["default"]) == {
+        "pairs": 2, "only_a": 1, "only_b": 0, "p_value": 1.0,
+    }  # fmt: skip
