@@ -275,7 +275,14 @@ def run_tune_command(args: argparse.Namespace) -> int:
                 return execute_ray(runs, jobs, stop_, address=args.ray_address)
 
         outcomes, ev = compare_heldout(
-            spec, test, controllers, jobs=args.jobs, stop=stop, cache=cache, executor=executor
+            spec,
+            test,
+            controllers,
+            jobs=args.jobs,
+            stop=stop,
+            cache=cache,
+            executor=executor,
+            on_row=progress.row,
         )
         if ev.interrupted:
             progress.say(f"interrupted in the held-out comparison: grasps kept in {rows_path}; --resume")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import datetime
 import importlib.metadata
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -74,6 +74,7 @@ def compare_heldout(
     stop: threading.Event,
     cache: ResultsFile | None = None,
     executor: Executor | None = None,
+    on_row: Callable[[Evaluation], None] | None = None,
 ) -> tuple[dict[str, list[bool | None]], Evaluation]:
     """Every controller (label -> firmware values) at every held-out placement, in one batch.
 
@@ -84,7 +85,7 @@ def compare_heldout(
     # A tuned controller equal to a baseline has the same runs (the same keys): grasped once.
     every = list({r.key: r for runs in per.values() for r in runs}.values())
     kw = {} if executor is None else {"executor": executor}
-    ev = evaluate(every, jobs=jobs, stop=stop, rule="none", cache=cache, **kw)  # type: ignore[arg-type]
+    ev = evaluate(every, jobs=jobs, stop=stop, rule="none", cache=cache, on_row=on_row, **kw)  # type: ignore[arg-type]
     return {label: ev.outcomes(runs) for label, runs in per.items()}, ev
 
 
