@@ -3,7 +3,9 @@ trial and pruning rule as the local search, with Ray Tune's Optuna search (TPE) 
 a trial once it cannot beat the best. Ray is imported only here.
 
 Each Ray trial takes one CPU and grasps its training placements one after another, reporting after each
-(``score``: its successes so far over all the placements, ``successes``, ``done``). The Optuna study lives
+(``score``: its successes over all the placements once it ran them all, and before that its successes
+minus the set's size over the size, negative, so that a trial the scheduler stopped is told to the study
+below every full one; ``successes``, ``done``). The Optuna study lives
 in a journal file in the ``--storage`` directory (Ray Tune's own experiment directory beside it), so a
 ``--resume`` goes on with the same study; a trial that ran all its placements is one whose last
 reported step is the set's size.
@@ -59,12 +61,32 @@ class _BoundScheduler(FIFOScheduler):  # type: ignore[misc]
         return str(TrialScheduler.CONTINUE)
 
 
+class _Journal(JournalStorage):  # type: ignore[misc]
+    """Optuna's journal storage, picklable by its path (Ray Tune pickles the searcher with the tuner)."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        super().__init__(JournalFileBackend(path))
+
+    def __reduce__(self) -> tuple[Any, tuple[str]]:
+        return (_Journal, (self.path,))
+
+
+_STOPS: dict[int, threading.Event] = {}
+"""The stop events of the searches in this process, by id (an event does not pickle; the tuner does)."""
+
+
 class _Budget(tune.Stopper):  # type: ignore[misc]
     """Stops the whole search on Ctrl-C (``stop``) or once the budget has passed."""
 
     def __init__(self, stop: threading.Event, budget_s: float | None) -> None:
-        self.stop = stop
+        _STOPS[id(stop)] = stop
+        self.stop_id = id(stop)
         self.deadline = None if budget_s is None else time.monotonic() + budget_s
+
+    @property
+    def stop(self) -> threading.Event:
+        return _STOPS.get(self.stop_id) or threading.Event()
 
     def __call__(self, trial_id: str, result: dict[str, Any]) -> bool:
         return False
@@ -73,8 +95,15 @@ class _Budget(tune.Stopper):  # type: ignore[misc]
         return self.stop.is_set() or (self.deadline is not None and time.monotonic() >= self.deadline)
 
 
+def _space(trial: Any) -> None:
+    """Ray Tune's define-by-run space: the trial's parameters are the searched keys (module level: the
+    searcher is pickled with plain ``pickle``)."""
+    suggest(trial)
+
+
 def _full(t: FrozenTrial, n: int) -> bool:
-    return t.state == TrialState.COMPLETE and bool(t.intermediate_values) and max(t.intermediate_values) >= n
+    """The trial ran every placement (a trial the scheduler stopped ends on a negative score)."""
+    return t.state == TrialState.COMPLETE and t.value is not None and t.value >= 0
 
 
 def _trainable(spec: TuneSpec, train: list[Placement]) -> Callable[[dict[str, Any]], None]:
@@ -85,7 +114,9 @@ def _trainable(spec: TuneSpec, train: list[Placement]) -> Callable[[dict[str, An
         k = 0
         for i, r in enumerate(runs, start=1):
             k += run_one(r)["outcome"] == "success"
-            tune.report({"score": k / n, "successes": k, "done": i})
+            # A stopped trial's last score is below every full one's: the study tells them apart by it.
+            score = k / n if i == n else (k - n) / n
+            tune.report({"score": score, "successes": k, "done": i})
 
     return run
 
@@ -117,7 +148,7 @@ def search_ray(
     n = len(train)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     storage.mkdir(parents=True, exist_ok=True)
-    journal = JournalStorage(JournalFileBackend(str(storage / JOURNAL)))
+    journal = _Journal(str(storage / JOURNAL))
     names = {s.study_name for s in journal.get_all_studies()}
     if (name in names) != resume:
         raise TuneError(
@@ -159,7 +190,7 @@ def search_ray(
             raise TuneError(f"cannot start or join Ray at {address or 'a local node'}: {exc}") from None
         try:
             searcher = OptunaSearch(
-                space=lambda trial: (suggest(trial), None)[1],
+                space=_space,
                 metric="score",
                 mode="max",
                 points_to_evaluate=None if resume else list(baseline_points().values()),

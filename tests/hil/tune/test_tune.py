@@ -302,7 +302,7 @@ def test_ray_tune_searches_with_optunas_sampler_and_resumes(tmp_path: Path) -> N
     assert main([*argv, "--trials", "2"]) == 0
     trials = _journal_trials(storage / "study.journal", "r")
     assert len(trials) == 2 and {t.params["grasp_strategy_on"] for t in trials} == {True, False}
-    assert all(max(t.intermediate_values) == 1 for t in trials)  # one placement each, reported
+    assert all(t.value is not None and t.value >= 0 for t in trials)  # both ran their placement
     assert load_param_file(out)["grasp_strategy_on"] in (True, False)
     assert main([*argv, "--trials", "3", "--resume"]) == 0
     assert len(_journal_trials(storage / "study.journal", "r")) == 3
