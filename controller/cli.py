@@ -47,6 +47,7 @@ from controller.config import FirmwareConfig
 from controller.errors import ConfigError, PortError
 from controller.firmware import Firmware
 from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus
+from controller.param_file import apply_param_file
 from controller.preflight import WINDOW_US, run_preflight
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import SerialTransport, Transport
@@ -99,6 +100,11 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
         "--duration", type=positive_duration, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
     )
     p.add_argument("--config", metavar="JSON", help="FirmwareConfig fields as a JSON object")
+    p.add_argument(
+        "--params",
+        metavar="FILE.toml",
+        help="a firmware parameter file (flat keys, e.g. from spirob-hil tune), applied over --config",
+    )
     p.add_argument("--no-fifo", action="store_true", help="do not ask for SCHED_FIFO")
     p.add_argument(
         "--preflight",
@@ -143,9 +149,12 @@ def _load_config(args: argparse.Namespace) -> FirmwareConfig:
         if not isinstance(loaded, dict):
             raise ConfigError(f"config {args.config} must hold a JSON object")
         values.update(loaded)
+    config = FirmwareConfig.from_dict(values)
+    if args.params:
+        config = apply_param_file(args.params, config)
     if args.require_host:
-        values["host_required"] = True
-    return FirmwareConfig.from_dict(values)
+        config = config.replaced(host_required=True)
+    return config
 
 
 def _bitrate(text: str) -> int:

@@ -101,6 +101,8 @@ class HostApp:
         self.virtual_rc: VirtualRcDriver | None = None
         self.script: ScriptDriver | None = None
         """``--virtual-rc-script``: the radio script played on the board."""
+        self.param_push: Any = None
+        """``--params``: the parameter file's values sent at every link-up (``host.param_push``)."""
         self.excite: ExcitationDriver | None = None
         """``--excite``: the excitation played on the board."""
         self.preset: Any = None
@@ -163,6 +165,14 @@ class HostApp:
             source.add_listener(listener.on_board_message)
         for state_listener in (board, notices, arbiter):
             source.add_state_listener(state_listener.on_link_state)
+        if o.params:
+            from host.param_push import ParamPush
+
+            push = self.param_push = ParamPush(
+                dict(o.params), arbiter.forward, lambda level, text: notices.log("host", level, text)
+            )
+            source.add_listener(push.on_board_message)
+            source.add_state_listener(push.on_link_state)
         if client is not None:
             self._wire_link(client)
             try:

@@ -145,6 +145,13 @@ def build_parser() -> argparse.ArgumentParser:
         "(default prototype; docs/plant.md lists them) or a model file fitted by spirob-hil identify",
     )
     src.add_argument(
+        "--params",
+        type=Path,
+        metavar="FILE.toml",
+        help="a firmware parameter file (spirob-hil tune writes one): its run-time values are sent to the "
+        "board as parameter sets each time the link comes up (SAFE-only ones while disarmed)",
+    )
+    src.add_argument(
         "--gamepad",
         metavar="DEVICE",
         help="a Linux joystick device (/dev/input/js0) as the virtual radio: right stick ch0/ch1, left "
@@ -290,6 +297,8 @@ class HostOptions:
         preset: the plant model (``hil.sim.presets.resolve``: a preset's name or a fitted model file) of
             the virtual board, or of the shadow plant with ``port``; None: the default prototype.
         excite: the excitation profile to play (``host.excite``); None: none.
+        params: ``--params``: wire name -> value, sent as parameter sets at every link-up
+            (``host.param_push``).
     """
 
     port: str | None = None
@@ -317,6 +326,7 @@ class HostOptions:
     gamepad_map: GamepadMapping = DEFAULT_MAPPING
     preset: str | None = None
     excite: str | None = None
+    params: tuple[tuple[str, float], ...] = ()
 
     @classmethod
     def from_args(cls, ns: argparse.Namespace) -> HostOptions:
@@ -342,6 +352,8 @@ class HostOptions:
                 raise HostError("--excite needs a board; it cannot be used with --replay")
             if ns.preset is not None:
                 raise HostError("--preset is a model of the virtual board or the shadow plant: no --replay")
+            if ns.params is not None:
+                raise HostError("--params needs a board; it cannot be used with --replay")
             if not ns.replay.is_file():
                 raise HostError(f"no such recording: {ns.replay}")
             from hil.mcap_bounded import RecordingError
@@ -408,7 +420,17 @@ class HostOptions:
             gamepad_map=gamepad_map,
             preset=ns.preset,
             excite=ns.excite,
+            params=_params_from_args(ns),
         )
+
+
+def _params_from_args(ns: argparse.Namespace) -> tuple[tuple[str, float], ...]:
+    """``--params FILE``: its run-time values by wire name (``host.param_push.wire_values``)."""
+    if ns.params is None:
+        return ()
+    from host.param_push import wire_values
+
+    return tuple(wire_values(ns.params).items())
 
 
 def _check_excite_and_preset(ns: argparse.Namespace) -> None:

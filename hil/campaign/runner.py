@@ -238,8 +238,11 @@ class ResultsFile:
 
 
 def _ignore_ctrl_c() -> None:
-    """Workers leave Ctrl-C to the parent (a terminal sends it to the whole process group)."""
+    """Workers leave Ctrl-C to the parent (a terminal sends it to the whole process group); SIGTERM ends
+    them (a forked worker inherits the parent's ``stop_on_signals`` handler, which would make the parent's
+    ``terminate()`` wait for the run in flight)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def execute_local(

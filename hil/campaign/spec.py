@@ -217,8 +217,15 @@ def _draw(name: str, spec: Any, rng: np.random.Generator) -> Any:
 # ---------------------------------------------------------------------- reading and checking
 
 
-def load_campaign(path: Path | None, overrides: list[str]) -> Campaign:
+def load_campaign(
+    path: Path | None, overrides: list[str], params: Mapping[str, Any] | None = None
+) -> Campaign:
     """Read a campaign file (``.toml`` or ``.json``; None: start empty), apply ``--set`` overrides, check.
+
+    ``params`` (``--params``: a firmware parameter file's values, ``controller.param_file``) are fixed
+    ``controller`` keys of a grasp campaign under whatever the file and the overrides set:
+    ``grasp_strategy_on`` is the trial's ``strategy_on``; ``grasp_direction_deg`` is the trial's own (the
+    object is on cable 0's side) and is left out.
 
     Raises:
         CampaignError: unreadable file, bad syntax, unknown key, wrong type, impossible design ... (one
@@ -239,6 +246,8 @@ def load_campaign(path: Path | None, overrides: list[str]) -> Campaign:
         raw = _parse_text(path, text)
     for spec in overrides:
         apply_override(raw, spec)
+    if params:
+        _apply_params(raw, params)
     if _depth(raw) > MAX_CAMPAIGN_DEPTH:
         raise _too_deep(f"{path}: " if path is not None else "")
     try:
@@ -246,6 +255,22 @@ def load_campaign(path: Path | None, overrides: list[str]) -> Campaign:
     except CampaignError as exc:
         where = f"{path}: " if path is not None else ""
         raise CampaignError(f"{where}{exc}") from None
+
+
+def _apply_params(raw: dict[str, Any], params: Mapping[str, Any]) -> None:
+    if raw.get("kind") != "grasp":
+        raise CampaignError("--params is for grasp campaigns (a scenario builds its own firmware)")
+    section = raw.setdefault("controller", {})
+    if not isinstance(section, dict):
+        raise CampaignError("controller must be a table")
+    for name, value in params.items():
+        if name == "grasp_direction_deg":
+            continue
+        if isinstance(value, tuple | list):
+            raise CampaignError(
+                f"--params: {name} is not a scalar key; a campaign run takes scalar keys only"
+            )
+        section.setdefault("strategy_on" if name == "grasp_strategy_on" else name, value)
 
 
 def _parse_text(path: Path, text: str) -> dict[str, Any]:

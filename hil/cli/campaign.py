@@ -69,6 +69,13 @@ def configure_campaign(p: argparse.ArgumentParser) -> None:
         metavar="PATH",
         help="JSON-lines results file (default: FILE's stem + .jsonl in the current directory)",
     )
+    p.add_argument(
+        "--params",
+        type=Path,
+        metavar="FILE.toml",
+        help="a firmware parameter file (e.g. from spirob-hil tune): the grasp runs' firmware under the "
+        "campaign's own controller keys",
+    )
     p.add_argument("--resume", action="store_true", help="go on with --out: skip the runs already in it")
     p.add_argument(
         "--jobs", type=int, default=2, metavar="N", help="local worker processes, or --ray's CPUs (default 2)"
@@ -120,7 +127,12 @@ def run_campaign_command(args: argparse.Namespace) -> int:
     summary to stdout. Exit status 1 if a run raised, 130 after Ctrl-C (the file keeps every finished run).
     """
     _check_args(args)
-    campaign = load_campaign(args.file, args.set)
+    params = None
+    if args.params is not None:
+        from controller.param_file import load_param_file
+
+        params = load_param_file(args.params)  # a ConfigError is one line, exit 2
+    campaign = load_campaign(args.file, args.set, params)
     out: Path = args.out if args.out is not None else Path(args.file.stem + ".jsonl")
     if args.report is not None:  # checked before the first run, not after the last
         writable_dir(args.report, "write the maps into", PROG)

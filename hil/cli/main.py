@@ -39,6 +39,7 @@ from hil.cli.campaign import CAMPAIGN_HELP, configure_campaign, run_campaign_com
 from hil.cli.design import add_design_arguments, design_from_args, model_from_args
 from hil.cli.experiment import EXPERIMENT_HELP, configure_experiment, run_experiment_command
 from hil.cli.identify import IDENTIFY_HELP, configure_identify, run_identify_command
+from hil.cli.tune import TUNE_HELP, configure_tune, run_tune_command
 from hil.identify.excitation import PROFILES
 from hil.sim.config import ModelConfig, ObjectConfig, SolverConfig
 from hil.sim.mjcf import write_mjcf
@@ -284,10 +285,19 @@ def _configure_board(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--no-fifo", action="store_true", help="do not ask for SCHED_FIFO real-time priority")
     p.add_argument("--seed", type=seed, default=0, help="seed of the plant's random choices (default 0)")
+    p.add_argument(
+        "--params",
+        type=Path,
+        metavar="FILE.toml",
+        help="the firmware's parameters from a parameter file (flat keys, e.g. from spirob-hil tune)",
+    )
 
 
 def _run_board(args: argparse.Namespace) -> int:
     from controller.clock import RealTimeClock
+    from controller.config import FirmwareConfig
+    from controller.errors import ConfigError
+    from controller.param_file import apply_param_file
     from hil.board import BoardConfig, parse_listen, realtime_board, run_realtime
     from hil.sim.types import PlantConfig
 
@@ -296,10 +306,16 @@ def _run_board(args: argparse.Namespace) -> int:
             parse_listen(args.listen, listen_any=args.listen_any)
         except ValueError as exc:
             raise UsageError(str(exc), f"{PROG} board") from None
+    firmware = FirmwareConfig()
+    if args.params is not None:
+        try:
+            firmware = apply_param_file(args.params)
+        except ConfigError as exc:
+            raise UsageError(str(exc), f"{PROG} board") from None
     design = design_from_args(args)
     plant = PlantConfig(model=model_from_args(args))
     try:
-        config = BoardConfig(design=design, plant=plant, rc=args.rc, seed=args.seed)
+        config = BoardConfig(design=design, plant=plant, firmware=firmware, rc=args.rc, seed=args.seed)
         board, url = realtime_board(config, args.listen, listen_any=args.listen_any)
     except OSError as exc:
         raise UsageError(f"cannot listen on {args.listen}: {exc.strerror or exc}", f"{PROG} board") from exc
@@ -307,6 +323,8 @@ def _run_board(args: argparse.Namespace) -> int:
         f"virtual board: {design.cables}-cable arm, {design.units} units; board link on {url}",
         flush=True,
     )
+    if args.params is not None:
+        print(f"firmware parameters from {args.params}", flush=True)
     print("connect with: spirob-host --port " + url, flush=True)
     # Ctrl-C and SIGTERM end the loop between two ticks; the board then sends zero current.
     try:
@@ -591,6 +609,7 @@ COMMANDS: list[Command] = [
     ),
     Command("campaign", CAMPAIGN_HELP, configure_campaign, run_campaign_command),
     Command("identify", IDENTIFY_HELP, configure_identify, run_identify_command),
+    Command("tune", TUNE_HELP, configure_tune, run_tune_command),
 ]
 """The subcommands, in ``--help`` order. Later issues append theirs."""
 
