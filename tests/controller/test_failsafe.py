@@ -351,3 +351,51 @@ def test_governor_a_slack_cable_is_reeled_in_slowly_and_snaps_taut_gently() -> N
     assert on_n > 0.0  # the slack was taken in
     # it snaps taut at most at twice the limit: v·sqrt(k·m), plus the 8.5 N the curl asked for
     assert on_n < 0.5 * off_n and on_n < 2 * limit_m_s * math.sqrt(48_000.0 * 1.3) + 8.5
+
+
+# --- the failsafe alone, on its own clock (what the mutation benchmark found untested) -------------
+
+
+def _alone() -> Failsafe:
+    """A failsafe of the default board, fed by hand (:func:`_feed`)."""
+    return Failsafe(FirmwareConfig(), EventQueue(64))
+
+
+def _feed(fs: Failsafe, t_us: int, lever: int = Lever.DOWN, rc: bool = True) -> Phase:
+    """Every motor answers at ``t_us``; a valid RC frame with ``lever`` unless ``rc`` is False."""
+    fs.on_motor_frames(t_us, [(1, None), (2, None), (3, None)])
+    if rc:
+        fs.on_rc_frame(t_us, lever)
+    return fs.update(t_us)
+
+
+def test_armed_is_exactly_phase_ok() -> None:
+    fs = _alone()
+    assert not fs.armed and fs.phase == Phase.GATE
+    assert _feed(fs, 1000) == Phase.OK and fs.armed
+    t = 1000
+    while fs.phase == Phase.OK and t < 200_000:  # the radio falls silent: RC_LOST, not armed
+        t += 1000
+        _feed(fs, t, rc=False)
+    assert fs.phase == Phase.RC_LOST and not fs.armed
+    fs.estop(t)
+    assert fs.phase == Phase.ESTOP and not fs.armed
+
+
+def test_an_estop_over_a_latched_rc_loss_holds_until_cleared_whatever_the_radio_does() -> None:
+    """E-stop pressed while RC_LOST is latched: the radio coming back with the lever DOWN re-arms
+    nothing; only CLEAR_ESTOP leaves ESTOP, and then the latched loss still needs the lever DOWN."""
+    fs = _alone()
+    assert _feed(fs, 1000) == Phase.OK
+    t = 1000
+    while fs.phase == Phase.OK and t < 200_000:
+        t += 1000
+        _feed(fs, t, rc=False)
+    assert fs.phase == Phase.RC_LOST
+    fs.estop(t)
+    for _ in range(500):  # half a second of valid frames, lever DOWN
+        t += 1000
+        assert _feed(fs, t, lever=Lever.DOWN) == Phase.ESTOP and not fs.armed
+    assert fs.clear_estop(t)
+    assert _feed(fs, t + 1000, lever=Lever.MIDDLE) != Phase.OK  # not without the lever DOWN
+    assert _feed(fs, t + 2000, lever=Lever.DOWN) == Phase.OK

@@ -261,3 +261,53 @@ def test_hardware_path_logs_every_frame_for_python_can_and_the_dbc(tmp_path: Pat
     times = [m.timestamp for m in frames]
     assert all(t > 1e9 for t in times) and times == sorted(times)
     assert [received[-3 + i].timestamp for i in range(3)] == pytest.approx(stamps, abs=1e-6)
+
+
+# --- what the mutation benchmark found untested --------------------------------------------------
+
+
+def test_the_current_limit_takes_only_what_a_c610_can_do() -> None:
+    from protocol.c610 import CURRENT_RAW_MAX
+
+    bus = RecordingBus()
+    bus.current_limit_raw = CURRENT_RAW_MAX
+    bus.current_limit_raw = 0
+    for bad in (CURRENT_RAW_MAX + 1, -1):
+        with pytest.raises(ValueError, match="current_limit_raw must be"):
+            bus.current_limit_raw = bad
+    assert bus.current_limit_raw == 0
+
+
+def test_the_clamp_holds_at_its_bound_on_both_sides() -> None:
+    bus = RecordingBus(current_limit_raw=3000)
+    assert bus.send_currents([3001, -3001, 3000]) == (3000, -3000, 3000)
+    assert bus.send_currents([-3000, 2999, -2999]) == (-3000, 2999, -2999)
+
+
+def test_another_nodes_command_frames_are_never_taken_as_feedback() -> None:
+    """0x200 (motors 1-4's command, e.g. from a second controller on the bus) and 0x1FF are not motor
+    0's or any motor's answer: a silent motor must not look alive from someone else's traffic."""
+    bus = RecordingBus()
+    bus.inbox = [(0x200, MotorFeedback(1, 2, 3, 4).pack()), (0x1FF, bytes(8)), (0x204, bytes(8))]
+    assert bus.read_feedback() == []
+    assert bus.frames_ignored == 3 and bus.can_errors == 0
+
+
+class _FailingBus(RecordingBus):
+    def __init__(self, error: Exception) -> None:
+        super().__init__()
+        self.error = error
+
+    def _recv_frames(self) -> list[tuple[int, bytes]]:
+        raise self.error
+
+    def _send_frame(self, can_id: int, data: bytes) -> None:
+        raise self.error
+
+
+@pytest.mark.parametrize("error", [OSError("adapter unplugged"), BusError("bus off")], ids=["os", "bus"])
+def test_a_failing_back_end_is_counted_and_the_bus_still_shuts_down(error: Exception) -> None:
+    bus = _FailingBus(error)
+    assert bus.read_feedback() == [] and bus.can_errors == 1
+    bus.shutdown()  # the zero-current frame fails too: counted, and the bus is shut down anyway
+    assert bus.can_errors == 2 and bus.is_shutdown and bus.closed == 1

@@ -183,3 +183,26 @@ def test_the_docs_page_is_generated_by_the_module() -> None:
     ).stdout
     assert out == markdown()
     assert all(f"`{name}`" in out for name in PARAMS) and all(f"`{p.name}`" in out for p in PARAM_TABLE)
+
+
+# --- what the mutation benchmark found untested --------------------------------------------------
+
+
+def test_an_open_upper_end_refuses_itself_and_everything_above() -> None:
+    r = Range(0.0, 1.0, hi_open=True)
+    assert r.contains(0.999, {}) and not r.contains(1.0, {}) and not r.contains(1.5, {})
+    closed = Range(0.0, 1.0)
+    assert closed.contains(1.0, {}) and not closed.contains(1.0001, {})
+
+
+def test_file_values_are_coerced_to_their_kind_and_nothing_else() -> None:
+    """A TOML or JSON file writes 30000.0 for an int and 1 for a float: taken as the kind says; a
+    fractional value for an int stays a float, for check_type to refuse."""
+    i = next(p for p in PARAM_TABLE if p.kind is Kind.INT)
+    f = next(p for p in PARAM_TABLE if p.kind is Kind.FLOAT)
+    got = i.coerce(3.0)
+    assert got == 3 and type(got) is int
+    assert type(i.coerce(3.5)) is float and type(i.coerce(3)) is int
+    got = f.coerce(3)
+    assert got == 3.0 and type(got) is float
+    assert type(f.coerce(True)) is bool  # a bool is not an int here: check_type refuses it
