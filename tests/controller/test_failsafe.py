@@ -399,3 +399,33 @@ def test_an_estop_over_a_latched_rc_loss_holds_until_cleared_whatever_the_radio_
     assert fs.clear_estop(t)
     assert _feed(fs, t + 1000, lever=Lever.MIDDLE) != Phase.OK  # not without the lever DOWN
     assert _feed(fs, t + 2000, lever=Lever.DOWN) == Phase.OK
+
+
+def test_a_motor_going_and_coming_back_is_said_once_each_naming_it() -> None:
+    events = EventQueue(64)
+    fs = Failsafe(FirmwareConfig(), events)
+    assert _feed(fs, 1000) == Phase.OK
+    events.pop_all()
+    t = 1000
+    for _ in range(200):  # motor 2 silent, the others answer
+        t += 1000
+        fs.on_motor_frames(t, [(1, None), (3, None)])
+        fs.on_rc_frame(t, Lever.DOWN)
+        fs.update(t)
+    fs.on_motor_frames(t + 1000, [(1, None), (2, None), (3, None)])
+    fs.update(t + 1000)
+    got = [e for e in events.pop_all() if e.kind in (EventKind.FAULT, EventKind.INFO)]
+    assert fs.motor_offline_events == 1
+    assert [(e.kind, e.code, e.text) for e in got] == [
+        (EventKind.FAULT, 2, "motor 2 offline"),
+        (EventKind.INFO, 2, "motor 2 online"),
+    ]
+
+
+def test_only_the_motors_that_answer_are_said_online() -> None:
+    events = EventQueue(64)
+    fs = Failsafe(FirmwareConfig(), events)
+    fs.on_motor_frames(1000, [(1, None), (2, None)])  # motor 3 never answers
+    fs.update(1000)
+    online = [e.code for e in events.pop_all() if e.kind == EventKind.INFO and "online" in e.text]
+    assert online == [1, 2] and fs.motors_online == 0b011

@@ -373,3 +373,12 @@ def test_bit_flips_never_deliver_a_corrupted_frame(frames: list[LinkFrame], data
     untouched = [f for i, f in enumerate(frames) if i not in touched]
     assert out == untouched
     assert p.frames_ok == len(untouched)
+
+
+def test_a_per_id_length_is_a_cap_not_an_exact_size() -> None:
+    """A frame shorter than its id's cap is taken; one byte over is refused (the mutation benchmark found
+    only frames of exactly the cap tested)."""
+    short, at_cap, over = (LinkFrame(0x0102, k, b"\x01" * n) for k, n in ((0, 3), (1, 10), (2, 11)))
+    p = LinkParser(lengths={0x0102: 10})
+    assert p.feed(short.encode() + at_cap.encode() + over.encode()) == [short, at_cap]
+    assert p.oversize_errors == 1
