@@ -416,9 +416,9 @@ def test_a_motor_going_and_coming_back_is_said_once_each_naming_it() -> None:
     fs.update(t + 1000)
     got = [e for e in events.pop_all() if e.kind in (EventKind.FAULT, EventKind.INFO)]
     assert fs.motor_offline_events == 1
-    assert [(e.kind, e.code, e.text) for e in got] == [
-        (EventKind.FAULT, 2, "motor 2 offline"),
-        (EventKind.INFO, 2, "motor 2 online"),
+    assert [(e.kind, e.code, e.value, e.text) for e in got] == [
+        (EventKind.FAULT, 2, 0.0, "motor 2 offline"),
+        (EventKind.INFO, 2, 1.0, "motor 2 online"),
     ]
 
 
