@@ -551,8 +551,10 @@ def test_a_killed_link_process_is_an_rc_loss_while_nobody_holds_control() -> Non
         # The longest stretch of board time without telemetry is the dead link.
         a, b = max(itertools.pairwise(seen[n - 1 :]), key=lambda p: p[1].time_us - p[0].time_us)
         gap_us, took = b.time_us - a.time_us, b.rc_frames_ok - a.rc_frames_ok
-        assert gap_us > 10 * RC_TIMEOUT_US, (a, b)
-        # ``took`` frames cut the gap into at most took + 1 intervals: one of them exceeded 30 ms.
+        # How long a restart takes is the machine's business (220 ms on a quiet one); what matters is that
+        # the board went without the radio past its time-out: ``took`` frames cut the gap into at most
+        # took + 1 intervals, and one of them exceeded 30 ms.
+        assert gap_us > RC_TIMEOUT_US, (a, b)
         assert (took + 1) * RC_TIMEOUT_US < gap_us, f"the board took {took} RC frames in {gap_us} us"
         assert all(t.commanded_current == (0, 0, 0) and t.mode == Mode.SAFE for t in seen[n:])
         assert arbiter.holder is None
