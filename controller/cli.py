@@ -5,14 +5,16 @@ Examples::
     python -m controller --can-interface socketcan --can-channel can0 --rc /dev/ttyUSB0 --link /dev/ttyGS0
     python -m controller --can-interface gs_usb --can-channel 0 --can-log run.blf --link /dev/ttyGS0
     python -m controller --can-interface fake --link socket://127.0.0.1:5760 --duration 10
+    python -m controller --can-interface fake --listen socket://127.0.0.1:5760   # the host link over TCP
 
 The CAN options are python-can's: ``--can-interface`` and ``--can-channel`` name the bus, ``--can-bitrate``
 (1 Mbit/s unless told otherwise) is passed to every interface, and what the flags leave open comes from
 python-can's configuration (``--can-config FILE``, else ``CAN_INTERFACE``/``CAN_CHANNEL``/``CAN_BITRATE``
 and ``~/.canrc``), as ``can.util.load_config`` reads it. ``--can-interface fake`` is the in-process C610
 trio. ``--can-log`` writes every frame through python-can's ``can.Logger`` (``.log`` candump, ``.blf``).
-Without ``--rc`` the sticks come from the host's virtual RC frames over ``--link``. A missing or busy port
-is a one-line error and exit status 2.
+Without ``--rc`` the sticks come from the host's virtual RC frames over ``--link`` (or ``--listen``: the board
+listens on TCP for one host at a time, as ``spirob-hil board --listen`` does). A missing or busy port is a
+one-line error and exit status 2.
 
 ``--preflight`` runs the pre-arm checks instead (``controller.preflight``): 2 s of the 1 kHz loop with zero
 current commanded, then one line per check (motors, RC, clock, lateness, host link), each failure with its
@@ -50,7 +52,7 @@ from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus
 from controller.param_file import apply_param_file
 from controller.preflight import WINDOW_US, run_preflight
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
-from controller.transport import SerialTransport, Transport
+from controller.transport import SerialTransport, TcpServerTransport, Transport, parse_listen
 
 __all__ = ["PROG", "SCRIPT_PROG", "build_parser", "can_bus_config", "main", "parse_args", "script_main"]
 
@@ -94,7 +96,19 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     # The private ``--can interface:channel`` of earlier versions: refused with the flags that replace it.
     p.add_argument("--can", help=argparse.SUPPRESS)
     p.add_argument("--rc", metavar="PORT", help="DR16 DBUS UART (100000 8E1), e.g. /dev/ttyUSB0")
-    p.add_argument("--link", metavar="PORT", help="host link: device path or pyserial URL (socket://...)")
+    link = p.add_mutually_exclusive_group()
+    link.add_argument("--link", metavar="PORT", help="host link: device path or pyserial URL (socket://...)")
+    link.add_argument(
+        "--listen",
+        metavar="socket://HOST:PORT",
+        help="host link over TCP: listen here for one host at a time (spirob-host --port socket://...); "
+        "a loopback HOST unless --listen-any",
+    )
+    p.add_argument(
+        "--listen-any",
+        action="store_true",
+        help="let --listen bind an address other machines reach (whoever reaches it can drive the arm)",
+    )
     p.add_argument("--require-host", action="store_true", help="zero current when the host heartbeat stops")
     p.add_argument(
         "--duration", type=positive_duration, metavar="S", help="stop after S seconds (default: until Ctrl-C)"
@@ -132,10 +146,41 @@ def parse_args(argv: Sequence[str] | None = None, prog: str = PROG) -> argparse.
             parser.prog, f"--duration does not apply to --preflight (it listens {WINDOW_US / 1e6:.0f} s)"
         )
         raise SystemExit(EXIT_USAGE)
-    if args.rc is None and args.link is None:
-        error_line(parser.prog, "give --rc (DBUS UART) or --link (virtual RC from the host), or both")
+    if args.rc is None and args.link is None and args.listen is None:
+        error_line(
+            parser.prog, "give --rc (DBUS UART) or --link / --listen (virtual RC from the host), or both"
+        )
         raise SystemExit(EXIT_USAGE)
+    if args.listen_any and args.listen is None:
+        error_line(parser.prog, "--listen-any needs --listen")
+        raise SystemExit(EXIT_USAGE)
+    if args.listen is not None:
+        try:
+            parse_listen(args.listen, listen_any=args.listen_any)
+        except ValueError as exc:
+            error_line(parser.prog, str(exc))
+            raise SystemExit(EXIT_USAGE) from None
+    args.link_name = args.link or args.listen or ""
     return args
+
+
+def _open_link(args: argparse.Namespace) -> Transport | None:
+    """The host link ``--link`` or ``--listen`` names (None with neither).
+
+    Raises:
+        PortError: the port does not open, or the address cannot be listened on (in use, ...).
+    """
+    if args.listen is not None:
+        host, port = parse_listen(args.listen, listen_any=args.listen_any)
+        try:
+            server = TcpServerTransport(host, port)
+        except OSError as exc:
+            raise PortError(f"cannot listen on {args.listen}: {exc.strerror or exc}") from None
+        print(f"host link: listening on {server.url}", file=sys.stderr, flush=True)
+        return server
+    if args.link:
+        return SerialTransport(args.link)
+    return None
 
 
 def _load_config(args: argparse.Namespace) -> FirmwareConfig:
@@ -242,9 +287,8 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         with ExitStack() as stack:
             bus = _open_bus(args)
             stack.callback(bus.shutdown)
-            link: Transport | None = None
-            if args.link:
-                link = SerialTransport(args.link)
+            link = _open_link(args)
+            if link is not None:
                 stack.callback(link.close)
             rc: RcSource = DbusSerialSource(args.rc) if args.rc else LinkRcSource()
             stack.callback(rc.close)
@@ -276,12 +320,12 @@ def _preflight(args: argparse.Namespace, config: FirmwareConfig) -> int:
         except PortError as exc:
             can_error = str(exc)
         link: Transport | None = None
-        if args.link:
-            try:
-                link = SerialTransport(args.link)
-                stack.callback(link.close)
-            except PortError as exc:
-                link_error = str(exc)
+        try:
+            link = _open_link(args)
+        except PortError as exc:
+            link_error = str(exc)
+        if link is not None:
+            stack.callback(link.close)
         rc: RcSource | None = None
         if args.rc:
             try:
@@ -291,8 +335,8 @@ def _preflight(args: argparse.Namespace, config: FirmwareConfig) -> int:
             rc_name = args.rc
         else:
             rc = LinkRcSource() if link is not None else None
-            rc_error = None if link is not None else f"no RC: the link {args.link} did not open"
-            rc_name = f"the host (VirtualRc on {args.link})"
+            rc_error = None if link is not None else f"no RC: the link {args.link_name} did not open"
+            rc_name = f"the host (VirtualRc on {args.link_name})"
         if rc is not None:
             stack.callback(rc.close)
         stop = stack.enter_context(stop_on_signals())
@@ -307,7 +351,7 @@ def _preflight(args: argparse.Namespace, config: FirmwareConfig) -> int:
             rc_error=rc_error,
             link_error=link_error,
             rc_name=rc_name,
-            link_name=args.link or "",
+            link_name=args.link_name,
             stop=stop,
         )
     for line in report.lines():

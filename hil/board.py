@@ -42,7 +42,7 @@ from controller.clock import Clock, RealTimeClock, monotonic_ns, run_periodic, z
 from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
-from controller.transport import Transport
+from controller.transport import Transport, parse_listen
 from hil import recording
 from hil.canbus import SimMotorBus
 from hil.errors import HilError
@@ -405,7 +405,8 @@ def realtime_board(
         ValueError: ``listen`` is not ``socket://HOST:PORT``, or not loopback without ``listen_any``.
         OSError: the endpoint cannot be opened (port in use, ...).
     """
-    from hil.transports import PtyTransport, TcpServerTransport
+    from controller.transport import TcpServerTransport
+    from hil.transports import PtyTransport
 
     transport: PtyTransport | TcpServerTransport
     if listen is None:
@@ -448,41 +449,6 @@ def _child_main(
         run_realtime(board, RealTimeClock(fifo=fifo), stop=stop, stall=stall)
     finally:
         board.close()
-
-
-def parse_listen(listen: str, *, listen_any: bool = False) -> tuple[str, int]:
-    """``socket://HOST:PORT`` -> (host, port), a loopback HOST unless ``listen_any``.
-
-    Raises:
-        ValueError: not that form, or reachable from other machines without ``listen_any``.
-    """
-    if not listen.startswith("socket://"):
-        raise ValueError(f"--listen takes socket://HOST:PORT, got {listen!r}")
-    host, sep, port = listen[len("socket://") :].rpartition(":")
-    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise ValueError(f"--listen takes socket://HOST:PORT, got {listen!r}")
-    if not listen_any and not is_loopback_host(host):
-        raise ValueError(
-            f"--listen {listen} is reachable from other machines (anyone there can drive the arm): "
-            "use a loopback address, or add --listen-any"
-        )
-    return host, int(port)
-
-
-def is_loopback_host(host: str) -> bool:
-    """``host`` (a name or an address, IPv6 in brackets or not) binds only this machine's loopback.
-
-    Only ``localhost`` among names: any other name may resolve to an address other machines reach.
-    """
-    import ipaddress
-
-    host = host.strip("[]")
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 class VirtualBoardProcess:

@@ -298,7 +298,8 @@ def _run_board(args: argparse.Namespace) -> int:
     from controller.config import FirmwareConfig
     from controller.errors import ConfigError
     from controller.param_file import apply_param_file
-    from hil.board import BoardConfig, parse_listen, realtime_board, run_realtime
+    from controller.transport import parse_listen
+    from hil.board import BoardConfig, realtime_board, run_realtime
     from hil.sim.types import PlantConfig
 
     if args.listen is not None:

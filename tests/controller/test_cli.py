@@ -116,6 +116,19 @@ def test_bad_config_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]
             "--can-bitrate: must be > 0",
         ),
         (["--can-interface", "fake", "--link", "loop://", "--bogus"], "unrecognized arguments: --bogus"),
+        (
+            ["--can-interface", "fake", "--listen", "socket://0.0.0.0:5760"],
+            "is reachable from other machines (anyone there can drive the arm): use a loopback address",
+        ),
+        (
+            ["--can-interface", "fake", "--listen", "tcp://127.0.0.1:5760"],
+            "--listen takes socket://HOST:PORT",
+        ),
+        (["--can-interface", "fake", "--link", "loop://", "--listen-any"], "--listen-any needs --listen"),
+        (
+            ["--can-interface", "fake", "--link", "loop://", "--listen", "socket://127.0.0.1:1"],
+            "not allowed with argument",
+        ),
     ],
 )
 def test_usage_errors_are_one_line_and_exit_2(
@@ -306,3 +319,57 @@ def test_spy_url_logs_the_firmwares_board_link(tmp_path: Path) -> None:
     tx = b"".join(bytes.fromhex(line[22:71]) for line in lines if line[11:13] == "TX")
     rx = b"".join(bytes.fromhex(line[22:71]) for line in lines if line[11:13] == "RX")
     assert tx.startswith(received[:64]) and rx == heartbeat
+
+
+def test_the_host_link_over_tcp_serves_one_host_at_a_time() -> None:
+    """``--listen socket://127.0.0.1:PORT``: the firmware is the TCP end a host connects to (``spirob-host
+    --port socket://...``), as ``spirob-hil board --listen`` is; a second host is refused while one is
+    live."""
+    import socket
+
+    from protocol.link import LinkParser
+    from protocol.messages import Telemetry
+
+    with socket.socket() as s:  # a free port: take one, then free it
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = start_in_own_group(
+        "controller",
+        *("--can-interface", "fake", "--no-fifo", "--duration", "4"),
+        *("--listen", f"socket://127.0.0.1:{port}"),
+    )
+    telemetry: list[Telemetry] = []
+    second = b"-"
+    try:
+        deadline = time.monotonic() + 60.0
+        host: socket.socket | None = None
+        while host is None and proc.poll() is None and time.monotonic() < deadline:
+            try:
+                host = socket.create_connection(("127.0.0.1", port), timeout=1.0)
+            except OSError:
+                time.sleep(0.05)
+        assert host is not None, "the firmware never listened"
+        with host:
+            host.settimeout(0.2)
+            host.sendall(encode(Heartbeat(host_time_us=1, counter=1), seq=0))
+            parser = LinkParser()
+            while len(telemetry) < 20 and proc.poll() is None and time.monotonic() < deadline:
+                try:
+                    data = host.recv(65536)
+                except TimeoutError:
+                    continue
+                telemetry += [
+                    Telemetry.unpack(f.payload) for f in parser.feed(data) if f.cmd_id == Telemetry.CMD_ID
+                ]
+            with socket.create_connection(("127.0.0.1", port), timeout=5.0) as other:
+                other.settimeout(5.0)
+                second = other.recv(1)  # accepted and closed at once: end-of-file
+        _, err = ctrl_c(proc) if proc.poll() is None else proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert f"host link: listening on socket://127.0.0.1:{port}" in err, err
+    assert len(telemetry) >= 20 and telemetry[-1].time_us > telemetry[0].time_us
+    assert all(t.commanded_current == (0, 0, 0) for t in telemetry)  # no RC: the gate stays shut
+    assert second == b""

@@ -11,13 +11,12 @@ import serial
 
 from controller.clock import LockstepClock
 from controller.config import FirmwareConfig
-from controller.transport import MemoryTransport
+from controller.transport import MemoryTransport, parse_listen
 from hil.board import (
     BoardConfig,
     LinkWire,
     VirtualBoard,
     VirtualBoardProcess,
-    parse_listen,
     realtime_board,
     run_realtime,
 )
@@ -259,7 +258,7 @@ def test_link_loss_resets_direct_on_a_tcp_board() -> None:
     from controller.firmware import Firmware
     from controller.motorbus import FakeMotorBus
     from controller.rc import LinkRcSource
-    from hil.transports import TcpServerTransport
+    from controller.transport import TcpServerTransport
     from protocol.messages import Command, CommandCode, Mode
 
     config = FirmwareConfig()

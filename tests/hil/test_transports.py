@@ -8,7 +8,8 @@ import time
 import pytest
 import serial
 
-from hil.transports import PtyTransport, TcpServerTransport
+from controller.transport import TcpServerTransport
+from hil.transports import PtyTransport
 
 
 def _read_until(read: object, n: int, timeout_s: float = 2.0) -> bytes:
