@@ -8,15 +8,14 @@ it), and commands through ``BoardClient.send``.
 
 The radio never falls silent on purpose: like a DT7 lying on the table, it transmits whether anyone holds
 control or not. Nobody holding control (at start, after a release, after the holder's tab closed) means
-the *idle* frame: sticks centred and both levers DOWN (SAFE, zero current; docs/host.md says why a
-released tab is not left where its lever was). An RC loss on the board is then a real one: a dead link
+the *idle* frame: sticks centred, the levers where they were (DOWN at start: SAFE, zero current;
+docs/host.md says why a released tab's levers stay). An RC loss on the board is then a real one: a dead link
 process, a host frozen past its lease (``host.link.process``), a board link that went down.
 
 Control ownership: exactly one client holds control. Anyone authorised may ask for it; if nobody holds
 it the request is granted, otherwise the holder is asked and must grant it (or release it): a second tab
 never takes control silently. Whoever receives control starts from SAFE (right lever DOWN, sticks
-centred), and so does everyone after the board link (re)connects; so does the idle radio when control is
-given up. E-stop is open to every authorised
+centred), and so does everyone after the board link (re)connects. E-stop is open to every authorised
 client. A board's answer refusing a command is told to the tab that sent that command code in the last
 5 s (else to everybody: a command from MAVLink, or from a tab that left).
 """
@@ -203,9 +202,13 @@ class ControlArbiter:
     def _set_holder(self, client: int | None) -> None:
         self._holder = client
         self._pending = None
-        # Whoever gets control starts from SAFE; control given up (or its tab gone) leaves the idle
-        # radio: sticks centred, both levers DOWN.
+        # Whoever gets control starts from SAFE. Control given up (or its tab gone) leaves the idle
+        # radio as a DT7 put down on the table: sticks centred, the levers where they were (a held
+        # object stays held; docs/host.md, "The idle radio").
+        old = self._op
         self._op = _Operator()
+        if client is None:
+            self._op.right_lever, self._op.left_lever = old.right_lever, old.left_lever
         self._publish()
 
     def request_control(self, client: int) -> ControlResult:
@@ -354,7 +357,8 @@ class ControlArbiter:
 
     @property
     def idle(self) -> bool:
-        """Nobody holds control: the radio sends the idle frame (sticks centred, levers DOWN)."""
+        """Nobody holds control: the radio sends the idle frame (sticks centred, the levers left where
+        they were, DOWN at start)."""
         return self._holder is None
 
     # ------------------------------------------------------------------ commands

@@ -440,6 +440,9 @@ def refresh_control(
     if telemetry is not None and telemetry.right_lever in (1, 2, 3):
         seen = f" · the board sees right **{Lever(telemetry.right_lever).name}**"
     if holder is None:
-        h.levers_md.content = f"Idle radio: sticks centred, levers DOWN (nobody holds control){seen}"
+        h.levers_md.content = (
+            f"Idle radio (nobody holds control): sticks centred, right lever **{right.name}** · left lever "
+            f"**{left.name}**{seen}"
+        )
     else:
         h.levers_md.content = f"Sent: right lever **{right.name}** · left lever **{left.name}**{seen}"

@@ -86,9 +86,10 @@ def test_the_radio_transmits_the_idle_frame_from_the_start() -> None:
 
 
 @pytest.mark.parametrize("how", ["release", "tab closed"])
-def test_control_given_up_mid_drive_leaves_a_safe_idle_radio(how: str) -> None:
-    # A tab in GRASP with the left lever UP and a stick deflected: the radio it leaves behind is SAFE
-    # (right lever DOWN: zero current on the board) with every stick centred, not its last position.
+def test_control_given_up_mid_drive_leaves_the_radio_as_a_dt7_put_down(how: str) -> None:
+    # A tab in GRASP with the left lever UP and a stick deflected: the radio it leaves behind keeps the
+    # levers where they were (a held object stays held) with every stick centred; the next holder
+    # starts from SAFE.
     m, link, _ = make()
     m.request_control(1)
     assert m.set_radio(1, (300, -200, 0, 500), Lever.UP, Lever.UP)
@@ -97,8 +98,13 @@ def test_control_given_up_mid_drive_leaves_a_safe_idle_radio(how: str) -> None:
         assert m.release_control(1)
     else:
         m.client_left(1)
-    assert m.idle and link.frames[-1] == IDLE and m.rc_frame() == IDLE
-    assert m.operator_input()[:3] == ((0, 0, 0, 0), Lever.DOWN, Lever.DOWN)
+    put_down = RcFrame((0, 0, 0, 0), int(Lever.UP), int(Lever.UP))
+    assert m.idle and link.frames[-1] == put_down and m.rc_frame() == put_down
+    assert m.operator_input()[:3] == ((0, 0, 0, 0), Lever.UP, Lever.UP)
+    # Nobody holding control moves nothing; the next holder starts from SAFE (levers DOWN).
+    assert not m.set_stick(1, 0, 100)
+    m.request_control(2)
+    assert link.frames[-1] == RcFrame((0, 0, 0, 0), int(Lever.DOWN), int(Lever.DOWN))
 
 
 def test_the_radio_reaches_the_link_once_per_change() -> None:
