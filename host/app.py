@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from controller.cli_kit import EXIT_FAILURE, EXIT_OK, EXIT_USAGE, error_line
+from controller.transport import is_loopback_host
 from host.errors import HostError
 from host.excite import ExcitationDriver, ExciteConfig, operator_lines
 from host.link.client import BoardClient, load_scaled_s
@@ -34,7 +35,6 @@ from host.options import (
     HostOptions,
     check_signing_timestamp_writable,
     check_ui_port_free,
-    is_loopback,
     signing_timestamp_path,
 )
 from host.panel.arbiter import CLI_CLIENT, ControlArbiter
@@ -339,7 +339,7 @@ class HostApp:
 
         o = self.options
         # viser prints its own banner (with a URL lacking the token): ours replaces it.
-        self.guard = guard = PanelGuard(o.token, loopback=is_loopback(o.ui_host))
+        self.guard = guard = PanelGuard(o.token, loopback=is_loopback_host(o.ui_host))
         with contextlib.redirect_stdout(io.StringIO()):
             server = start_guarded_server(
                 self.guard, host=o.ui_host, port=o.ui_port, label="SpiRob teleop", verbose=False

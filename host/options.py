@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import errno
-import ipaddress
 import os
 import socket
 import stat
@@ -17,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
 from controller.cli_kit import Parser, port_number, positive_duration
+from controller.transport import is_loopback_host
 from host.errors import HostError
 from host.gamepad import DEFAULT_MAPPING, GamepadMapping, format_mapping, parse_mapping
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
@@ -37,7 +37,6 @@ __all__ = [
     "check_mavlink_url",
     "check_signing_timestamp_writable",
     "check_ui_port_free",
-    "is_loopback",
     "signing_timestamp_path",
 ]
 
@@ -387,7 +386,7 @@ class HostOptions:
         if ns.no_token:
             if ns.token is not None:
                 raise HostError("--no-token and --token cannot be combined")
-            if not is_loopback(ns.ui_host):
+            if not is_loopback_host(ns.ui_host):
                 raise HostError(
                     f"--no-token is for a loopback --ui-host only ({ns.ui_host} is reachable from elsewhere)"
                 )
@@ -611,16 +610,6 @@ def check_mavlink_url(url: str) -> None:
     elif kind.lower() not in _MAV_OTHER:
         known = ", ".join(f"{k}:" for k in (*_MAV_HOST_PORT, *_MAV_OTHER))
         raise HostError(f"--mavlink {url}: unknown connection type {kind!r} ({known} or a serial device)")
-
-
-def is_loopback(host: str) -> bool:
-    """True for ``localhost`` and loopback addresses (127.0.0.0/8, ::1)."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def check_ui_port_free(host: str, port: int) -> None:

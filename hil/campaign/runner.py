@@ -336,6 +336,35 @@ _CONNECT_TIMEOUT_S = 5.0
 """How long ``--ray-address`` may take to accept a TCP connection [s]."""
 
 
+def init_ray(ray: Any, address: str | None, jobs: int) -> str | None:
+    """Start a local Ray of ``jobs`` CPUs on 127.0.0.1 (no dashboard, no usage statistics), or join the
+    cluster at ``address``: what campaigns and ``spirob-hil tune --ray`` both do.
+
+    Returns:
+        Why Ray could not be started or joined (one line), or None.
+
+    Raises:
+        CampaignError: ``address`` is not ``HOST:PORT`` or ``ray://HOST:PORT``.
+    """
+    if address is not None:
+        check_ray_address(address)
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # nobody is phoned
+    try:
+        if address is None:
+            ray.init(
+                address="local",  # a new node, never a cluster another `ray start` left running here
+                num_cpus=jobs,
+                include_dashboard=False,
+                _node_ip_address="127.0.0.1",
+                logging_level=logging.WARNING,
+            )
+        else:
+            ray.init(address=address, logging_level=logging.WARNING)
+    except Exception as exc:  # Ray reports a node that timed out starting with a bare Exception
+        return f"cannot start or join Ray at {address or 'a local node'}: {exc}"
+    return None
+
+
 def check_ray_address(address: str) -> None:
     """A ``HOST:PORT`` that takes no connection is one line now, not Ray's minute of retries and warnings.
 
@@ -382,22 +411,9 @@ def execute_ray(
         from ray.exceptions import RayError
     except ImportError:
         raise CampaignError(RAY_MISSING) from None
-    if address is not None:
-        check_ray_address(address)
-    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # a campaign phones nobody
-    try:
-        if address is None:
-            ray.init(
-                address="local",  # a new node, never a cluster another `ray start` left running here
-                num_cpus=jobs,
-                include_dashboard=False,
-                _node_ip_address="127.0.0.1",
-                logging_level=logging.WARNING,
-            )
-        else:
-            ray.init(address=address, logging_level=logging.WARNING)
-    except (ConnectionError, RuntimeError, ValueError) as exc:
-        raise CampaignError(f"cannot start or join Ray at {address or 'a local node'}: {exc}") from None
+    why = init_ray(ray, address, jobs)
+    if why is not None:
+        raise CampaignError(why)
     try:
         task = ray.remote(num_cpus=1, max_retries=max_retries, retry_exceptions=False)(run_one)
         cpus = max(1, int(ray.cluster_resources().get("CPU", jobs)))

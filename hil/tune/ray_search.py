@@ -14,7 +14,6 @@ reported step is the set's size.
 from __future__ import annotations
 
 import json
-import logging
 import os
 import threading
 import time
@@ -31,7 +30,7 @@ from ray import tune
 from ray.tune.schedulers import FIFOScheduler, TrialScheduler
 from ray.tune.search.optuna import OptunaSearch
 
-from hil.campaign.runner import check_ray_address, run_one
+from hil.campaign.runner import init_ray, run_one
 from hil.tune.objective import Placement, TuneSpec, hopeless, runs_for
 from hil.tune.search import SPEC_ATTR, TuneError
 from hil.tune.space import baseline_points, firmware_values, suggest
@@ -171,23 +170,10 @@ def search_ray(
     )
     left = trials - len(before)
     if left > 0 and not stop.is_set():
-        if address is not None:
-            check_ray_address(address)
-        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
         os.environ["TUNE_DISABLE_SIGINT_HANDLER"] = "1"  # Ctrl-C sets ``stop``; the Stopper ends the run
-        try:
-            if address is None:
-                ray.init(
-                    address="local",
-                    num_cpus=jobs,
-                    include_dashboard=False,
-                    _node_ip_address="127.0.0.1",
-                    logging_level=logging.WARNING,
-                )
-            else:
-                ray.init(address=address, logging_level=logging.WARNING)
-        except Exception as exc:  # Ray says a node that timed out starting with a bare Exception
-            raise TuneError(f"cannot start or join Ray at {address or 'a local node'}: {exc}") from None
+        why = init_ray(ray, address, jobs)
+        if why is not None:
+            raise TuneError(why)
         try:
             searcher = OptunaSearch(
                 space=_space,

@@ -49,9 +49,9 @@ import warnings
 from dataclasses import dataclass
 from typing import Any
 
+from controller.transport import is_loopback_host
 from host.errors import HostError
 from host.http_headers import header_problem
-from host.options import is_loopback
 
 __all__ = ["PAGE_TITLE", "GuardStats", "PanelGuard", "request_token", "retitle_page", "start_guarded_server"]
 
@@ -236,7 +236,7 @@ class PanelGuard:
             return False
         if self.loopback:
             name = _host_name(host)
-            return name is not None and is_loopback(name)
+            return name is not None and is_loopback_host(name)
         return True
 
     def check(self, connection: Any, request: Any) -> Any:
