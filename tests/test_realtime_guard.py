@@ -103,25 +103,26 @@ def test_a_void_run_while_others_were_busy_is_retried_then_skipped(monkeypatch: 
 
 @pytest.mark.skipif(not os.path.exists("/proc/stat"), reason="Linux /proc only")
 def test_the_monitor_counts_work_outside_its_tree_as_others_and_its_own_as_not() -> None:
-    """Watching a sleeping child's tree, this process's spin is others' work; watching this process's
-    tree, it is not. Judged against the CPU this process really got (the machine may be shared)."""
+    """Watching a sleeping child's tree, a spinning child of this process is others' work; watching this
+    process's tree, it is not. Judged against the CPU the spinner really got (the machine may be shared).
+    The spin is a child process: a spinning thread here would hold the GIL the monitors sample with."""
     sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    spin = "import time\nt = time.monotonic()\nwhile time.monotonic() - t < 1.5: pass\ntime.sleep(30)"
+    spinner = subprocess.Popen([sys.executable, "-c", spin])
     try:
         outside = MachineMonitor(root=sleeper.pid, sample_s=0.1).start()
         inside = MachineMonitor(root=os.getpid(), sample_s=0.1).start()
-        t0, cpu0 = time.monotonic(), time.process_time()
-        deadline = t0 + 1.5
-        while time.monotonic() < deadline:
-            sum(range(10_000))
-        time.sleep(0.3)  # the last samples close
-        spun_s = time.process_time() - cpu0
+        t0, cpu0 = time.monotonic(), machine._tree_cpu_s(spinner.pid)
+        time.sleep(2.0)  # the spin and the last samples
+        spun_s = machine._tree_cpu_s(spinner.pid) - cpu0
         got_out = outside.others(t0)
         got_in = inside.others(t0)
         outside.stop()
         inside.stop()
     finally:
-        sleeper.kill()
-        sleeper.wait()
+        for p in (sleeper, spinner):
+            p.kill()
+            p.wait()
     assert got_out.samples >= 5 and got_in.samples >= 5
     # Others' CPU seconds seen from outside include (nearly all of) our spin; from inside they exclude it.
     assert got_out.mean_cores * got_out.window_s >= 0.8 * spun_s - 0.05, (got_out, spun_s)
