@@ -50,7 +50,8 @@ from controller.errors import ConfigError, PortError
 from controller.firmware import Firmware
 from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus
 from controller.param_file import apply_param_file
-from controller.preflight import WINDOW_US, run_preflight
+from controller.preflight import run_preflight
+from controller.preflight_checks import WINDOW_US
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import SerialTransport, TcpServerTransport, Transport, parse_listen
 

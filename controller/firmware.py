@@ -215,6 +215,7 @@ class Firmware:
 
         def begin(start_us: int) -> int:
             self.clock_kind = clock.kind  # inside clock.running(): SCHED_FIFO is known by now
+            self.rc.discard_pending()  # stick positions buffered since the port opened are stale
             return start_us
 
         def step(now_us: int) -> int:

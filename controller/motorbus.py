@@ -219,6 +219,86 @@ def feedback_filters(motor_count: int = 3) -> list[dict[str, int | bool]]:
     ]
 
 
+def _slcan_bus_class() -> type[Any]:
+    """python-can's slcan bus, reading what the adapter has sent in one call instead of byte by byte.
+
+    python-can 4.6's ``slcanBus._read`` reads one byte per ``read(1)`` call (a ``select`` each) and, with
+    nothing waiting, blocks for the port's time-out (1 ms) even when ``recv(timeout=0)`` was asked. A
+    1 kHz loop that drains three feedback frames per tick then spends 1-3 ms per tick reading and falls
+    behind (measured over a pty: 1296 of 2000 ticks in 2 s; ``bench/slcan.py``). Its ``_write`` also
+    drains the port (``tcdrain``) after every frame, which waits for the adapter to take the bytes: over
+    USB, up to a bus frame (1 ms) per command. This bus takes every byte waiting in one read, returns at
+    once when none is and ``timeout`` is 0 (otherwise it waits as python-can does), and writes without
+    waiting: what the kernel does not take now is kept, in order, for the next frame (pyserial's own
+    timed write selects after every write and raised "Write timeout" on frames already written). Same
+    lines, same terminators (``\\r`` ok, ``\\a`` error), same errors.
+    """
+    global _SLCAN_BULK
+    if _SLCAN_BULK is not None:
+        return _SLCAN_BULK
+    import serial
+    from can.exceptions import CanOperationError, error_check
+    from can.interfaces.slcan import slcanBus
+
+    class BulkSlcanBus(slcanBus):  # type: ignore[misc]
+        _tx: bytearray | None = None
+
+        def _write(self, string: str) -> None:
+            data = string.encode() + self.LINE_TERMINATOR
+            port = self.serialPortOrig
+            fd = getattr(port, "fd", None)
+            if not isinstance(fd, int):  # a URL port (socket://...): python-can's write, less the drain
+                with error_check("Could not write to serial device"):
+                    port.write(data)
+                return
+            # The port's descriptor is non-blocking (pyserial opens it so): write what the kernel takes
+            # now and keep the rest, in order, for the next frame; never wait, never select.
+            if self._tx is None:
+                self._tx = bytearray()
+            tx = self._tx
+            tx += data
+            try:
+                n = os.write(fd, tx)
+            except BlockingIOError:
+                n = 0
+            except OSError as exc:
+                raise CanOperationError("Could not write to serial device") from exc
+            del tx[:n]
+            if len(tx) > _SLCAN_TX_PENDING_MAX:
+                tx.clear()
+                raise CanOperationError(
+                    f"the adapter took no bytes for {_SLCAN_TX_PENDING_MAX} bytes: dropped"
+                )
+
+        def _read(self, timeout: float | None) -> str | None:
+            port = self.serialPortOrig
+            buf: bytearray = self._buffer
+            expiry = serial.Timeout(timeout)
+            with error_check("Could not read from serial device"):
+                while True:
+                    ends = [i for i in (buf.find(self._OK), buf.find(self._ERROR)) if i >= 0]
+                    if ends:
+                        end = min(ends) + 1
+                        line = buf[:end].decode()
+                        del buf[:end]
+                        return line
+                    waiting = port.in_waiting
+                    if waiting:
+                        buf.extend(port.read(waiting))
+                        continue
+                    if expiry.expired():
+                        return None
+                    buf.extend(port.read(1))  # waits up to the port's time-out for the next byte
+
+    _SLCAN_BULK = BulkSlcanBus
+    return BulkSlcanBus
+
+
+_SLCAN_BULK: type[Any] | None = None
+_SLCAN_TX_PENDING_MAX = 4096
+"""Bytes of slcan commands an adapter may leave untaken (about 180 command frames) before it is an error."""
+
+
 class CanMotorBus(MotorBus):
     """The motors on any python-can bus (``socketcan``, ``gs_usb``, ``slcan``, ``pcan``, ``virtual``, ...).
 
@@ -271,7 +351,10 @@ class CanMotorBus(MotorBus):
             kwargs.setdefault("bitrate", bitrate)
             kwargs.setdefault("can_filters", feedback_filters(self.motor_count))
             try:
-                bus = can.Bus(channel=channel, interface=interface, **kwargs)
+                if interface == "slcan":
+                    bus = _slcan_bus_class()(channel=channel, **kwargs)
+                else:
+                    bus = can.Bus(channel=channel, interface=interface, **kwargs)
             except (can.CanError, OSError, ValueError, ImportError) as exc:
                 raise PortError(f"cannot open CAN {interface} channel {channel}: {exc}") from exc
         self.bus = bus

@@ -103,6 +103,14 @@ class RcSource(ABC):
         """Raw bytes discarded by this source's framer (0 for sources without one)."""
         return 0
 
+    def discard_pending(self) -> int:
+        """Drop what arrived before the loop started (bytes dropped; 0 for sources without a port).
+
+        A UART buffers the receiver's frames from the moment it is opened; the loop starts later (the
+        other ports open, a CAN adapter settles), and its first read would take that backlog as one
+        burst: frames seconds old, counted as a burst that was not 18 bytes."""
+        return 0
+
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release the source's port, if any (safe twice)."""
 
@@ -155,6 +163,20 @@ class DbusSerialSource(RcSource):
     def bytes_dropped(self) -> int:
         """Bytes of bursts that were not 18 bytes long."""
         return self.framer.bytes_dropped
+
+    def discard_pending(self) -> int:
+        """Read and drop what the UART holds, unframed (see :meth:`RcSource.discard_pending`)."""
+        dropped = 0
+        if not self._closed:
+            try:
+                for _ in range(64):  # bounded: a receiver sends 1.3 KB/s, a UART buffers a few KB
+                    n = self._serial.in_waiting
+                    if not n:
+                        break
+                    dropped += len(self._serial.read(n))
+            except OSError:  # serial.SerialException is an OSError (unplugged adapter)
+                self.read_errors += 1
+        return dropped
 
     def poll(self, now_us: int) -> list[RcFrame]:
         """Read what the UART holds and return the frames the idle gap has closed."""

@@ -4,6 +4,7 @@ emulator with a fake C610 trio behind it)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from collections.abc import Iterator
@@ -13,6 +14,7 @@ import can
 import cantools
 import pytest
 
+from controller import motorbus
 from controller.errors import BusError, PortError
 from controller.fake_c610 import FakeC610Trio
 from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus, feedback_filters
@@ -176,6 +178,8 @@ def test_every_interface_gets_1_mbit_and_the_feedback_filters(monkeypatch: pytes
         return real_bus(interface="virtual", channel=f"test-opened-{os.getpid()}")
 
     monkeypatch.setattr(can, "Bus", fake_bus)
+    # slcan opens python-can's slcanBus class with a faster reader and writer (same arguments).
+    monkeypatch.setattr(motorbus, "_slcan_bus_class", lambda: lambda **kw: fake_bus(interface="slcan", **kw))
     for interface in ("gs_usb", "socketcan", "slcan", "pcan"):
         CanMotorBus("0", interface).shutdown()
     assert [k["interface"] for k in opened] == ["gs_usb", "socketcan", "slcan", "pcan"]
@@ -311,3 +315,23 @@ def test_a_failing_back_end_is_counted_and_the_bus_still_shuts_down(error: Excep
     assert bus.read_feedback() == [] and bus.can_errors == 1
     bus.shutdown()  # the zero-current frame fails too: counted, and the bus is shut down anyway
     assert bus.can_errors == 2 and bus.is_shutdown and bus.closed == 1
+
+
+def test_an_slcan_adapter_that_takes_no_bytes_is_a_bus_error_not_a_blocked_loop() -> None:
+    """Nobody reads the pty's far end: writes never wait (the loop is never blocked); once the kernel's
+    buffer and our bounded queue of untaken commands are full, each send fails and is counted."""
+    master, slave = os.openpty()
+    try:
+        with CanMotorBus(os.ttyname(slave), "slcan", sleep_after_open=0) as bus:
+            for _ in range(100_000):  # bounded: the kernel buffers some 64 KB of a pty
+                bus.send_currents([0, 0, 0])
+                if not bus.last_send_ok:
+                    break
+            assert bus.can_errors == 1 and bus.frames_sent > 100
+            with pytest.raises(BusError, match="adapter took no bytes"):  # the reason a log would carry
+                for _ in range(100_000):  # the untaken queue was dropped with the error: fill it again
+                    bus._send_frame(0x200, bytes(8))
+    finally:
+        for fd in (master, slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)

@@ -54,6 +54,21 @@ def test_dbus_frames_over_a_pty_split_on_idle_gaps(dbus_pty: tuple[int, DbusSeri
     assert source.framer.frames_ok == 2
 
 
+def test_what_arrived_before_the_loop_started_is_dropped(
+    dbus_pty: tuple[int, DbusSerialSource],
+) -> None:
+    """Two frames buffered since the port opened would be one 36-byte burst at the first poll: stale
+    positions, counted as dropped bytes. ``discard_pending`` drops them unread, and counts nothing."""
+    master, source = dbus_pty
+    os.write(master, GOOD.pack() * 2)
+    deadline = time.monotonic() + 5.0
+    while source._serial.in_waiting < 36 and time.monotonic() < deadline:
+        time.sleep(0.0005)
+    assert source.discard_pending() == 36
+    assert _write_then_poll(master, source, GOOD.pack(), 0) == [] and source.poll(2_600) == [GOOD]
+    assert source.bytes_dropped == 0 and source.framer.frames_ok == 1
+
+
 def test_missing_rc_port_is_a_port_error() -> None:
     with pytest.raises(PortError, match="ttyNOPE"):
         DbusSerialSource("/dev/ttyNOPE")

@@ -2,22 +2,26 @@
 
 - :class:`C610TrioServer` answers every 0x200 on a python-can bus with 0x201-0x203;
 - :class:`SlcanAdapterEmulator` is a USB-CAN adapter speaking slcan on a pty, the trio behind it, so that
-  ``CanMotorBus(interface="slcan", channel=<pty slave>)`` is tested end to end.
+  ``CanMotorBus(interface="slcan", channel=<pty slave>)`` is tested end to end;
+- :class:`SlcanAdapterProcess` runs that adapter in a process of its own, for a firmware that runs in
+  another: a thread would answer in bursts whenever the test's own threads hold its interpreter.
 """
 
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import os
 import select
 import threading
+import tty
 from types import TracebackType
 from typing import Any
 
 from controller.fake_c610 import FakeC610Trio
 from protocol.c610 import COMMAND_ID_LOW
 
-__all__ = ["C610TrioServer", "SlcanAdapterEmulator"]
+__all__ = ["C610TrioServer", "SlcanAdapterEmulator", "SlcanAdapterProcess"]
 
 
 class _Worker:
@@ -172,3 +176,52 @@ class SlcanAdapterEmulator(_Worker):
                 select.select([], [self.fd], [], 0.01)
                 continue
             view = view[n:]
+
+
+def _serve_slcan(fd: int, stop: Any, out: Any) -> None:
+    """The body of :class:`SlcanAdapterProcess`: serve until ``stop`` is set, then report on ``out``."""
+    with SlcanAdapterEmulator(fd) as adapter:
+        stop.wait(120.0)  # bounded: the test's own time-out is far shorter
+    trio = adapter.trio
+    out.send(
+        {
+            "error": repr(adapter.error) if adapter.error is not None else None,
+            "lines": [line for line in adapter.lines if not line.startswith("t")],
+            "commands": trio.commands,
+            "currents_raw": [m.current_raw for m in trio.motors],
+        }
+    )
+
+
+class SlcanAdapterProcess:
+    """:class:`SlcanAdapterEmulator` in a child process (forked), on a pty it opens; ``path`` is the
+    adapter's port. On exit :attr:`summary` holds the adapter's error, its non-frame lines (``S8``,
+    ``O``, ...), the commands the trio took and the trio's last currents."""
+
+    def __init__(self) -> None:
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        self.path = os.ttyname(self._slave)
+        ctx = multiprocessing.get_context("fork")
+        self._stop = ctx.Event()
+        self._recv, send = ctx.Pipe(duplex=False)
+        self._proc = ctx.Process(target=_serve_slcan, args=(self._master, self._stop, send), daemon=True)
+        self.summary: dict[str, Any] = {}
+
+    def __enter__(self) -> SlcanAdapterProcess:
+        self._proc.start()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self._stop.set()
+        if self._recv.poll(10.0):
+            self.summary = self._recv.recv()
+        self._proc.join(timeout=5.0)
+        if self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join(timeout=5.0)
+        for fd in (self._master, self._slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
