@@ -13,12 +13,15 @@ import shutil
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hil.experiments.common import pyplot, save_figure
 from hil.experiments.stats import wilson_interval
+
+if TYPE_CHECKING:
+    from hil.render import Pictures
 
 __all__ = ["DesignRate", "campaign_pictures", "design_rates", "success_maps"]
 
@@ -171,8 +174,7 @@ def campaign_pictures(
     Returns:
         ``([(heading, Pictures), ...], notes)`` for :func:`hil.report.write_index`.
     """
-    from hil.campaign.runner import grasp_setup
-    from hil.render import NO_GL, RERUN, Pictures, film_grasp_trial, gl_backends, render_film
+    from hil.render import NO_GL, Pictures, gl_backends
 
     finished = [r for r in rows if r["outcome"] != "error"]
     if not finished:
@@ -204,13 +206,20 @@ def campaign_pictures(
             f"x = {1000 * i['object.x_m']:.0f} mm, z = {1000 * i['object.z_m']:.0f} mm, seed {i['seed']} "
             f"(run {row['key']})"
         )
-        setup, design = grasp_setup(i)
-        film, note = film_grasp_trial(setup, design, row["measured"])
-        pics = (
-            Pictures(note=note) if film is None else render_film(film, out_dir, f"run-{label}", source=RERUN)
-        )
-        out.append((heading, pics))
+        out.append((heading, grasp_row_pictures(row, out_dir, f"run-{label}")))
     return out, notes
+
+
+def grasp_row_pictures(row: Mapping[str, Any], out_dir: Path, name: str) -> Pictures:
+    """A grasp campaign row run again, filmed (its design and firmware values from its inputs), and
+    rendered as ``out_dir/NAME-*`` only if it measures exactly what the row recorded
+    (:func:`hil.render.film_grasp_trial`); otherwise the one line saying what differed."""
+    from hil.campaign.runner import grasp_setup
+    from hil.render import RERUN, Pictures, film_grasp_trial, render_film
+
+    setup, design = grasp_setup(row["inputs"])
+    film, note = film_grasp_trial(setup, design, row["measured"])
+    return Pictures(note=note) if film is None else render_film(film, out_dir, name, source=RERUN)
 
 
 def _scenario_pictures(label: str, row: Mapping[str, Any], out_dir: Path) -> list[str]:

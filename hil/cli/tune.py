@@ -17,7 +17,14 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from controller.cli_kit import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_OK, UsageError, stop_on_signals
+from controller.cli_kit import (
+    EXIT_FAILURE,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    UsageError,
+    stop_on_signals,
+    writable_dir,
+)
 from hil.campaign.runner import RAY_MISSING, ResultsFile, check_ray_address, execute_ray
 from hil.tune.heldout import (
     Rate,
@@ -121,6 +128,13 @@ def configure_tune(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "-o", "--output", type=Path, metavar="FILE", help="parameter file (default runs/tune/NAME.toml)"
     )
+    p.add_argument(
+        "--report",
+        type=Path,
+        metavar="DIR",
+        help="write DIR/tune.md: the search's progress, the held-out comparison, pictures of the tuned "
+        "controller's held-out grasps",
+    )
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
 
 
@@ -156,6 +170,8 @@ def _check_args(args: argparse.Namespace) -> None:
         raise UsageError(RAY_MISSING, PROG)
     if args.ray_address:
         check_ray_address(args.ray_address)
+    if args.report is not None:  # checked before the first grasp, not after the last
+        writable_dir(args.report, "write the report into", PROG)
 
 
 class _Progress:
@@ -301,7 +317,39 @@ def run_tune_command(args: argparse.Namespace) -> int:
         mcnemar=mcnemar,
     )
     write_tuned(output, controllers["tuned"], header)
-    return _report(args, output, storage, train_rate, heldout, mcnemar, controllers["tuned"], ev.errors)
+    index = None
+    if args.report is not None:
+        from hil.tune.objective import runs_for
+        from hil.tune.report import write_tune_report
+
+        progress.say(f"report: pictures of the tuned controller's held-out grasps into {args.report}")
+        index = write_tune_report(
+            args.report,
+            describe=spec.describe(),
+            points=_trial_points(args, study, storage, len(train)),
+            train_n=len(train),
+            heldout=heldout,
+            mcnemar=mcnemar,
+            tuned_rows=[
+                ev.rows[r.key] for r in runs_for(controllers["tuned"], test, spec) if r.key in ev.rows
+            ],
+            values=controllers["tuned"],
+            param_file=output,
+        )
+    return _report(
+        args, output, storage, train_rate, heldout, mcnemar, controllers["tuned"], ev.errors, index
+    )
+
+
+def _trial_points(args: argparse.Namespace, study: Any, storage: Path, n: int) -> list[Any] | None:
+    """The search's finished trials for the report's progress figure (a Ray search's from its journal)."""
+    from hil.tune.report import trial_points
+
+    if study is None:
+        from hil.tune.ray_search import load_study
+
+        study = load_study(storage, args.study)
+    return None if study is None else trial_points(study, n)
 
 
 def _command_line(args: argparse.Namespace, spec: TuneSpec) -> str:
@@ -379,6 +427,7 @@ def _report(
     mcnemar: Mapping[str, Mapping[str, Any]],
     values: Mapping[str, Any],
     errors_n: int,
+    index: Path | None = None,
 ) -> int:
     status = EXIT_FAILURE if errors_n else EXIT_OK
     if args.json:
@@ -392,6 +441,7 @@ def _report(
                     "heldout": {k: r.as_dict() for k, r in heldout.items()},
                     "mcnemar": {k: dict(m) for k, m in mcnemar.items()},
                     "errors_n": errors_n,
+                    "report": None if index is None else str(index),
                 },
                 allow_nan=False,
             )
@@ -408,6 +458,8 @@ def _report(
     console.print(table)
     console.print(f"training success of the tuned values: {rate_text(train)}", highlight=False)
     console.print(f"parameter file: {output} (study in {storage})", highlight=False, soft_wrap=True)
+    if index is not None:
+        console.print(f"report: {index}", highlight=False, soft_wrap=True)
     if errors_n:
         console.print(f"{errors_n} grasp(s) raised: see the rows file", highlight=False)
     return status

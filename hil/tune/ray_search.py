@@ -35,7 +35,7 @@ from hil.tune.objective import Placement, TuneSpec, hopeless, runs_for
 from hil.tune.search import SPEC_ATTR, TuneError
 from hil.tune.space import baseline_points, firmware_values, suggest
 
-__all__ = ["search_ray"]
+__all__ = ["load_study", "search_ray"]
 
 JOURNAL = "study.journal"
 """The Optuna journal's name in the ``--storage`` directory."""
@@ -98,6 +98,17 @@ def _space(trial: Any) -> None:
     """Ray Tune's define-by-run space: the trial's parameters are the searched keys (module level: the
     searcher is pickled with plain ``pickle``)."""
     suggest(trial)
+
+
+def load_study(storage: Path, name: str) -> optuna.Study | None:
+    """The study ``name`` of a Ray search's ``--storage`` directory (None: there is none)."""
+    path = storage / JOURNAL
+    if not path.is_file():
+        return None
+    journal = _Journal(str(path))
+    if name not in {s.study_name for s in journal.get_all_studies()}:
+        return None
+    return optuna.load_study(study_name=name, storage=journal)
 
 
 def _full(t: FrozenTrial, n: int) -> bool:

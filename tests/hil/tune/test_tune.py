@@ -124,7 +124,7 @@ def searched(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, P
 
         buf = io.StringIO()
         with contextlib.redirect_stdout(buf):
-            status = main([*argv, "--jobs", "1", "--json"])
+            status = main([*argv, "--jobs", "1", "--json", "--report", str(d / "report")])
     finally:
         os.chdir(old)
     assert status == 0
@@ -147,6 +147,37 @@ def test_a_search_writes_a_file_of_its_best_trial(searched: tuple[Path, Path, Pa
     header = out.read_text().split("\n\n")[0]
     assert "Held-out (never seen by the search)" in header and "McNemar" in header
     assert "Wilson" in header and "2 trials" in header
+
+
+def test_the_report_shows_the_search_the_heldout_comparison_and_the_tuned_grasp(
+    searched: tuple[Path, Path, Path, dict[str, Any]],
+) -> None:
+    """``--report``: the progress and held-out figures (pixels drawn, not blank), the table with McNemar,
+    the parameter values, and the tuned controller's held-out grasp run again with its values: pictures
+    only if the re-run measured exactly what the held-out grasp recorded."""
+    d, _, out, result = searched
+    report = d / "report"
+    assert result["report"] == str(report / "tune.md")
+    text = (report / "tune.md").read_text()
+    for png in ("trials.png", "heldout.png"):
+        assert f"({png})" in text
+        from PIL import Image
+
+        with Image.open(report / png) as im:
+            assert len(set(im.convert("RGB").getdata())) > 20, png  # drawn, not a blank canvas
+    assert "| tuned | " in text and "| default | " in text and "| ramp | " in text and "McNemar" in text
+    assert f"Parameter file: `{out}`" in text and out.read_text() in text  # the file as written
+    from hil.render import NO_GL, gl_backends
+
+    held = result["heldout"]["tuned"]["successes"] == 1
+    if not gl_backends():
+        assert NO_GL in text
+        return
+    heading = "a held-out grasp that " + ("succeeded" if held else "did not succeed")
+    assert heading in text
+    assert "re-run differs" not in text  # the tuned values are part of the re-run: it is the same grasp
+    stills = sorted(report.glob(f"tuned-{'held' if held else 'failed'}-*.png"))
+    assert stills and all(f"({p.name})" in text for p in stills)
 
 
 def test_a_search_resumes_without_running_finished_trials_again(
@@ -350,3 +381,28 @@ def test_the_heldout_comparison_grasps_a_shared_run_once_and_pairs_by_placement(
     assert paired(outcomes["tuned"], outcomes["default"]) == {
         "pairs": 2, "only_a": 1, "only_b": 0, "p_value": 1.0,
     }  # fmt: skip
+
+
+def test_trial_points_read_a_local_and_a_ray_study_alike() -> None:
+    """The progress figure's points: a local trial's stored successes; a Ray trial's score (successes over
+    the set when it ran it all, negative when its scheduler stopped it)."""
+    import optuna
+
+    from hil.tune.report import TrialPoint, trial_points
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    local = optuna.create_study(direction="maximize")
+    t = local.ask()
+    t.set_user_attr("successes", 3)
+    t.set_user_attr("done", 6)
+    local.tell(t, state=optuna.trial.TrialState.PRUNED)
+    t = local.ask()
+    t.set_user_attr("successes", 5)
+    t.set_user_attr("done", 9)
+    local.tell(t, 5 / 9)
+    assert trial_points(local, 9) == [TrialPoint(0, 3, 6, True), TrialPoint(1, 5, 9, False)]
+    ray = optuna.create_study(direction="maximize")
+    ray.tell(ray.ask(), 4 / 9)
+    ray.tell(ray.ask(), (2 - 9) / 9)  # stopped after 2 successes
+    ray.ask()  # running: not a point
+    assert trial_points(ray, 9) == [TrialPoint(0, 4, 9, False), TrialPoint(1, 2, 9, True)]
