@@ -326,8 +326,11 @@ def test_a_local_search_never_imports_ray(tmp_path: Path) -> None:
 
 
 @pytest.mark.ray
-def test_ray_tune_searches_with_optunas_sampler_and_resumes(tmp_path: Path) -> None:
-    """A local Ray of one CPU: the two baselines, then one more trial after a resume."""
+def test_ray_tune_searches_with_optunas_sampler_and_resumes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A local Ray of one CPU: the two baselines, then one more trial after a resume, whose report draws
+    the three trials from the Ray search's journal (pictures off: the local search's report films)."""
     storage, out = tmp_path / "r", tmp_path / "r.toml"
     argv = ["tune", *REF, "--ray", "--jobs", "1", "--study", "r", "--storage", str(storage), "-o", str(out)]
     assert main([*argv, "--trials", "2"]) == 0
@@ -335,8 +338,16 @@ def test_ray_tune_searches_with_optunas_sampler_and_resumes(tmp_path: Path) -> N
     assert len(trials) == 2 and {t.params["grasp_strategy_on"] for t in trials} == {True, False}
     assert all(t.value is not None and t.value >= 0 for t in trials)  # both ran their placement
     assert load_param_file(out)["grasp_strategy_on"] in (True, False)
-    assert main([*argv, "--trials", "3", "--resume"]) == 0
+    monkeypatch.setenv("MUJOCO_GL", "disable")
+    assert main([*argv, "--trials", "3", "--resume", "--report", str(tmp_path / "report")]) == 0
     assert len(_journal_trials(storage / "study.journal", "r")) == 3
+    text = (tmp_path / "report" / "tune.md").read_text()
+    assert "(trials.png)" in text and "no OpenGL: pictures skipped" in text
+    from hil.tune.ray_search import load_study
+    from hil.tune.report import trial_points
+
+    study = load_study(storage, "r")
+    assert study is not None and len(trial_points(study, 1)) == 3 and load_study(storage, "other") is None
 
 
 def test_the_shipped_prototype_file_is_taken_by_every_consumer() -> None:
