@@ -16,7 +16,11 @@ exact, and how long does it take (issue 23's proof without hardware).
 Every row is written to ``--out`` (JSON lines) as it finishes; ``--resume`` skips the rows already there.
 Prints the figures and their intervals (Wilson for rates, bootstrap for medians) with the sample sizes.
 
-Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]``
+``--known-torque`` gives each draw's true torque constant to the fit (as a lab gives the datasheet's, or a
+bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
+
+Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]
+[--known-torque]``
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ from hil.identify.fit import FitOptions, FitResult, fit  # noqa: E402
 from hil.identify.motor_data import load_motor_data  # noqa: E402
 from hil.identify.synthetic import MISMATCHES, draw_truth, record_truth, relative_error  # noqa: E402
 from hil.sim.config import ModelConfig  # noqa: E402
-from hil.sim.uncertain import ID_PARAMS, by_name  # noqa: E402
+from hil.sim.uncertain import ID_PARAMS, apply, by_name  # noqa: E402
 
 GOAL_WITHIN = 0.10
 GOAL_DRAWS = 18 / 20
@@ -50,10 +54,17 @@ GOAL_COVERAGE = 0.90
 GOAL_HELD_OUT_M = 0.3e-3
 
 
-def _fit(paths: list[Path], args: argparse.Namespace, fit_s: float) -> FitResult:
+def _fit(
+    paths: list[Path], args: argparse.Namespace, fit_s: float, known: dict[str, float] | None = None
+) -> FitResult:
+    """The fit on ``paths``; ``known`` parameters are set to their values and not fitted."""
     data = [load_motor_data(p) for p in paths]
-    opts = FitOptions(budget_s=fit_s, min_span_s=fit_s, max_iters=args.max_iters, jobs=args.jobs)
-    return fit(data, ModelConfig(), opts)
+    known = known or {}
+    params = tuple(p.name for p in ID_PARAMS if p.name not in known)
+    opts = FitOptions(
+        params=params, budget_s=fit_s, min_span_s=fit_s, max_iters=args.max_iters, jobs=args.jobs
+    )
+    return fit(data, apply(ModelConfig(), known), opts)
 
 
 def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[str, Any]:
@@ -66,7 +77,10 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
     record_s = time.monotonic() - t0
     # Both recordings go in; the fit's budget (``--fit-s``, at least ``min_span_s`` per recording) is spent
     # on the first one's start, so the second is held out whole and simulated for the traces.
-    result = _fit(paths, args, args.fit_s)
+    # --known-torque: the torque constant given as a lab would measure it (datasheet, a known weight),
+    # which pins the common scale of the forces (docs/identify.md section 3); the others are fitted.
+    known = {"torque_scale": truth["torque_scale"]} if args.known_torque else {}
+    result = _fit(paths, args, args.fit_s, known)
     second = _fit_traces_rms(result.traces, paths[1].name)
     params = []
     for e in result.estimates:
@@ -89,6 +103,7 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
     return {
         "kind": "truth",
         "seed": seed,
+        "known": known,
         "params": params,
         "held_out_rms_m": result.rms_m(True),
         "held_out_rms_nominal_m": result.rms_m(True, "nominal"),
@@ -162,7 +177,10 @@ def summarise(rows: list[dict[str, Any]]) -> None:
         all_cov: list[bool] = []
         ok_draws = 0
         for p in ID_PARAMS:
-            rs = [next(x for x in r["params"] if x["name"] == p.name) for r in truths]
+            rs = [x for r in truths for x in r["params"] if x["name"] == p.name]
+            if not rs:
+                print(f"{p.name:20s} given (--known-torque), not fitted")
+                continue
             ident = [x for x in rs if x["identifiable"]]
             within = sum(x["rel_error"] <= GOAL_WITHIN for x in ident)
             cov = sum(bool(x["covered"]) for x in rs)
@@ -226,6 +244,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mismatch", action="store_true", help="also the model-mismatch plants")
     ap.add_argument("--fit-time", action="store_true", help="also five 60 s recordings, timed")
     ap.add_argument("--quick", action="store_true", help="3 draws of the quick profile (a smoke run)")
+    ap.add_argument(
+        "--known-torque",
+        action="store_true",
+        help="give the fit each draw's true torque constant (as a datasheet would) and fit the rest",
+    )
     ap.add_argument("--out", type=Path, default=Path("runs/bench-identify.jsonl"))
     ap.add_argument("--resume", action="store_true", help="keep the rows already in --out")
     args = ap.parse_args(argv)

@@ -22,7 +22,7 @@ from hil.identify.report import write_report
 from hil.recording import package_version
 from hil.sim.model_file import FittedParameter, ModelFile, read_model_file, write_model_file
 from hil.sim.presets import is_model_file, resolve
-from hil.sim.uncertain import ID_PARAMS
+from hil.sim.uncertain import ID_PARAMS, apply, by_name
 
 __all__ = ["IDENTIFY_HELP", "configure_identify", "run_identify_command"]
 
@@ -41,6 +41,26 @@ def _param_list(text: str) -> tuple[str, ...]:
             f"unknown parameter(s) {', '.join(unknown) or '(none given)'}; known: {', '.join(sorted(known))}"
         )
     return names
+
+
+def _known(text: str) -> tuple[str, float]:
+    name, eq, value = text.partition("=")
+    names = {p.name for p in ID_PARAMS}
+    if not eq or name.strip() not in names:
+        raise argparse.ArgumentTypeError(
+            f"--known wants NAME=VALUE with NAME one of {', '.join(sorted(names))}, got {text!r}"
+        )
+    try:
+        v = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--known {name.strip()}: not a number: {value!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"--known {name.strip()}: not a finite number: {value!r}")
+    return name.strip(), v
+
+
+KNOWN_NOTE = "known: given with --known (a datasheet, a bench test), not fitted"
+"""The model file's note on a parameter the lab gave rather than the fit found."""
 
 
 def configure_identify(p: argparse.ArgumentParser) -> None:
@@ -64,6 +84,15 @@ def configure_identify(p: argparse.ArgumentParser) -> None:
         type=_param_list,
         metavar="A,B,...",
         help=f"the parameters to fit (default all: {', '.join(q.name for q in ID_PARAMS)})",
+    )
+    p.add_argument(
+        "--known",
+        type=_known,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a parameter the lab knows (e.g. torque_scale from the datasheet): set, not fitted; "
+        "repeatable. Giving torque_scale removes the fit's common-scale tie (docs/identify.md)",
     )
     p.add_argument(
         "--budget-s",
@@ -103,8 +132,21 @@ def run_identify_command(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from exc
     chosen = resolve(args.preset)
     base_preset = read_model_file(args.preset).preset if is_model_file(args.preset) else args.preset
+    known = dict(args.known)
+    if len(known) != len(args.known):
+        raise UsageError("--known gives a parameter twice")
+    both = sorted(set(known) & set(args.params or ()))
+    if both:
+        raise UsageError(f"--known and --params both name {', '.join(both)}: a parameter is given or fitted")
+    try:
+        start = apply(chosen.model, known)
+    except ValueError as exc:
+        raise UsageError(f"--known: {exc}") from exc
+    fitted = tuple(n for n in (args.params or tuple(p.name for p in ID_PARAMS)) if n not in known)
+    if not fitted:
+        raise UsageError("--known gives every parameter: nothing left to fit")
     options = FitOptions(
-        params=args.params or tuple(p.name for p in ID_PARAMS),
+        params=fitted,
         budget_s=args.budget_s,
         max_iters=args.max_iters,
         jobs=args.jobs,
@@ -114,10 +156,10 @@ def run_identify_command(args: argparse.Namespace) -> int:
     err = Console(stderr=True)
     absl_logging.set_verbosity(absl_logging.ERROR)  # the toolbox's advice lines; the report says what matters
     try:
-        result = _fit_with_progress(data, chosen.model, options, design, args, err)
+        result = _fit_with_progress(data, start, options, design, args, err)
     except FitError as exc:
         raise UsageError(str(exc)) from exc
-    model = _model_file(result, base_preset, design)
+    model = _model_file(result, base_preset, design, known, chosen.model)
     write_model_file(args.output, model)
     page = None
     if args.report is not None:
@@ -125,9 +167,9 @@ def run_identify_command(args: argparse.Namespace) -> int:
             result, args.report, f"Identification: {', '.join(p.name for p in args.recordings)}"
         )
     if args.json:
-        print(json.dumps(_finite(_as_dict(result, args.output, page)), allow_nan=False))
+        print(json.dumps(_finite(_as_dict(result, args.output, page) | {"known": known}), allow_nan=False))
     else:
-        _print(result, args.output, page)
+        _print(result, args.output, page, known)
     return EXIT_OK
 
 
@@ -160,11 +202,16 @@ def _fit_with_progress(
     return result
 
 
-def _model_file(result: FitResult, preset: str, design: Any) -> ModelFile:
+def _model_file(
+    result: FitResult, preset: str, design: Any, known: dict[str, float], preset_model: Any
+) -> ModelFile:
     params = {
         e.name: FittedParameter(e.name, e.value, e.unit, e.interval, e.identifiable, e.preset, e.why)
         for e in result.estimates
     }
+    for name, value in known.items():  # the model file carries them: a reader gets the arm the fit saw
+        row = by_name(name)
+        params[name] = FittedParameter(name, value, row.unit, preset=row.read(preset_model), note=KNOWN_NOTE)
     fit_summary: dict[str, float | int | str] = {
         "fitted_rms_mm": _mm(result.rms_m(False)),
         "held_out_rms_mm": _mm(result.rms_m(True)),
@@ -186,7 +233,7 @@ def _mm(m: float) -> float:
     return round(m * 1e3, 4) if math.isfinite(m) else math.nan
 
 
-def _print(result: FitResult, output: Path, page: Path | None) -> None:
+def _print(result: FitResult, output: Path, page: Path | None, known: dict[str, float]) -> None:
     console = Console()
     table = Table(title="fitted parameters (95 % intervals, autocorrelation-consistent)")
     for col in ("parameter", "preset", "fitted", "95 % interval", "identified"):
@@ -201,6 +248,9 @@ def _print(result: FitResult, output: Path, page: Path | None) -> None:
             "yes" if e.identifiable else f"no: {e.why}",
         )
     console.print(table)
+    if known:
+        given = ", ".join(f"{k} = {v:.4g} {by_name(k).unit}".rstrip() for k, v in known.items())
+        console.print(f"known (--known, not fitted): {given}", highlight=False)
     console.print(
         f"cable length error: fitted {_mm(result.rms_m(False))} mm, held out {_mm(result.rms_m(True))} mm "
         f"(the preset: {_mm(result.rms_m(False, 'nominal'))} mm, {_mm(result.rms_m(True, 'nominal'))} mm); "

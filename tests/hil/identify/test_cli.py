@@ -1,0 +1,57 @@
+"""``spirob-hil identify`` on the command line: ``--known`` (a parameter the lab gives, not fitted), its
+mistakes in one line each, and the model file that carries the given value."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from hil.cli.identify import KNOWN_NOTE
+from hil.cli.main import main
+from hil.sim.model_file import read_model_file
+from hil.sim.presets import PRESETS, resolve
+from hil.sim.uncertain import by_name
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--known", "torque_scale"], "--known wants NAME=VALUE"),
+        (["--known", "no_such=1"], "--known wants NAME=VALUE"),
+        (["--known", "torque_scale=abc"], "not a number"),
+        (["--known", "torque_scale=nan"], "not a finite number"),
+        (["--known", "torque_scale=1", "--known", "torque_scale=1.1"], "gives a parameter twice"),
+        (["--known", "torque_scale=1", "--params", "torque_scale,delay"], "both name torque_scale"),
+        (["--known", "torque_scale=-3"], "--known: "),
+    ],
+)
+def test_known_mistakes_are_one_line_and_status_2(
+    argv: list[str], says: str, preset_recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    try:  # argparse's own refusals exit; the command's return their status
+        code = main(["identify", str(preset_recording), "-o", str(tmp_path / "arm.toml"), *argv])
+    except SystemExit as exc:
+        code = exc.code  # type: ignore[assignment]
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) <= 2 and says in err[-1], err  # argparse's usage line, then the one line
+    assert not (tmp_path / "arm.toml").exists()
+
+
+def test_a_known_parameter_is_set_not_fitted_and_the_file_carries_it(
+    truth_recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "arm.toml"
+    preset = by_name("torque_scale").read(PRESETS["prototype"].model)
+    given = 0.97 * preset  # as a bench test with a known weight might find it
+    argv = ["identify", str(truth_recording), "-o", str(out), "--params", "base_stiffness,damping_ratio"]
+    argv += ["--known", f"torque_scale={given!r}", "--max-iters", "1", "--budget-s", "6", "--jobs", "2"]
+    assert main([*argv, "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["known"] == {"torque_scale": given}
+    assert [p["name"] for p in result["parameters"]] == ["base_stiffness", "damping_ratio"]  # not fitted
+    fitted = read_model_file(out).parameters["torque_scale"]
+    assert fitted.value == given and fitted.preset == preset and fitted.note == KNOWN_NOTE
+    assert by_name("torque_scale").read(resolve(str(out)).model) == pytest.approx(given)
