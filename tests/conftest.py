@@ -47,6 +47,25 @@ _SERIAL_PATHS = (
     "tests/controller/test_firmware.py",
 )
 """Files whose tests run real-time boards, link processes, browsers or CLIs in real time without a mark."""
+_PARALLEL_HOST_FILES = (
+    "tests/host/drone/test_component.py",
+    "tests/host/drone/test_servo.py",
+    "tests/host/panel/test_arbiter.py",
+    "tests/host/panel/test_board_params.py",
+    "tests/host/panel/test_board_state.py",
+    "tests/host/panel/test_guard.py",
+    "tests/host/panel/test_notices.py",
+    "tests/host/panel/test_param_table.py",
+    "tests/host/panel/test_plots.py",
+    "tests/host/panel/test_record.py",
+    "tests/host/panel/test_scene.py",
+    "tests/host/panel/test_state_bar.py",
+    "tests/host/test_gamepad.py",
+    "tests/host/test_object_spec.py",
+)
+"""Host files of unit tests (fake clocks, lockstep boards, in-process servers on port 0): no real-time board,
+link process, browser or CLI, so they run with the parallel phase (a wall-clock mark still makes a test
+serial)."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -57,7 +76,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         rel = item.path.relative_to(root).as_posix() if item.path.is_relative_to(root) else ""
         wall = not _WALL_CLOCK_MARKS.isdisjoint(item.keywords) or "ray" in item.keywords
-        if wall or rel.startswith(_SERIAL_PATHS):
+        if wall or (rel.startswith(_SERIAL_PATHS) and rel not in _PARALLEL_HOST_FILES):
             item.add_marker(pytest.mark.serial)
 
 
