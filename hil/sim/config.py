@@ -17,6 +17,7 @@ from controller.params import C610_MAX_A
 __all__ = [
     "ACTUATOR_KINDS",
     "MOUNTINGS",
+    "OBJECT_SHAPES",
     "ActuatorConfig",
     "ArmConfig",
     "ContactConfig",
@@ -356,22 +357,44 @@ class ActuatorConfig:
         _check(0 < lo < hi, f"muscle_length_range must be 0 < low < high, got {self.muscle_length_range!r}")
 
 
+OBJECT_SHAPES: tuple[str, ...] = ("cylinder", "capsule", "sphere", "box", "ellipsoid", "cone", "mesh")
+"""The shapes an :class:`ObjectConfig` can take."""
+
+
+def _spans_a_volume(points: tuple[tuple[float, float, float], ...]) -> bool:
+    """Some four of ``points`` make a tetrahedron of non-negligible volume (relative to their spread)."""
+    import numpy as np
+
+    p = np.asarray(points, dtype=float)
+    centred = p - p.mean(axis=0)
+    if not np.all(np.isfinite(centred)):
+        return False
+    s = np.linalg.svd(centred, compute_uv=False)
+    return bool(s[0] > 0 and s[-1] > 1e-3 * s[0])
+
+
 @dataclass(frozen=True)
 class ObjectConfig:
-    """A cylinder to grasp.
+    """An object to grasp: a cylinder by default, or one of :data:`OBJECT_SHAPES`.
 
     Attributes:
         name: body name in the model (letters, digits, underscores; not an arm name).
-        radius_m: cylinder radius.
-        length_m: cylinder length.
-        pos_m: centre in world coordinates.
-        axis: direction of the cylinder axis in world coordinates (normalised here).
+        radius_m: the radius across the axis: a cylinder's, capsule's, sphere's, cone's base, an
+            ellipsoid's two equal semi-axes, a box's half-width (its cross-section is square); a mesh's
+            characteristic radius (the penetration figures are judged against it).
+        length_m: the extent along the axis: a cylinder's or capsule's length, a box's or a cone's height,
+            an ellipsoid's length (twice its third semi-axis); a sphere and a mesh ignore it.
+        pos_m: where the object's frame is, in world coordinates: the middle of its extent along the axis
+            (a cone's base is ``length_m / 2`` below it, its apex as far above); a mesh's vertices' origin.
+        axis: direction of the object's axis in world coordinates (normalised here).
         mass_kg: ``None`` = fixed to the world (a branch, a pole); otherwise a free body of this mass,
             with a switchable support (``{name}_support``: a mocap body and a weld to it, inactive at
             start) that :meth:`hil.sim.plant.Plant.hold_object` uses to hold it where it is.
         friction: sliding friction coefficient.
         shape: ``"cylinder"`` (flat ends, convex collision) or ``"capsule"`` (rounded ends, analytic
-            collision: cheaper).
+            collision: cheaper), ``"sphere"``, ``"box"``, ``"ellipsoid"``, ``"cone"`` (a 24-sided
+            pyramid, apex towards +axis), ``"mesh"`` (the convex hull of ``vertices``).
+        vertices: a mesh's points in its own frame (z along ``axis``), at least 4 not in one plane.
     """
 
     name: str
@@ -382,6 +405,7 @@ class ObjectConfig:
     mass_kg: float | None = None
     friction: float = 0.8
     shape: str = "cylinder"
+    vertices: tuple[tuple[float, float, float], ...] = ()
 
     def validate(self) -> None:
         """Raise ``ValueError`` if a value is out of range."""
@@ -398,9 +422,19 @@ class ObjectConfig:
             _finite("mass_kg", self.mass_kg)
         _finite("friction", self.friction, allow_equal=True)
         _check(
-            self.shape in ("cylinder", "capsule"),
-            f"shape must be 'cylinder' or 'capsule', got {self.shape!r}",
+            self.shape in OBJECT_SHAPES,
+            f"shape must be one of {', '.join(OBJECT_SHAPES)}, got {self.shape!r}",
         )
+        if self.shape == "mesh":
+            _check(
+                4 <= len(self.vertices) <= 1000,
+                f"a mesh needs 4 to 1000 vertices, got {len(self.vertices)}",
+            )
+            for v in self.vertices:
+                _vector("vertices", v, 3)
+            _check(_spans_a_volume(self.vertices), "a mesh's vertices must not lie in one plane")
+        else:
+            _check(not self.vertices, f"vertices are for a mesh, not a {self.shape}")
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from hil.sim.config import (
     ArmConfig,
     ModelConfig,
 )
+from hil.sim.object_shapes import object_mesh_vertices, object_shape_xml
 from hil.sim.spiral import SpiralDesign
 from hil.sim.standalone import (
     CAPSTAN_REFERENCE_TENSION_N,
@@ -408,6 +409,10 @@ def build_mjcf(
             inset = wedge_inset_ratio(design)
             verts = " ".join(_v(*p) for p in wedge_vertices_m(geo, i, dtheta, ball, inset))
             add(f'    <mesh name="unit_{i:02d}_mesh" vertex="{verts}"/>')
+    for obj in cfg.objects:
+        points = object_mesh_vertices(obj)
+        if points:
+            add(f'    <mesh name="{obj.name}_mesh" vertex="{" ".join(_v(*p) for p in points)}"/>')
     add("  </asset>")
     add("  <worldbody>")
     add('    <light name="sun" pos="0 0 3" dir="0 0 -1" directional="true"/>')
@@ -513,11 +518,8 @@ def build_mjcf(
     add("    </body>")
 
     for obj in cfg.objects:
-        norm = math.sqrt(sum(v * v for v in obj.axis))
-        half = 0.5 * obj.length_m
-        ends = [v / norm * -half for v in obj.axis] + [v / norm * half for v in obj.axis]
         geom = (
-            f'<geom name="{obj.name}_geom" type="{obj.shape}" fromto="{_v(*ends)}" size="{_f(obj.radius_m)}" '
+            f'<geom name="{obj.name}_geom" {object_shape_xml(obj)} '
             f'contype="{ENV_CONTYPE}" conaffinity="{ARM_CONTYPE | ENV_CONTYPE}" '
             f'friction="{_f(obj.friction)} 0.005 0.0001" material="object" {contact}'
         )

@@ -35,7 +35,7 @@ def test_defaults_are_valid_and_the_motor_shares_the_firmware_drive_constants() 
         (MotorConfig(temperature_c=300), "temperature_c"),
         (DroneConfig(half_size_m=(0.1, 0.0, 0.1)), "half_size_m"),
         (SolverConfig(cone="round"), "cone"),
-        (ObjectConfig("pole", 0.01, 0.1, (0, 0, 1), shape="box"), "shape"),
+        (ObjectConfig("pole", 0.01, 0.1, (0, 0, 1), shape="torus"), "shape"),
         (
             ModelConfig(objects=(ObjectConfig("a", 0.01, 0.1, (0, 0, 0), mass_kg=0.1),)).with_objects(
                 ObjectConfig("a_support", 0.01, 0.1, (0, 0, 1))
