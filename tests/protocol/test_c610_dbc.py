@@ -69,8 +69,9 @@ def test_any_eight_motor_board_decodes_to_its_amps(values: list[int]) -> None:
     db = c610_db()
     decoded: dict[str, int] = {}
     for can_id, data in command_frames(values):
-        decoded |= db.decode_message(can_id, data, scaling=False)
-        assert db.encode_message(can_id, db.decode_message(can_id, data, scaling=False), scaling=False) == data
+        fields = db.decode_message(can_id, data, scaling=False)
+        assert db.encode_message(can_id, fields, scaling=False) == data
+        decoded |= fields
     padded = values + [0] * (8 - len(values))
     assert decoded == {f"Motor{i + 1}_Current": v for i, v in enumerate(padded)}
 
