@@ -18,7 +18,7 @@ import pytest
 from controller.cli import can_bus_config, main, parse_args
 from controller.transport import SerialTransport
 from protocol.messages import Heartbeat, encode
-from tests.support.c610_rigs import C610TrioServer
+from tests.support.c610_rigs import C610SetServer
 from tests.support.terminal import ctrl_c, start_in_own_group
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -276,7 +276,7 @@ def test_can_log_of_a_firmware_run_on_python_cans_virtual_bus(
     channel = f"test-cli-canlog-{os.getpid()}"
     log = tmp_path / "run.log"
     argv = ["--can-interface", "virtual", "--can-channel", channel, "--can-log", str(log)]
-    with C610TrioServer(can.Bus(interface="virtual", channel=channel)) as server:
+    with C610SetServer(can.Bus(interface="virtual", channel=channel)) as server:
         assert main([*argv, "--link", "loop://", "--duration", "0.3", "--no-fifo"]) == 0
     assert server.error is None and "stopped:" in capsys.readouterr().err
     frames = list(can.LogReader(log))

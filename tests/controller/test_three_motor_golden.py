@@ -79,9 +79,9 @@ def three_motor_run() -> tuple[list[tuple[int, bytes]], bytes]:
     assert grasp.state is GraspState.HOLD
     rig.set_rc(frame(right=Lever.UP, left=Lever.DOWN))
     run(1000)
-    rig.bus.trio.silent.add(2)
+    rig.bus.c610s.silent.add(2)
     run(50)
-    rig.bus.trio.silent.clear()
+    rig.bus.c610s.silent.clear()
     rig.set_rc(frame())
     run(150)
     rig.set_rc(frame(right=Lever.MIDDLE, ch3=660))
