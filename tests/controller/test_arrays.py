@@ -26,7 +26,18 @@ from controller.motorbus import CanMotorBus, FakeMotorBus
 from controller.rc import ScriptedRcSource
 from protocol.c610 import command_frames, unpack_currents
 from protocol.dbus import Lever
-from protocol.messages import GraspState, Mode, Phase
+from protocol.messages import (
+    Command,
+    CommandAck,
+    CommandCode,
+    GraspState,
+    Heartbeat,
+    Mode,
+    MotorFrames,
+    Phase,
+    Telemetry,
+    TelemetryFlags,
+)
 from tests.support.c610_rigs import C610SetServer
 from tests.support.controller_harness import Rig, frame
 
@@ -210,18 +221,61 @@ def test_one_stick_closes_eight_one_cable_arms_together() -> None:
     assert rig.fw.tensions_n == pytest.approx((curl_n,) * 8)
 
 
-def test_direct_tensions_are_per_cable_of_an_arm() -> None:
-    rig = Rig(FirmwareConfig().with_arms(2), bus=RecordingFakeBus(6))
-    rig.fw.modes.direct_tensions_n[:] = [2.0, 3.0, 4.0]
-    rig.fw.modes.direct_requested = True
-    rig.fw.failsafe.on_heartbeat(0)
-    rig.fw.failsafe.configure(rig.config.replaced(host_timeout_us=10_000_000))
+def _acks(rig: Rig) -> list[str]:
+    return [m.text for m in rig.drain() if isinstance(m, CommandAck)]
+
+
+def test_host_tensions_and_length_holds_are_per_cable_of_every_arm() -> None:
+    """SET_TENSIONS and HOLD_LENGTHS name the cables of an arm (their args beyond its cables unused):
+    every arm of the array takes them."""
+    config = FirmwareConfig().with_arms(4, 2)
+    rig = Rig(config, link=True, bus=RecordingFakeBus(8))
     rig.arm()
     rig.set_rc(frame(right=Lever.MIDDLE))
-    rig.fw.modes.direct_requested = True
+    rig.send(Heartbeat(rig.now_us, 0))
+    rig.tick(20)
+    rig.send(Command(CommandCode.SET_MODE, (float(Mode.DIRECT), 0.0, 0.0)))
+    rig.send(Command(CommandCode.SET_TENSIONS, (2.0, 3.0, -1.0)))  # the third arg is unused: no denial
+    rig.tick(5)
+    assert _acks(rig) == ["direct tensions", "ok"]
     rig.tick(300)
     assert rig.fw.mode == Mode.DIRECT
-    assert rig.fw.tensions_n == pytest.approx((2.0, 3.0, 4.0, 2.0, 3.0, 4.0))
+    assert rig.fw.tensions_n == pytest.approx((2.0, 3.0) * 4)
+    rig.send(Command(CommandCode.HOLD_LENGTHS, (math.nan, math.inf, math.inf)))
+    rig.tick(5)
+    assert _acks(rig) == ["held cables: 2"]
+    assert rig.fw.hold.held == [False, True] * 4
+    rig.send(Command(CommandCode.HOLD_LENGTHS, (math.inf, -math.inf, math.nan)))
+    rig.tick(5)
+    assert _acks(rig) == ["held cables: 1"]
+    assert rig.fw.hold.held == [True, False] * 4
+
+
+@pytest.mark.parametrize(("arms", "cables"), [(1, 1), (2, 1), (8, 1), (2, 3)])
+def test_the_links_telemetry_reports_motors_1_to_3(arms: int, cables: int) -> None:
+    """The board link's Telemetry and MotorFrames keep their three-motor layout (issue 27 item 2 widens
+    them): a board with more motors reports motors 1-3, one with fewer zeros; the online mask has all."""
+    config = FirmwareConfig().with_arms(arms, cables)
+    n = config.motor_count
+    rig = Rig(config, link=True, bus=RecordingFakeBus(n))
+    rig.arm()
+    rig.set_rc(frame(right=Lever.MIDDLE, ch3=400))
+    rig.tick(300)
+    rig.fw.hold.engage(n - 1)  # a hold on the last motor: beyond cable 3 it is not in the flags
+    rig.tick(20)
+    received = rig.drain()
+    assert any(isinstance(m, Telemetry) for m in received)
+    frames = [m for m in received if isinstance(m, MotorFrames)][-1]
+    tel = rig.fw.build_telemetry(rig.last_us)  # what the next Telemetry carries
+    assert tel.motors_online == (1 << n) - 1
+    shown = min(n, 3)
+    assert tel.commanded_current[:shown] == rig.currents[:shown] and all(rig.currents)
+    assert tel.commanded_current[shown:] == (0,) * (3 - shown)
+    assert tel.motor_angle[shown:] == (0,) * (3 - shown)
+    assert [can_id for can_id, _ in frames.frames] == [0x201 + i if i < n else 0 for i in range(3)]
+    assert rig.fw.hold.held[n - 1]
+    hold_bits = int(tel.flags) & (0b111 * TelemetryFlags.HOLD_1)
+    assert hold_bits == (TelemetryFlags.HOLD_1 << (n - 1) if n <= 3 else 0)  # motors 4-8: not on the link
 
 
 # --- the grasp: the array is one gripper ----------------------------------------------------------
