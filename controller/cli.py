@@ -18,7 +18,8 @@ one-line error and exit status 2.
 
 ``--arms N`` (and ``--cables-per-arm C``) lays the board out as an array of N arms of C cables (C610 ids
 1..N·C, at most 8; motor m drives cable (m-1) % C of arm (m-1) // C): every arm takes the same tensions,
-so the sticks and the grasp close them together (docs/hardware.md, Arrays). The default is one three-cable arm.
+so the sticks and the grasp close them together (docs/hardware.md, Arrays). The default is one
+three-cable arm.
 
 ``--preflight`` runs the pre-arm checks instead (``controller.preflight``): 2 s of the 1 kHz loop with zero
 current commanded, then one line per check (motors, RC, clock, lateness, host link), each failure with its
