@@ -24,6 +24,7 @@ import pytest
 
 from controller.cli import main
 from controller.clock import LockstepClock
+from controller.config import FirmwareConfig
 from controller.fake_c610 import FakeC610Set
 from controller.motorbus import FakeMotorBus
 from controller.preflight import run_preflight
@@ -154,6 +155,28 @@ def _lockstep_run(
 
 
 # --- the whole run on an injected clock --------------------------------------------------------------------
+
+
+def test_an_eight_motor_board_judges_each_of_its_motors() -> None:
+    clock = FakeRealtimeClock()
+    c610s = FakeC610Set.of(8)
+    c610s.silent.add(6)
+    config = FirmwareConfig().with_arms(8, 1)
+    report = run_preflight(
+        clock,
+        FakeMotorBus(c610s),
+        ScriptedRcSource(_NEUTRAL),
+        ScriptedHost(clock),
+        config=config,
+        rc_name="pty-rc",
+        link_name="pty-link",
+        exec_timer_ns=lambda: 0,
+    )
+    motors = [c for c in report.checks if c.name.startswith("motor ")]
+    assert [c.name for c in motors] == [f"motor {n} (0x{0x200 + n:03X})" for n in range(1, 9)]
+    assert [c.status for c in motors] == [Status.PASS] * 5 + [Status.FAIL] + [Status.PASS] * 2
+    with pytest.raises(ValueError, match="the bus has 3 motors, the configuration 8"):
+        run_preflight(clock, FakeMotorBus(), None, None, config=config)
 
 
 def test_a_good_rig_passes_every_check_with_zero_current_throughout() -> None:
