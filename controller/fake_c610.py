@@ -93,7 +93,7 @@ class FakeC610Set:
     Attributes:
         motors: the motors, motor 1 first.
         silent: motor numbers (1..n) that stop answering (fault injection).
-        commands: command frames handled (0x200 and 0x1FF).
+        commands: command frames handled (0x200, and 0x1FF when the set has motors 5-8).
     """
 
     def __init__(self, start_angles_counts: Iterable[int] = (0, 0, 0), **motor_kwargs: Any) -> None:
@@ -123,6 +123,8 @@ class FakeC610Set:
             first = MOTORS_PER_COMMAND
         else:
             return
+        if first >= len(self.motors):
+            return  # a 0x1FF to a set of four or fewer: for motors it does not have
         self.commands += 1
         values = unpack_currents(data)
         for motor, raw in zip(self.motors[first : first + MOTORS_PER_COMMAND], values, strict=False):

@@ -134,6 +134,9 @@ def test_fake_bus_of_eight_motors_drives_motors_5_to_8() -> None:
     fb = dict(bus.read_feedback())
     assert fb[8].speed_rpm > 0 and fb[1].speed_rpm == 0
     assert len(bus.read_feedback()) == 0
+    trio = FakeC610Set()
+    trio.handle_frame(0x1FF, bytes.fromhex("0001000200030004"))  # motors 5-8: not in a trio
+    assert trio.commands == 0 and [m.current_raw for m in trio.motors] == [0, 0, 0]
 
 
 def test_send_failure_is_counted_not_raised() -> None:
