@@ -37,7 +37,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
 from controller.clock import RealTimeClock  # noqa: E402
 from controller.config import FirmwareConfig  # noqa: E402
-from controller.fake_c610 import FakeC610Trio  # noqa: E402
+from controller.fake_c610 import FakeC610Set  # noqa: E402
 from controller.firmware import Firmware  # noqa: E402
 from controller.motorbus import CanMotorBus, FakeMotorBus, MotorBus  # noqa: E402
 from controller.rc import ScriptedRcSource  # noqa: E402
@@ -85,7 +85,7 @@ def tick_cost(n: int) -> dict[str, tuple[float, float]]:
 
     channel = f"bench-{os.getpid()}"
     peer = can.Bus(interface="virtual", channel=channel)
-    trio = FakeC610Trio()
+    trio = FakeC610Set()
 
     def pump() -> None:  # the motors answer, outside the timed region
         while (msg := peer.recv(timeout=0)) is not None:

@@ -1,4 +1,4 @@
-"""The firmware's three cables: sticks -> tension targets -> motor currents, and feedback -> cable state.
+"""The firmware's cables: sticks -> tension targets -> motor currents, and feedback -> cable state.
 
 **Mapping** (:class:`CableMapper`, :class:`TensionSlew`): pull-only, clamped per cable, slew-rate limited.
 Three cables sit at 120° around the arm. A bending moment of magnitude ``m`` toward ``direction`` is
@@ -7,11 +7,18 @@ made pull-only with the smallest tensions by
     share_i = (2 / n) * (cos(direction - angle_i) - min_j cos(direction - angle_j))
 
 (n = 3 cables with sum(unit vectors) = 0, so the common offset adds no moment): toward a cable that
-cable alone pulls ``m``; between two cables both pull ``m``. Each cable's target is
+cable alone pulls ``m``; between two cables both pull ``m``. A two-cable arm (0° and 180°, bending in
+its plane) uses ``1/2`` for ``2/n``, so that the cable toward which the stick points pulls
+``m·cos(direction - angle)`` and the other none; a one-cable arm bends only toward its cable, which takes
+every bending share (1). Each cable's target is
 
     pretension + common + bend * share_i, clamped to [pretension, tension_max]
 
 and the tension actually commanded moves toward the target by at most ``slew_n_per_s * dt``.
+
+**Arrays** (``controller.config``: motor m = cable (m-1) % C of arm (m-1) // C): the mapping shapes the
+C targets of one arm and every arm takes them, so one stick closes every arm together and the grasp
+machine drives the array as one gripper. Slew, governor, length-hold and motor model work per motor.
 
 Stick conventions (DBUS channels, ±660): left stick vertical ch3 up = common tension (curl), centred or
 down = none; right stick (ch0 = x right, ch1 = y up) = bending, direction ``atan2(ch1, ch0)`` measured
@@ -42,7 +49,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, MutableSequence, Sequence
 
-from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.config import FirmwareConfig
 from protocol.c610 import ANGLE_COUNTS, RAW_PER_AMP, MotorFeedback
 
 __all__ = ["CableMapper", "MotorModel", "TensionSlew", "bend_shares"]
@@ -50,25 +57,42 @@ __all__ = ["CableMapper", "MotorModel", "TensionSlew", "bend_shares"]
 _CH_LIMIT = 660.0  # DBUS: |channel| <= 660 when valid
 
 
+def _share_scale(cables: int) -> float:
+    """``k`` of the module notes: 2/n for three cables, 1/2 for two (1 toward a cable)."""
+    return 0.5 if cables == 2 else 2.0 / cables
+
+
 def bend_shares(direction_rad: float, cable_angles_rad: Sequence[float]) -> tuple[float, ...]:
     """Per-cable shares (>= 0) of a unit bending moment toward ``direction_rad``, pull-only.
 
-    Exact for cables evenly spread around the arm (the moments of a common tension cancel).
+    Exact for three cables evenly spread around the arm (the moments of a common tension cancel); two
+    cables (a planar arm) share ``cos`` of the direction; one cable takes it all (it can only curl).
     """
     n = len(cable_angles_rad)
+    if n == 1:
+        return (1.0,)
     cosines = [math.cos(direction_rad - a) for a in cable_angles_rad]
     low = min(cosines)
-    k = 2.0 / n
+    k = _share_scale(n)
     return tuple(k * (c - low) for c in cosines)
 
 
 class CableMapper:
-    """Targets per cable from the sticks, the grasp curl, or host tensions (preallocated)."""
+    """Targets per motor from the sticks, the grasp curl, or host tensions (preallocated).
+
+    One arm's targets are shaped (:attr:`arm_targets_n`, one per cable) and every arm of an array takes
+    them (:attr:`targets_n`, one per motor; the same list when there is one arm).
+    """
 
     def __init__(self, config: FirmwareConfig) -> None:
         """Create the mapper for ``config`` (see :meth:`configure`)."""
-        self.targets_n: list[float] = [0.0] * MOTOR_COUNT
-        """The last computed targets, clamped (written in place)."""
+        self.targets_n: list[float] = [0.0] * config.motor_count
+        """The last computed targets per motor, clamped (written in place)."""
+        cables = config.cables_per_arm
+        self.arm_targets_n: list[float] = self.targets_n if config.arm_count == 1 else [0.0] * cables
+        """The last computed targets of one arm, per cable (written in place)."""
+        self._cables = cables
+        self._cosines = [0.0] * cables
         self.configure(config)
 
     def configure(self, config: FirmwareConfig) -> None:
@@ -80,23 +104,35 @@ class CableMapper:
         self._common_per_count = m.common_max_n / _CH_LIMIT
         self._bend_max_n = m.bend_max_n
         self._deadband = m.stick_deadband
-        self._k = 2.0 / MOTOR_COUNT
+        self._k = _share_scale(len(self._angles_rad))
 
     def _clamp(self, value: float) -> float:
         lo = self._pretension_n
         hi = self._tension_max_n
         return lo if value < lo else hi if value > hi else value
 
-    def _shape(self, common_n: float, bend_n: float, direction_rad: float) -> list[float]:
+    def _spread(self) -> list[float]:
+        """Every arm takes the arm's targets (nothing to do for one arm: the same list)."""
         out = self.targets_n
+        arm = self.arm_targets_n
+        if out is not arm:
+            c = self._cables
+            for i in range(len(out)):
+                out[i] = arm[i % c]
+        return out
+
+    def _shape(self, common_n: float, bend_n: float, direction_rad: float) -> list[float]:
+        out = self.arm_targets_n
         lo = self._pretension_n
         hi = self._tension_max_n
         base = lo + common_n
         if bend_n <= 0.0:
             v = lo if base < lo else hi if base > hi else base
-            for i in range(MOTOR_COUNT):
+            for i in range(self._cables):
                 out[i] = v
-            return out
+            return self._spread()
+        if self._cables != 3:
+            return self._shape_few(base, bend_n, direction_rad)
         a0, a1, a2 = self._angles_rad
         c0 = math.cos(direction_rad - a0)
         c1 = math.cos(direction_rad - a1)
@@ -110,7 +146,26 @@ class CableMapper:
         out[1] = lo if v < lo else hi if v > hi else v
         v = base + scale * (c2 - low)
         out[2] = lo if v < lo else hi if v > hi else v
-        return out
+        return self._spread()
+
+    def _shape_few(self, base: float, bend_n: float, direction_rad: float) -> list[float]:
+        """:meth:`_shape` for a one- or two-cable arm (shares as :func:`bend_shares`)."""
+        out = self.arm_targets_n
+        lo = self._pretension_n
+        hi = self._tension_max_n
+        if self._cables == 1:
+            v = base + bend_n
+            out[0] = lo if v < lo else hi if v > hi else v
+            return self._spread()
+        cos = self._cosines
+        for i, a in enumerate(self._angles_rad):
+            cos[i] = math.cos(direction_rad - a)
+        low = min(cos)
+        scale = bend_n * self._k
+        for i in range(self._cables):
+            v = base + scale * (cos[i] - low)
+            out[i] = lo if v < lo else hi if v > hi else v
+        return self._spread()
 
     def manual(self, channels: Sequence[int]) -> list[float]:
         """MANUAL mode targets from DBUS channels (ch0, ch1 right stick; ch3 left vertical)."""
@@ -131,11 +186,12 @@ class CableMapper:
         return self._shape(0.0, curl_n if curl_n > 0.0 else 0.0, direction_rad)
 
     def direct(self, tensions_n: Sequence[float]) -> list[float]:
-        """DIRECT mode: host tensions per cable, clamped to [pretension, tension_max]."""
-        out = self.targets_n
-        for i in range(MOTOR_COUNT):
+        """DIRECT mode: host tensions per cable of an arm (every arm alike), clamped to [pretension,
+        tension_max]."""
+        out = self.arm_targets_n
+        for i in range(self._cables):
             out[i] = self._clamp(tensions_n[i])
-        return out
+        return self._spread()
 
     def stick_direction(self, channels: Sequence[int], min_fraction: float) -> float | None:
         """Right-stick direction (rad) if deflected by at least ``min_fraction`` of full scale, else None."""
@@ -155,8 +211,8 @@ class TensionSlew:
 
     def __init__(self, config: FirmwareConfig) -> None:
         """Create the limiter for ``config`` (see :meth:`configure`)."""
-        self.tensions_n: list[float] = [0.0] * MOTOR_COUNT
-        """Commanded tensions (written in place)."""
+        self.tensions_n: list[float] = [0.0] * config.motor_count
+        """Commanded tensions per motor (written in place)."""
         self.active = False
         self.configure(config)
 
@@ -169,19 +225,20 @@ class TensionSlew:
         """Go inactive: tensions 0."""
         self.active = False
         t = self.tensions_n
-        for i in range(MOTOR_COUNT):
+        for i in range(len(t)):
             t[i] = 0.0
 
     def step(self, targets_n: Sequence[float], dt_us: int) -> MutableSequence[float]:
         """Move each tension toward its target by at most ``slew_n_per_s * dt``; return the tensions."""
         t = self.tensions_n
         floor = self._pretension_n
+        n = len(t)
         if not self.active:
             self.active = True
-            for i in range(MOTOR_COUNT):
+            for i in range(n):
                 t[i] = floor
         step = self._rate_n_per_us * dt_us
-        for i in range(MOTOR_COUNT):
+        for i in range(n):
             cur = t[i]
             d = targets_n[i] - cur
             if d > step:
@@ -216,7 +273,8 @@ class MotorModel:
 
     def __init__(self, config: FirmwareConfig) -> None:
         """Create the model for ``config``."""
-        n = MOTOR_COUNT
+        n = config.motor_count
+        self.motor_count = n
         self.seen = [False] * n
         self.last_feedback_us = [0] * n
         self.angle = [0] * n
@@ -258,7 +316,7 @@ class MotorModel:
         k = self._m_s_per_rpm
         signs = self._signs
         rpm = self.speed_rpm
-        for i in range(MOTOR_COUNT):
+        for i in range(self.motor_count):
             t = tensions_n[i]
             v = signs[i] * rpm[i] * k
             if v > limit and t > pre:

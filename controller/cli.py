@@ -16,6 +16,11 @@ Without ``--rc`` the sticks come from the host's virtual RC frames over ``--link
 listens on TCP for one host at a time, as ``spirob-hil board --listen`` does). A missing or busy port is a
 one-line error and exit status 2.
 
+``--arms N`` (and ``--cables-per-arm C``) lays the board out as an array of N arms of C cables (C610 ids
+1..N·C, at most 8; motor m drives cable (m-1) % C of arm (m-1) // C): every arm takes the same tensions,
+so the sticks and the grasp close them together (docs/hardware.md, Arrays). The default is one
+three-cable arm.
+
 ``--preflight`` runs the pre-arm checks instead (``controller.preflight``): 2 s of the 1 kHz loop with zero
 current commanded, then one line per check (motors, RC, clock, lateness, host link), each failure with its
 fix; exit status 1 when any check fails. A port that does not open is one of those failed checks.
@@ -45,8 +50,9 @@ from controller.cli_kit import (
     stop_on_signals,
 )
 from controller.clock import RealTimeClock
-from controller.config import FirmwareConfig
+from controller.config import CABLES_PER_ARM_MAX, FirmwareConfig
 from controller.errors import ConfigError, PortError
+from controller.fake_c610 import FakeC610Set
 from controller.firmware import Firmware
 from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus
 from controller.param_file import apply_param_file
@@ -54,6 +60,7 @@ from controller.preflight import run_preflight
 from controller.preflight_checks import WINDOW_US
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from controller.transport import SerialTransport, TcpServerTransport, Transport, parse_listen
+from protocol.c610 import MOTORS_MAX
 
 __all__ = ["PROG", "SCRIPT_PROG", "build_parser", "can_bus_config", "main", "parse_args", "script_main"]
 
@@ -67,7 +74,8 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     """The argument parser of ``python -m controller`` (``prog``: the name it reports itself by)."""
     p = Parser(
         prog=prog,
-        description="SpiRob C-board firmware emulator: 1 kHz control of three C610/M2006 motors.",
+        description="SpiRob C-board firmware emulator: 1 kHz control of C610/M2006 motors (one three-cable "
+        "arm, or an array of up to eight motors).",
     )
     add_version(p)
     can = p.add_argument_group("motor CAN bus (python-can's options)")
@@ -96,6 +104,20 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     )
     # The private ``--can interface:channel`` of earlier versions: refused with the flags that replace it.
     p.add_argument("--can", help=argparse.SUPPRESS)
+    arms = p.add_argument_group("arms and cables (an array of SpiRobs on one board)")
+    arms.add_argument(
+        "--arms",
+        type=_arm_count,
+        metavar="N",
+        help="arms driven together (1-8; default: the configuration's, one); motors = N x cables <= 8",
+    )
+    arms.add_argument(
+        "--cables-per-arm",
+        type=_cable_count,
+        metavar="C",
+        help="cables of each arm (1, 2 or 3; default: the configuration's, three); motor m drives cable "
+        "(m-1) %% C of arm (m-1) // C",
+    )
     p.add_argument("--rc", metavar="PORT", help="DR16 DBUS UART (100000 8E1), e.g. /dev/ttyUSB0")
     link = p.add_mutually_exclusive_group()
     link.add_argument("--link", metavar="PORT", help="host link: device path or pyserial URL (socket://...)")
@@ -200,7 +222,29 @@ def _load_config(args: argparse.Namespace) -> FirmwareConfig:
         config = apply_param_file(args.params, config)
     if args.require_host:
         config = config.replaced(host_required=True)
+    if args.arms is not None or args.cables_per_arm is not None:
+        config = config.with_arms(args.arms or config.arm_count, args.cables_per_arm)
     return config
+
+
+def _arm_count(text: str) -> int:
+    """An ``--arms``: 1..8."""
+    return _whole_in(text, 1, MOTORS_MAX)
+
+
+def _cable_count(text: str) -> int:
+    """A ``--cables-per-arm``: 1..3."""
+    return _whole_in(text, 1, CABLES_PER_ARM_MAX)
+
+
+def _whole_in(text: str, lo: int, hi: int) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number {lo}..{hi}, got {text!r}") from None
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"must be {lo}..{hi}, got {text!r}")
+    return value
 
 
 def _bitrate(text: str) -> int:
@@ -260,19 +304,27 @@ def can_bus_config(args: argparse.Namespace) -> dict[str, Any]:
     return config
 
 
-def _open_bus(args: argparse.Namespace) -> MotorBus:
+def _open_bus(args: argparse.Namespace, config: FirmwareConfig) -> MotorBus:
+    """The motor bus the flags name, with the configuration's motors (C610 ids 1..n)."""
     if args.can_interface == "fake":
         if args.can_log is not None:
-            raise PortError("--can-log needs a python-can interface: the fake trio has no CAN frames")
-        return FakeMotorBus()
-    config = can_bus_config(args)
-    if config["bitrate"] != CAN_BITRATE:
+            raise PortError("--can-log needs a python-can interface: the fake C610 set has no CAN frames")
+        return FakeMotorBus(FakeC610Set.of(config.motor_count))
+    options = can_bus_config(args)
+    if options["bitrate"] != CAN_BITRATE:
         logging.getLogger(__name__).warning(
-            "CAN bit rate %s: C610s talk at %s only", config["bitrate"], CAN_BITRATE
+            "CAN bit rate %s: C610s talk at %s only", options["bitrate"], CAN_BITRATE
         )
-    interface, channel = config.pop("interface"), config.pop("channel")
+    interface, channel = options.pop("interface"), options.pop("channel")
     # Resolved above already: python-can must not merge its config files in a second time.
-    return CanMotorBus(str(channel), str(interface), log_file=args.can_log, ignore_config=True, **config)
+    return CanMotorBus(
+        str(channel),
+        str(interface),
+        log_file=args.can_log,
+        motor_count=config.motor_count,
+        ignore_config=True,
+        **options,
+    )
 
 
 def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
@@ -286,7 +338,7 @@ def main(argv: Sequence[str] | None = None, prog: str = PROG) -> int:
         if args.preflight:
             return _preflight(args, config)
         with ExitStack() as stack:
-            bus = _open_bus(args)
+            bus = _open_bus(args, config)
             stack.callback(bus.shutdown)
             link = _open_link(args)
             if link is not None:
@@ -316,7 +368,7 @@ def _preflight(args: argparse.Namespace, config: FirmwareConfig) -> int:
         bus: MotorBus | None = None
         can_error = rc_error = link_error = None
         try:
-            bus = _open_bus(args)
+            bus = _open_bus(args, config)
             stack.callback(bus.shutdown)
         except PortError as exc:
             can_error = str(exc)

@@ -297,13 +297,15 @@ class CommandServer:
                 return AckResult.REJECTED, self._params.refused
             return AckResult.ACCEPTED, "host required" if a0 else "host not required"
         if code == CommandCode.SET_TENSIONS:
-            values = (a0, a1, a2)
+            # one tension per cable of an arm (args beyond the arm's cables unused), every arm alike
+            direct = self._modes.direct_tensions_n
+            values = (a0, a1, a2)[: len(direct)]
             if not all(math.isfinite(v) and v >= 0.0 for v in values):
                 return AckResult.DENIED, "tensions must be finite and >= 0"
             mapping = self._params.config.mapping
             lo, hi = mapping.pretension_n, mapping.tension_max_n
             clamped = [min(hi, max(lo, v)) for v in values]
-            self._modes.direct_tensions_n[:] = clamped
+            direct[:] = clamped
             return AckResult.ACCEPTED, "clamped" if clamped != list(values) else "ok"
         if code == CommandCode.SET_MODE:
             return self._set_mode(a0)
@@ -314,17 +316,23 @@ class CommandServer:
         return AckResult.UNSUPPORTED, "unsupported"
 
     def _hold_lengths(self, args: Sequence[float]) -> tuple[AckResult, str]:
-        """Per cable: NaN unchanged, -inf release, +inf hold here, finite hold at that length (m)."""
+        """Per cable of an arm (every arm's): NaN unchanged, -inf release, +inf hold here, finite hold at
+        that length (m). Args beyond the arm's cables are unused."""
         if self._modes.mode == Mode.SAFE:
             return AckResult.REJECTED, "length-hold needs an active mode (not SAFE)"
         hold = self._hold
+        config = self._params.config
+        cables = config.cables_per_arm
+        motors = range(0, config.motor_count, cables)  # each arm's first motor
+        args = args[:cables]
         for i, value in enumerate(args):
             if math.isnan(value):
                 continue
-            if value == -math.inf:
-                hold.release(i)
-            elif not hold.engage(i, None if value == math.inf else value):
-                return AckResult.FAILED, f"cable {i + 1}: no motor feedback yet"
+            for first in motors:
+                if value == -math.inf:
+                    hold.release(first + i)
+                elif not hold.engage(first + i, None if value == math.inf else value):
+                    return AckResult.FAILED, f"cable {i + 1}: no motor feedback yet"
         held = "".join(str(i + 1) for i in range(len(args)) if hold.held[i])
         return AckResult.ACCEPTED, f"held cables: {held or 'none'}"
 

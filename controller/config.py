@@ -11,6 +11,13 @@ Facts behind the defaults:
   for the firmware's tension estimate to be consistent.
 - Spool radius 10 mm (the prototype's), current limit 3 A (the M2006's continuous rating).
 
+Arms and cables (an array of SpiRobs on one board): ``cable_angles_deg`` holds one angle per cable of an
+arm (1-3 cables: the same for every arm) and ``motor_signs`` one sign per motor (1-8: a CAN bus carries
+C610 ids 1-8, commands 0x200 and 0x1FF). Motor ``m`` (1-based) drives cable ``(m - 1) % cables`` of arm
+``(m - 1) // cables``: arm 1's cables first, then arm 2's. The default (three angles, three signs) is the
+paper's one three-cable arm; eight one-cable arms, four two-cable arms or two three-cable arms fill a
+board (:meth:`FirmwareConfig.with_arms`). Every arm gets the same tensions (``controller.cables``).
+
 The configuration is nested by concern — :class:`MotorDriveConfig` (``motor``), :class:`MappingConfig`
 (``mapping``), :class:`FailsafeConfig` (``failsafe``), :class:`GraspConfig` (``grasp``),
 :class:`HoldConfig` (``hold``) — with the task periods at the top. Its flat form
@@ -36,9 +43,10 @@ from typing import Any
 
 from controller.errors import ConfigError
 from controller.params import FIELD_ROWS, PARAM_TABLE, WIRE_ROWS, default
-from protocol.c610 import RAW_PER_AMP
+from protocol.c610 import MOTORS_MAX, RAW_PER_AMP
 
 __all__ = [
+    "CABLES_PER_ARM_MAX",
     "CONTROL_PERIOD_US",
     "M2006_NO_LOAD_RPM",
     "MOTOR_COUNT",
@@ -51,7 +59,11 @@ __all__ = [
 ]
 
 MOTOR_COUNT = 3
-"""Three cables, three M2006 motors on C610 ids 1..3 (CAN feedback 0x201-0x203)."""
+"""The default board: one arm of three cables, three M2006 motors on C610 ids 1..3 (feedback 0x201-0x203).
+A configuration's own count is :attr:`FirmwareConfig.motor_count` (1..8, see the module notes)."""
+
+CABLES_PER_ARM_MAX = 3
+"""SpiRobs have one, two or three cables (the supplement's Note S3 and Fig. S5)."""
 
 CONTROL_PERIOD_US: int = default("control_period_us")
 """The control tick (1 kHz, the C-board's chassis/gimbal loop rate): the default of every 1 ms period."""
@@ -71,7 +83,7 @@ class MotorDriveConfig:
         gear_ratio: rotor turns per output turn (M2006 P36: 36).
         current_limit_a: |current| never commanded above this (M2006: 3 A continuous).
         motor_signs: +1 if a positive current reels the cable in (raises tension) on that motor, -1 if
-            the motor is mounted mirrored.
+            the motor is mounted mirrored; one per motor (1-8: their count is the board's motor count).
         speed_filter_tau_us: low-pass time constant of the cable speed used for contact detection.
         payin_limit_m_per_s: the speed governor (every mode, after the mapping, slew and length-hold):
             while a cable reels in faster than this (from the rotor speed) its tension is cut back toward
@@ -86,7 +98,7 @@ class MotorDriveConfig:
     torque_constant_nm_per_a: float = default("motor.torque_constant_nm_per_a")
     gear_ratio: float = default("motor.gear_ratio")
     current_limit_a: float = default("motor.current_limit_a")
-    motor_signs: tuple[int, int, int] = default("motor.motor_signs")
+    motor_signs: tuple[int, ...] = default("motor.motor_signs")
     speed_filter_tau_us: int = default("motor.speed_filter_tau_us")
     payin_limit_m_per_s: float = default("motor.payin_limit_m_per_s")
 
@@ -101,7 +113,8 @@ class MappingConfig:
     """Sticks to cable tensions.
 
     Attributes:
-        cable_angles_deg: angular position of cables 1..3 around the arm (120° apart).
+        cable_angles_deg: angular position of each cable around an arm (three at 120°; one to three
+            cables, the same for every arm of an array).
         pretension_n: tension floor of every active cable (pull-only: never below it while active).
         common_max_n: common (curl) tension at full left stick up.
         bend_max_n: bending tension at full right stick deflection.
@@ -110,7 +123,7 @@ class MappingConfig:
         stick_deadband: stick counts (of ±660) treated as centred.
     """
 
-    cable_angles_deg: tuple[float, float, float] = default("mapping.cable_angles_deg")
+    cable_angles_deg: tuple[float, ...] = default("mapping.cable_angles_deg")
     pretension_n: float = default("mapping.pretension_n")
     common_max_n: float = default("mapping.common_max_n")
     bend_max_n: float = default("mapping.bend_max_n")
@@ -323,8 +336,18 @@ class FirmwareConfig:
             )
         for name in ("rc_timeout_us", "motor_timeout_us"):
             _require(name, v[name] >= 2 * control_us, f"must be at least 2 control periods ({control_us} µs)")
-        _require("cable_angles_deg", len(v["cable_angles_deg"]) == MOTOR_COUNT, f"needs {MOTOR_COUNT} angles")
-        _require("motor_signs", len(v["motor_signs"]) == MOTOR_COUNT, f"needs {MOTOR_COUNT} signs")
+        cables = len(v["cable_angles_deg"])
+        motors = len(v["motor_signs"])
+        _require(
+            "cable_angles_deg",
+            1 <= cables <= CABLES_PER_ARM_MAX,
+            f"one angle per cable of an arm: 1..{CABLES_PER_ARM_MAX}, got {cables}",
+        )
+        _require(
+            "motor_signs",
+            1 <= motors <= MOTORS_MAX and motors % cables == 0,
+            f"one sign per motor: 1..{MOTORS_MAX} motors, whole {cables}-cable arms, got {motors}",
+        )
         _require("motor_signs", all(s in (-1, 1) for s in v["motor_signs"]), "each must be +1 or -1")
         _require(
             "grasp_reach_n",
@@ -336,6 +359,53 @@ class FirmwareConfig:
             v["grasp_reach_timeout_us"] > v["grasp_contact_grace_us"],
             "must exceed grasp_contact_grace_us",
         )
+
+    @property
+    def motor_count(self) -> int:
+        """Motors on the board (C610 ids 1..n): one per ``motor_signs`` entry."""
+        return len(self.motor.motor_signs)
+
+    @property
+    def cables_per_arm(self) -> int:
+        """Cables of each arm: one per ``cable_angles_deg`` entry."""
+        return len(self.mapping.cable_angles_deg)
+
+    @property
+    def arm_count(self) -> int:
+        """Arms on the board: motors / cables per arm (motor m drives cable (m-1) % C of arm (m-1) // C)."""
+        return len(self.motor.motor_signs) // len(self.mapping.cable_angles_deg)
+
+    def with_arms(self, arms: int, cables_per_arm: int | None = None) -> FirmwareConfig:
+        """A copy laid out as ``arms`` arms of ``cables_per_arm`` cables (default: this one's).
+
+        The cable angles are kept when their count is ``cables_per_arm``, else spread evenly (0°; 0° and
+        180°; 0°, 120° and 240°). The motor signs are kept when there is one per motor; signs all +1 are
+        repeated for every motor; mirrored motors of another layout are refused (no guess at which motor
+        of the new layout is mirrored).
+
+        Raises:
+            ConfigError: more than eight motors, an unknown cable count, or signs that do not fit.
+        """
+        cables = self.cables_per_arm if cables_per_arm is None else cables_per_arm
+        if not 1 <= cables <= CABLES_PER_ARM_MAX:
+            raise ConfigError(f"cables per arm: 1..{CABLES_PER_ARM_MAX}, got {cables}")
+        motors = arms * cables
+        if arms < 1 or motors > MOTORS_MAX:
+            raise ConfigError(
+                f"{arms} arm(s) of {cables} cable(s) need {motors} motors: a C-board drives 1..{MOTORS_MAX}"
+            )
+        angles = self.mapping.cable_angles_deg
+        if len(angles) != cables:
+            angles = tuple(360.0 * i / cables for i in range(cables))
+        signs = self.motor.motor_signs
+        if len(signs) != motors:
+            if any(s != 1 for s in signs):
+                raise ConfigError(
+                    f"motor_signs has {len(signs)} entries with mirrored motors; {arms} arm(s) of {cables} "
+                    f"cable(s) need {motors}: give them in the configuration"
+                )
+            signs = (1,) * motors
+        return self.replaced(cable_angles_deg=angles, motor_signs=signs)
 
     @classmethod
     def from_dict(cls, values: Mapping[str, Any]) -> FirmwareConfig:

@@ -9,7 +9,7 @@ Phases (``protocol.messages.Phase``) and transitions:
 - ``GATE`` (start-up, after DISARM, after CLEAR_ESTOP): leaves for ``OK`` when RC is valid and fresh,
   the right lever is DOWN (SAFE), all motors answer, the host heartbeat is fresh if required, and the
   host has not disarmed the board (ARM clears that). Like an arming switch.
-- ``OK`` -> ``MOTOR_FAULT`` when any motor is silent longer than ``motor_timeout_us`` (DJI: 10 ms).
+- ``OK`` -> ``MOTOR_FAULT`` when any motor (of 1-8) is silent longer than ``motor_timeout_us`` (DJI: 10 ms).
   Latched: leaves only when every motor answers again *and* the right lever is seen DOWN (re-armed
   through SAFE).
 - ``OK`` -> ``RC_LOST`` after ``rc_timeout_us`` (DJI: 30 ms) without a valid frame. Latched: leaves
@@ -30,7 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.config import FirmwareConfig
 from controller.events import EventQueue
 from protocol.dbus import Lever
 from protocol.messages import ArmBlocker, EventKind, Phase
@@ -53,7 +53,7 @@ _PHASE_TEXT = {
 
 
 class Failsafe:
-    """Failsafe phase machine for three motors, one RC link and an optional host.
+    """Failsafe phase machine for the board's motors (1-8), one RC link and an optional host.
 
     Attributes:
         phase: current phase.
@@ -82,9 +82,11 @@ class Failsafe:
         self._right_lever = 0
         self._hb_seen = False
         self._last_hb_us = 0
-        self._fb_seen = [False] * MOTOR_COUNT
-        self._last_fb_us = [0] * MOTOR_COUNT
-        self._all_motors = (1 << MOTOR_COUNT) - 1
+        n = config.motor_count  # a start-up setting: configure() never changes it
+        self._motor_count = n
+        self._fb_seen = [False] * n
+        self._last_fb_us = [0] * n
+        self._all_motors = (1 << n) - 1
         self.configure(config)
 
     def configure(self, config: FirmwareConfig) -> None:
@@ -163,7 +165,7 @@ class Failsafe:
         timeout = self._motor_timeout_us
         seen = self._fb_seen
         last = self._last_fb_us
-        for i in range(MOTOR_COUNT):
+        for i in range(self._motor_count):
             if seen[i] and now_us - last[i] <= timeout:
                 mask |= 1 << i
         if mask != self.motors_online:
@@ -238,7 +240,7 @@ class Failsafe:
 
     def _motors_changed(self, now_us: int, old: int, new: int) -> None:
         self.motors_online = new
-        for i in range(MOTOR_COUNT):
+        for i in range(self._motor_count):
             bit = 1 << i
             if old & bit and not new & bit:
                 self.motor_offline_events += 1

@@ -1,4 +1,5 @@
-"""A fake C610/M2006 trio for tests and examples (no hardware, no MuJoCo).
+"""A fake set of C610/M2006 motors (1 to 8, a trio by default) for tests and examples (no hardware, no
+MuJoCo).
 
 Each fake motor winds a cable against a linear spring (a stand-in for the arm): the C610's current loop
 is taken as ideal (measured current = command), the output shaft integrates
@@ -7,7 +8,7 @@ carry the wrapped rotor angle (8192 counts per rotor turn, 36 rotor turns per ou
 speed in rpm and the current, byte for byte as ``protocol.c610`` defines them.
 
 It is stepped synchronously by :class:`~controller.motorbus.FakeMotorBus` (``python -m controller
---can-interface fake``) or directly with :meth:`FakeC610Trio.step`.
+--can-interface fake``) or directly with :meth:`FakeC610Set.step`.
 """
 
 from __future__ import annotations
@@ -17,9 +18,12 @@ from typing import Any
 
 from protocol.c610 import (
     ANGLE_COUNTS,
+    COMMAND_ID_HIGH,
     COMMAND_ID_LOW,
     FEEDBACK_ID_BASE,
     FRAME_LEN,
+    MOTORS_MAX,
+    MOTORS_PER_COMMAND,
     RAW_PER_AMP,
     MotorFeedback,
     output_rad_s_to_rotor_rpm,
@@ -27,7 +31,7 @@ from protocol.c610 import (
     unpack_currents,
 )
 
-__all__ = ["FakeC610", "FakeC610Trio"]
+__all__ = ["FakeC610", "FakeC610Set"]
 
 _INT16_MAX = 32767
 
@@ -82,28 +86,48 @@ class FakeC610:
         return MotorFeedback((self._angle0_counts + rotor_counts) % ANGLE_COUNTS, rpm, self.current_raw, 30)
 
 
-class FakeC610Trio:
-    """Three fake motors on C610 ids 1..3 (command 0x200, feedback 0x201-0x203).
+class FakeC610Set:
+    """Fake motors on C610 ids 1..n (n = 1..8; three by default): commands on 0x200 (motors 1-4) and
+    0x1FF (motors 5-8), feedback on 0x201..0x200+n.
 
     Attributes:
-        motors: the three motors.
-        silent: motor numbers (1..3) that stop answering (fault injection).
-        commands: 0x200 frames handled.
+        motors: the motors, motor 1 first.
+        silent: motor numbers (1..n) that stop answering (fault injection).
+        commands: command frames handled (0x200, and 0x1FF when the set has motors 5-8).
     """
 
     def __init__(self, start_angles_counts: Iterable[int] = (0, 0, 0), **motor_kwargs: Any) -> None:
-        """Create the trio; ``motor_kwargs`` go to each :class:`FakeC610`."""
+        """One motor per start angle; ``motor_kwargs`` go to each :class:`FakeC610`.
+
+        Raises:
+            ValueError: no start angle or more than eight.
+        """
         self.motors = [FakeC610(start_angle_counts=a, **motor_kwargs) for a in start_angles_counts]
+        if not 1 <= len(self.motors) <= MOTORS_MAX:
+            raise ValueError(f"a C610 set has 1..{MOTORS_MAX} motors, got {len(self.motors)}")
         self.silent: set[int] = set()
         self.commands = 0
 
+    @classmethod
+    def of(cls, motor_count: int, **motor_kwargs: Any) -> FakeC610Set:
+        """``motor_count`` motors at rest, every encoder at 0."""
+        return cls((0,) * motor_count, **motor_kwargs)
+
     def handle_frame(self, can_id: int, data: bytes) -> None:
-        """Take a frame from the bus; only 8-byte 0x200 commands matter."""
-        if can_id != COMMAND_ID_LOW or len(data) != FRAME_LEN:
+        """Take a frame from the bus; only 8-byte 0x200 / 0x1FF commands matter (each to its four ids)."""
+        if len(data) != FRAME_LEN:
             return
+        if can_id == COMMAND_ID_LOW:
+            first = 0
+        elif can_id == COMMAND_ID_HIGH:
+            first = MOTORS_PER_COMMAND
+        else:
+            return
+        if first >= len(self.motors):
+            return  # a 0x1FF to a set of four or fewer: for motors it does not have
         self.commands += 1
         values = unpack_currents(data)
-        for motor, raw in zip(self.motors, values, strict=False):
+        for motor, raw in zip(self.motors[first : first + MOTORS_PER_COMMAND], values, strict=False):
             motor.current_raw = raw
 
     def step(self, dt_us: int) -> list[tuple[int, bytes]]:

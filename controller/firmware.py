@@ -4,7 +4,7 @@ Task table (rates are the config's defaults; tasks due on the same tick run in t
 
     name        period   body
     link_rx     1 kHz    board link in: heartbeat, virtual RC, commands, parameters   (with a link)
-    control     1 kHz    RC + feedback in, failsafe, mode, tensions, currents, one 0x200 frame out
+    control     1 kHz    RC + feedback in, failsafe, mode, tensions, currents, 0x200 (+ 0x1FF) out
     detect      100 Hz   device liveness summary (RC, host) and its events
     telemetry   100 Hz   Telemetry, MotorFrames, RawRc, Event out                    (with a link)
     status      2 Hz     BoardStatus (per-task statistics) out                        (with a link)
@@ -34,7 +34,8 @@ from collections.abc import Callable
 from controller.cables import CableMapper, MotorModel, TensionSlew
 from controller.clock import Clock, StopSignal, monotonic_ns, run_periodic
 from controller.commands import CommandServer, GraspAcks, Params
-from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.config import FirmwareConfig
+from controller.errors import ConfigError
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
@@ -60,8 +61,10 @@ class Firmware:
     """The C-board firmware emulator.
 
     Args:
-        config: firmware constants (a runtime copy is kept; ``ParamSet`` replaces it).
-        bus: the motor bus (owned by the caller).
+        config: firmware constants (a runtime copy is kept; ``ParamSet`` replaces it). Its layout of arms
+            and cables (``FirmwareConfig.motor_count``, ``arm_count``, ``cables_per_arm``) is fixed at
+            start-up.
+        bus: the motor bus (owned by the caller), with ``config.motor_count`` motors.
         rc: the RC source (owned by the caller). With a :class:`~controller.rc.LinkRcSource` the host's
             ``VirtualRc`` frames feed it; with any other source they are ignored (the radio is master).
         link: the host link transport, or None to run without a host.
@@ -85,7 +88,16 @@ class Firmware:
         poses: PoseProvider | None = None,
         exec_timer_ns: Callable[[], int] | None = None,
     ) -> None:
-        """Wire the firmware up (nothing runs until :meth:`run_due` or :meth:`run`)."""
+        """Wire the firmware up (nothing runs until :meth:`run_due` or :meth:`run`).
+
+        Raises:
+            ConfigError: the bus has not the configuration's number of motors.
+        """
+        if bus.motor_count != config.motor_count:
+            raise ConfigError(
+                f"the motor bus has {bus.motor_count} motors, the configuration {config.motor_count} "
+                f"({config.arm_count} arm(s) of {config.cables_per_arm} cable(s))"
+            )
         self.bus = bus
         self.rc = rc
         self.link = BoardLink(link) if link is not None else None
@@ -125,9 +137,10 @@ class Firmware:
             else None
         )
         self.clock_kind = ClockKind.LOCKSTEP
-        self.commanded_currents: tuple[int, ...] = (0,) * MOTOR_COUNT
-        self._raw = [0] * MOTOR_COUNT
-        self._zero = (0,) * MOTOR_COUNT
+        n = config.motor_count
+        self.commanded_currents: tuple[int, ...] = (0,) * n
+        self._raw = [0] * n
+        self._zero = (0,) * n
         self._last_control_us: int | None = None
         self._last_rc_ok = False
         self._last_host_ok = False
@@ -276,7 +289,7 @@ class Firmware:
 
     @property
     def direct_tensions_n(self) -> list[float]:
-        """The host's DIRECT tensions (``SET_TENSIONS``, clamped)."""
+        """The host's DIRECT tensions (``SET_TENSIONS``, clamped), one per cable of an arm."""
         return self.modes.direct_tensions_n
 
     @property

@@ -44,6 +44,11 @@ Strategy off (Fig. S6A, for comparison): IDLE holds the arm straight (0 N); a gr
 toward the target from straight up to ``grasp_wrap_n`` (WRAP: the arm curls from the tip), then HOLD;
 release as above.
 
+An array (several arms on one board, ``controller.config``) is one gripper: one machine, one curl that
+every arm takes (``controller.cables``); it senses with each cable's mean over the arms (the speed and
+tension of cable j averaged over every arm's cable j), so contact is the array's arms, on average, being
+blocked. With one arm the signals are the cables' own.
+
 Triggers: left lever UP / DOWN edges in GRASP mode, host ``GRASP`` / ``RELEASE`` / ``HOLD`` commands
 (MAVLink DO_GRIPPER through the host). The radio stays the master of the host's commands:
 :func:`grasp_refusal` is the one rule that says when the radio lets them act (the board's command server
@@ -57,7 +62,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from controller.cables import bend_shares
-from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.config import FirmwareConfig
 from controller.contact import ContactDetector
 from controller.events import EventQueue
 from protocol.messages import AckResult, EventKind, GraspState, Mode, Phase
@@ -126,8 +131,13 @@ class GraspMachine:
         self.pending = False
         self.contact_override: Callable[[int], bool] | None = None
         self.detector = ContactDetector(config)
-        self._shares = [0.0] * MOTOR_COUNT
-        self._wrap_shares = [0.0] * MOTOR_COUNT
+        cables = config.cables_per_arm
+        self._cables = cables
+        self._arms = config.arm_count
+        self._shares = [0.0] * cables
+        self._wrap_shares = [0.0] * cables
+        self._mean_speed = [0.0] * cables  # per cable of an arm, averaged over the arms (arrays only)
+        self._mean_tension = [0.0] * cables
         self._taut = True
         self._t_state_us = 0
         self._stall_since_us = -1
@@ -164,12 +174,20 @@ class GraspMachine:
         """Curl held in IDLE: packed with the strategy on, straight (0 N) with it off."""
         return self._pack_n if self.strategy_on else 0.0
 
+    def _in_plane(self, target_rad: float) -> float:
+        """A two-cable arm bends in its plane: a target there, toward the nearer of its two cables."""
+        if self._cables != 2:
+            return target_rad
+        a0 = self._angles_rad[0]
+        return a0 if math.cos(target_rad - a0) >= 0.0 else math.remainder(a0 + math.pi, 2.0 * math.pi)
+
     def _set_target(self, target_rad: float) -> None:
+        target_rad = self._in_plane(target_rad)
         self.target_rad = target_rad
         self.direction_rad = target_rad
         shares = bend_shares(target_rad, self._angles_rad)
         opposite = bend_shares(target_rad + math.pi, self._angles_rad)
-        for i in range(MOTOR_COUNT):
+        for i in range(self._cables):
             self._shares[i] = shares[i]
             self._wrap_shares[i] = opposite[i]
 
@@ -203,7 +221,7 @@ class GraspMachine:
             return AckResult.REJECTED
         if direction_rad is not None and not math.isfinite(direction_rad):
             return AckResult.DENIED
-        target = self._default_dir_rad if direction_rad is None else direction_rad
+        target = self._in_plane(self._default_dir_rad if direction_rad is None else direction_rad)
         if self.curl_n > 0.0 and target != self.direction_rad:
             # Curled toward another side: start the new pack from 0 N (the slew limiter smooths it).
             self.curl_n = 0.0
@@ -239,9 +257,12 @@ class GraspMachine:
         Args:
             now_us: board time.
             dt_us: time since the previous tick.
-            cable_speed_m_s: per-cable filtered paid-in speed (``MotorModel.cable_speed_m_s``).
-            tension_est_n: per-cable estimated tension (``MotorModel.tension_est_n``).
+            cable_speed_m_s: per-motor filtered paid-in speed (``MotorModel.cable_speed_m_s``).
+            tension_est_n: per-motor estimated tension (``MotorModel.tension_est_n``).
         """
+        if self._arms > 1:
+            cable_speed_m_s = self._arm_mean(cable_speed_m_s, self._mean_speed)
+            tension_est_n = self._arm_mean(tension_est_n, self._mean_tension)
         state = self.state
         curl = self.curl_n
         if state == GraspState.IDLE:
@@ -283,6 +304,17 @@ class GraspMachine:
         # HOLD and FAILED keep the tension.
         return self.curl_n
 
+    def _arm_mean(self, per_motor: Sequence[float], out: list[float]) -> list[float]:
+        """Each cable's value averaged over the arms (motor m = cable (m-1) % C of arm (m-1) // C)."""
+        c = self._cables
+        arms = self._arms
+        for j in range(c):
+            total = 0.0
+            for a in range(arms):
+                total += per_motor[a * c + j]
+            out[j] = total / arms
+        return out
+
     def _settled(self, now_us: int, cable_speed_m_s: Sequence[float]) -> bool:
         """The pack-side cable has been still (slower than the stall speed) for the contact dwell time.
 
@@ -307,9 +339,7 @@ class GraspMachine:
         else:
             speed, tension = self._pack_side(cable_speed_m_s, tension_est_n)
             s = self._wrap_shares
-            wrap = (s[0] * cable_speed_m_s[0] + s[1] * cable_speed_m_s[1] + s[2] * cable_speed_m_s[2]) / (
-                s[0] + s[1] + s[2]
-            )
+            wrap = _dot(s, cable_speed_m_s) / sum(s)
             if self.detector.update(now_us, dt_us, ramping, speed, tension, wrap):
                 self._contact(now_us, f"contact ({self.detector.reason})")
         if self.state == GraspState.REACH and elapsed >= self._timeout_us:
@@ -342,8 +372,7 @@ class GraspMachine:
     def _pull_side_speed(self, speed_m_s: Sequence[float]) -> float:
         """Share-weighted paid-in speed of the cables that pull toward :attr:`direction_rad`."""
         s = self._wrap_shares if self.direction_rad != self.target_rad else self._shares
-        total = s[0] + s[1] + s[2]
-        return (s[0] * speed_m_s[0] + s[1] * speed_m_s[1] + s[2] * speed_m_s[2]) / total
+        return _dot(s, speed_m_s) / sum(s)
 
     def pull_shares(self) -> Sequence[float]:
         """Per-cable bending shares of the present curl (which cables pull toward :attr:`direction_rad`)."""
@@ -352,7 +381,13 @@ class GraspMachine:
     def _pack_side(self, speed_m_s: Sequence[float], tension_n: Sequence[float]) -> tuple[float, float]:
         """Share-weighted paid-in speed and estimated tension of the pack-side (target-side) cables."""
         s = self._shares
-        total = s[0] + s[1] + s[2]  # >= 1 for three cables at 120°
-        v = (s[0] * speed_m_s[0] + s[1] * speed_m_s[1] + s[2] * speed_m_s[2]) / total
-        t = (s[0] * tension_n[0] + s[1] * tension_n[1] + s[2] * tension_n[2]) / total
-        return v, t
+        total = sum(s)  # >= 1 for three cables at 120° and two at 180°; 1 for one cable
+        return _dot(s, speed_m_s) / total, _dot(s, tension_n) / total
+
+
+def _dot(shares: Sequence[float], values: Sequence[float]) -> float:
+    """``shares[0]*values[0] + shares[1]*values[1] + ...`` over the cables of one arm, left to right."""
+    acc = shares[0] * values[0]
+    for i in range(1, len(shares)):
+        acc += shares[i] * values[i]
+    return acc

@@ -23,7 +23,7 @@ import math
 from collections.abc import MutableSequence
 
 from controller.cables import MotorModel, TensionSlew
-from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.config import FirmwareConfig
 
 __all__ = ["LengthHold", "Pid"]
 
@@ -88,14 +88,16 @@ class LengthHold:
         """Create the loops for ``config``, reading feedback from ``motors`` and tensions from ``slew``."""
         self._motors = motors
         self._tensions_n = slew.tensions_n  # written in place by the slew limiter, never replaced
-        self.held = [False] * MOTOR_COUNT
-        self.by_grasp = [False] * MOTOR_COUNT
-        self.setpoint_m = [0.0] * MOTOR_COUNT
+        n = config.motor_count
+        self._n = n
+        self.held = [False] * n
+        self.by_grasp = [False] * n
+        self.setpoint_m = [0.0] * n
         self.count = 0
         self.flags = 0
         self._pos: list[Pid] = []
         self._speed: list[Pid] = []
-        for _ in range(MOTOR_COUNT):
+        for _ in range(n):
             self._pos.append(Pid(0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
             self._speed.append(Pid(0.0, 0.0, 0.0, 0.0, 0.0, 0.0))
         self.configure(config)
@@ -150,26 +152,26 @@ class LengthHold:
     def release_all(self) -> None:
         """Drop every hold (SAFE, a mode change)."""
         if self.count:
-            for i in range(MOTOR_COUNT):
+            for i in range(self._n):
                 self.held[i] = False
                 self.by_grasp[i] = False
             self._count()
 
     def release_host(self) -> None:
         """Drop the holds the host engaged (``HOLD_LENGTHS``; on link loss)."""
-        for i in range(MOTOR_COUNT):
+        for i in range(self._n):
             if self.held[i] and not self.by_grasp[i]:
                 self.release(i)
 
     def release_grasp(self) -> None:
         """Drop the holds the grasp machine engaged."""
-        for i in range(MOTOR_COUNT):
+        for i in range(self._n):
             if self.by_grasp[i]:
                 self.release(i)
 
     def _count(self) -> None:
         self.count = sum(self.held)
-        self.flags = sum(1 << i for i in range(MOTOR_COUNT) if self.held[i])
+        self.flags = sum(1 << i for i in range(self._n) if self.held[i])
 
     def step(self, dt_us: int, tensions_n: MutableSequence[float]) -> None:
         """One control tick: overwrite the held cables' tensions with the cascade's output.
@@ -180,7 +182,7 @@ class LengthHold:
         dt_s = dt_us * 1e-6
         m = self._motors
         held = self.held
-        for i in range(MOTOR_COUNT):
+        for i in range(self._n):
             if not held[i]:
                 continue
             v_ref = self._pos[i].step(self.setpoint_m[i] - m.cable_length_m[i], dt_s)

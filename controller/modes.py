@@ -23,7 +23,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from controller.cables import CableMapper, MotorModel
-from controller.config import MOTOR_COUNT, FirmwareConfig
+from controller.config import FirmwareConfig
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine, grasp_refusal
@@ -62,7 +62,8 @@ class ModeSelector:
         mode: the mode of the last control tick.
         direct_requested: the host asked for DIRECT (cleared when the lever leaves MIDDLE or the
             heartbeat is lost).
-        direct_tensions_n: the host's per-cable tensions for DIRECT (clamped by ``SET_TENSIONS``).
+        direct_tensions_n: the host's tensions for DIRECT (clamped by ``SET_TENSIONS``), one per cable
+            of an arm: every arm of an array takes them.
     """
 
     def __init__(
@@ -87,7 +88,9 @@ class ModeSelector:
         self.mode = Mode.SAFE
         self.direct_requested = False
         self._pretension_n = config.mapping.pretension_n
-        self.direct_tensions_n = [self._pretension_n] * MOTOR_COUNT
+        self.direct_tensions_n = [self._pretension_n] * config.cables_per_arm
+        self._cables = config.cables_per_arm
+        self._arms = config.arm_count
         self._prev_left_lever = 0
         self._prev_grasp_state = GraspState.IDLE
 
@@ -103,7 +106,7 @@ class ModeSelector:
         """
         self.direct_requested = False
         tensions = self.direct_tensions_n
-        for i in range(MOTOR_COUNT):
+        for i in range(len(tensions)):
             tensions[i] = self._pretension_n
 
     def select(self, now_us: int, phase: Phase, rc: RcFrame | None) -> Mode:
@@ -165,8 +168,10 @@ class ModeSelector:
         return self._mapper.curl(curl, grasp.direction_rad)
 
     def _hold_pulling_cables(self) -> None:
-        """``grasp_hold_length``: HOLD freezes the length of the cables that pull the wrap."""
+        """``grasp_hold_length``: HOLD freezes the length of the cables that pull the wrap (on every arm)."""
         hold = self._hold
+        cables = self._cables
         for i, share in enumerate(self._grasp.pull_shares()):
             if share > _PULLING_SHARE:
-                hold.engage(i, by_grasp=True)
+                for arm in range(self._arms):
+                    hold.engage(arm * cables + i, by_grasp=True)

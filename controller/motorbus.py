@@ -10,11 +10,13 @@ errors — over two tiny private hooks that a back end implements:
 Back ends: :class:`CanMotorBus` (any python-can bus: ``socketcan`` (``can0``), ``gs_usb`` (candleLight),
 ``slcan`` over a serial port such as /dev/ttyACM0, ``virtual``; python-can's ``interface`` name picks the
 driver; 1 Mbit/s, receive filters for the feedback ids, an optional ``can.Logger`` of every frame) and
-:class:`FakeMotorBus` (an in-process C610 trio, no threads). The simulated back end lives in ``hil``
+:class:`FakeMotorBus` (an in-process fake C610 set, no threads). The simulated back end lives in ``hil``
 (``hil.canbus.SimMotorBus``), which builds it around its plant.
 
-Facts: C610 command id 0x200 carries motors 1-4 as big-endian int16, -10000..10000 = -10..10 A; motor n
-answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``). CAN bus at 1 Mbit/s.
+Facts: C610 command id 0x200 carries motors 1-4 as big-endian int16, -10000..10000 = -10..10 A, and id
+0x1FF motors 5-8 in the same layout; motor n answers on 0x200 + n at about 1 kHz (DJI ``CAN_receive.c``).
+CAN bus at 1 Mbit/s. A bus of up to four motors sends one 0x200 frame per tick (a three-motor arm's
+frames are those it has always sent), of five to eight a 0x200 and then a 0x1FF frame.
 """
 
 from __future__ import annotations
@@ -29,17 +31,20 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from controller.config import CONTROL_PERIOD_US
 from controller.errors import BusError, PortError
 from protocol.c610 import (
+    COMMAND_ID_HIGH,
     COMMAND_ID_LOW,
     CURRENT_RAW_MAX,
     FEEDBACK_ID_BASE,
+    MOTORS_MAX,
+    MOTORS_PER_COMMAND,
     MotorFeedback,
-    current_command,
+    command_frames,
     pack_currents,
 )
 from protocol.errors import DecodeError
 
 if TYPE_CHECKING:
-    from controller.fake_c610 import FakeC610Trio
+    from controller.fake_c610 import FakeC610Set
 
 __all__ = [
     "CanMotorBus",
@@ -55,14 +60,15 @@ _RECV_BURST_MAX = 64
 
 
 class MotorBus(ABC):
-    """Three C610/M2006 motors behind one command frame (0x200) and three feedback ids (0x201-0x203).
+    """C610/M2006 motors 1..n (n = 1..8; three by default): commands on 0x200 (motors 1-4) and, above
+    four motors, 0x1FF (motors 5-8); feedback on 0x201..0x200+n.
 
     Attributes:
-        motor_count: motors on this bus (3).
+        motor_count: motors on this bus (1..8).
         can_errors: failed sends/receives and undecodable feedback frames.
-        frames_sent: command frames sent.
+        frames_sent: command frames sent (two per :meth:`send_currents` above four motors).
         frames_ignored: received frames that are not feedback from our motors.
-        last_send_ok: the last command frame went out.
+        last_send_ok: every command frame of the last :meth:`send_currents` went out.
         simulated: True for back ends driving a simulated plant (reported in telemetry).
     """
 
@@ -73,13 +79,13 @@ class MotorBus(ABC):
 
         Args:
             current_limit_raw: |current| never sent above this (raw, 1000 per amp; at most 10000).
-            motor_count: motors 1..n on command id 0x200 (1..4).
+            motor_count: motors 1..n (1..8): 1-4 on command id 0x200, 5-8 on 0x1FF.
 
         Raises:
             ValueError: a bad limit or motor count.
         """
-        if not 1 <= motor_count <= 4:
-            raise ValueError(f"motor_count must be 1..4, got {motor_count}")
+        if not 1 <= motor_count <= MOTORS_MAX:
+            raise ValueError(f"motor_count must be 1..{MOTORS_MAX}, got {motor_count}")
         self.motor_count = motor_count
         self.current_limit_raw = current_limit_raw
         self.can_errors = 0
@@ -87,7 +93,9 @@ class MotorBus(ABC):
         self.frames_ignored = 0
         self.last_send_ok = False
         self._sent = [0] * motor_count
-        self._unused_slots = (0,) * (4 - motor_count)
+        self._two_frames = motor_count > MOTORS_PER_COMMAND
+        # the empty slots of the last frame (0x200 up to four motors, 0x1FF above), sent as 0
+        self._unused_slots = (0,) * (-motor_count % MOTORS_PER_COMMAND)
         self._is_shutdown = False
 
     @property
@@ -107,14 +115,15 @@ class MotorBus(ABC):
         return self._is_shutdown
 
     def send_currents(self, currents_raw: Sequence[int]) -> tuple[int, ...]:
-        """Clamp and send one current command frame (id 0x200) for motors 1..n.
+        """Clamp and send the current command frames for motors 1..n: 0x200, then 0x1FF above four.
 
         Args:
             currents_raw: one raw setpoint per motor (1000 per amp); floats are rounded.
 
         Returns:
-            The setpoints put in the frame after clamping to ±``current_limit_raw``. If the back end
-            failed to send, the error is counted and ``last_send_ok`` is False.
+            The setpoints put in the frames after clamping to ±``current_limit_raw``. If the back end
+            failed to send a frame, the error is counted and ``last_send_ok`` is False (the other frame
+            is still sent).
 
         Raises:
             ValueError: wrong number of setpoints.
@@ -132,9 +141,12 @@ class MotorBus(ABC):
             if type(v) is not int:
                 v = round(v)
             out[i] = lim if v > lim else -lim if v < -lim else v
-        # The clamp above leaves ints within ±10000, so the frame is packed by the unchecked packer, without
-        # current_command's per-value validation (the same bytes; this runs every control tick).
-        data = pack_currents(*out, *self._unused_slots)
+        # The clamp above leaves ints within ±10000, so the frames are packed by the unchecked packer, without
+        # current_command's per-value validation (command_frames' bytes; this runs every control tick).
+        if self._two_frames:
+            data = pack_currents(out[0], out[1], out[2], out[3])
+        else:
+            data = pack_currents(*out, *self._unused_slots)
         try:
             self._send_frame(COMMAND_ID_LOW, data)
         except (BusError, OSError):
@@ -143,6 +155,15 @@ class MotorBus(ABC):
         else:
             self.frames_sent += 1
             self.last_send_ok = True
+        if self._two_frames:
+            data = pack_currents(*out[MOTORS_PER_COMMAND:], *self._unused_slots)
+            try:
+                self._send_frame(COMMAND_ID_HIGH, data)
+            except (BusError, OSError):
+                self.can_errors += 1
+                self.last_send_ok = False
+            else:
+                self.frames_sent += 1
         return tuple(out)
 
     def read_feedback(self) -> list[tuple[int, MotorFeedback]]:
@@ -174,14 +195,16 @@ class MotorBus(ABC):
         return out
 
     def shutdown(self) -> None:
-        """Send zero current once (if the bus still works) and release the back end. Safe twice."""
+        """Send zero current once on every command frame (if the bus still works) and release the back
+        end. Safe twice."""
         if self._is_shutdown:
             return
         try:
-            can_id, data = current_command([0] * self.motor_count, COMMAND_ID_LOW)
-            self._send_frame(can_id, data)
-        except (BusError, OSError):
-            self.can_errors += 1
+            for can_id, data in command_frames([0] * self.motor_count):
+                try:
+                    self._send_frame(can_id, data)
+                except (BusError, OSError):
+                    self.can_errors += 1
         finally:
             self._is_shutdown = True
             self._shutdown_backend()
@@ -207,7 +230,7 @@ class MotorBus(ABC):
 
 
 def feedback_filters(motor_count: int = 3) -> list[dict[str, int | bool]]:
-    """python-can ``can_filters`` that pass only the feedback of motors 1..``motor_count`` (0x201-0x203).
+    """python-can ``can_filters`` that pass only the feedback of motors 1..``motor_count`` (0x201-0x20n).
 
     Interfaces that filter in the kernel or the adapter (SocketCAN, PCAN, Kvaser, ...) then never wake
     the control loop for other traffic; the others (slcan, gs_usb, virtual) filter inside python-can,
@@ -320,6 +343,7 @@ class CanMotorBus(MotorBus):
         log_file: str | os.PathLike[str] | None = None,
         send_timeout_s: float = 0.001,
         current_limit_raw: int = CURRENT_RAW_MAX,
+        motor_count: int = 3,
         **kwargs: Any,
     ) -> None:
         """Open a python-can bus, or wrap one (``bus=``, then owned: shut down with this object).
@@ -336,12 +360,13 @@ class CanMotorBus(MotorBus):
                 suffix picks the format (``.log`` candump, ``.blf`` Vector BLF, ``.asc``, ``.csv``).
             send_timeout_s: longest a send may wait for room in the adapter's queue.
             current_limit_raw: see :class:`MotorBus`.
+            motor_count: see :class:`MotorBus` (the feedback filters pass 0x201..0x200+n).
             **kwargs: passed to ``can.Bus`` (e.g. ``sleep_after_open=0`` for slcan on a pty).
 
         Raises:
             PortError: the channel cannot be opened, or the log file cannot be written.
         """
-        super().__init__(current_limit_raw=current_limit_raw)
+        super().__init__(current_limit_raw=current_limit_raw, motor_count=motor_count)
         import can
 
         self._can = can
@@ -440,33 +465,37 @@ class CanMotorBus(MotorBus):
 
 
 class FakeMotorBus(MotorBus):
-    """An in-process C610 trio, stepped synchronously: each command advances it by ``dt_us``.
+    """An in-process fake C610 set, stepped synchronously: each tick's commands advance it by ``dt_us``.
 
-    Feedback produced by a command is returned by the next :meth:`read_feedback` — the order of a real
-    bus, where the answers arrive after the command. Faults: ``bus.trio.silent.add(2)`` stops motor 2.
+    The set steps on the tick's last command frame (0x200, or 0x1FF above four motors), so every motor
+    runs this tick's current. Feedback produced by a command is returned by the next :meth:`read_feedback`
+    — the order of a real bus, where the answers arrive after the command. Faults:
+    ``bus.c610s.silent.add(2)`` stops motor 2.
     """
 
     def __init__(
         self,
-        trio: FakeC610Trio | None = None,
+        c610s: FakeC610Set | None = None,
         *,
         dt_us: int = CONTROL_PERIOD_US,
         current_limit_raw: int = CURRENT_RAW_MAX,
     ) -> None:
-        """Create the bus around ``trio`` (default: a fresh ``FakeC610Trio()``)."""
-        super().__init__(current_limit_raw=current_limit_raw)
-        if trio is None:
-            from controller.fake_c610 import FakeC610Trio
+        """Create the bus around ``c610s`` (default: a fresh ``FakeC610Set()``, three motors); the bus has
+        as many motors as the set."""
+        if c610s is None:
+            from controller.fake_c610 import FakeC610Set
 
-            trio = FakeC610Trio()
-        self.trio = trio
+            c610s = FakeC610Set()
+        super().__init__(current_limit_raw=current_limit_raw, motor_count=len(c610s.motors))
+        self.c610s = c610s
         self.dt_us = dt_us
+        self._step_id = COMMAND_ID_HIGH if self.motor_count > MOTORS_PER_COMMAND else COMMAND_ID_LOW
         self._pending: list[tuple[int, bytes]] = []
 
     def _send_frame(self, can_id: int, data: bytes) -> None:
-        self.trio.handle_frame(can_id, data)
-        if can_id == COMMAND_ID_LOW:
-            self._pending.extend(self.trio.step(self.dt_us))
+        self.c610s.handle_frame(can_id, data)
+        if can_id == self._step_id:
+            self._pending.extend(self.c610s.step(self.dt_us))
 
     def _recv_frames(self) -> list[tuple[int, bytes]]:
         if not self._pending:

@@ -131,18 +131,21 @@ def run_preflight(
         The report; the bus has been sent zero current once more on the way out.
 
     Raises:
-        ValueError: ``window_us`` shorter than a second.
+        ValueError: ``window_us`` shorter than a second, or a bus without the configuration's motors.
     """
     if window_us < 1_000_000:
         raise ValueError(f"window_us must be >= 1 s, got {window_us}")
     cfg = config or FirmwareConfig()
+    if bus is not None and bus.motor_count != cfg.motor_count:
+        raise ValueError(f"the bus has {bus.motor_count} motors, the configuration {cfg.motor_count}")
     period_us = cfg.control_period_us
     probe = _Probe(
         bus=bus,
         rc=rc,
         link=BoardLink(link) if link is not None else None,
         link_rc=rc if isinstance(rc, LinkRcSource) else None,
-        motors=[MotorStats() for _ in range(MOTOR_COUNT)],
+        motors=[MotorStats() for _ in range(cfg.motor_count)],
+        zero=(0,) * cfg.motor_count,
     )
     sched = Scheduler((TaskSpec("preflight", period_us, probe.tick),), exec_timer_ns or monotonic_ns)
     task = sched["preflight"]
@@ -222,7 +225,7 @@ def run_preflight(
         judge_motor(
             n, probe.motors[n - 1] if bus is not None else None, ticks=probe.ticks, window_us=window_us
         )
-        for n in range(1, MOTOR_COUNT + 1)
+        for n in range(1, cfg.motor_count + 1)
     ]
     if rc is None and rc_error is not None:
         checks.append(Check("rc", Status.FAIL, rc_error, _PORT_FIX))

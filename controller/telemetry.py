@@ -3,15 +3,19 @@
 :class:`TelemetryBuilder` reads the components' state (it owns none) at the telemetry, status and pose
 rates; nothing here runs on the control tick. Which arming blocker holds the gate is computed here, so
 the control tick never pays for it.
+
+The board link's ``Telemetry`` and ``MotorFrames`` carry three motors (their layout is the three-cable
+arm's): a board with more reports motors 1-3 there (and the length-holds of cables 1-3), one with fewer
+reports zeros in the missing slots. ``motors_online`` has a bit for each of up to eight motors. Widening
+the link for arrays is a versioned change of its own (issue 27, item 2).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from controller.cables import MotorModel, TensionSlew
-from controller.config import MOTOR_COUNT
 from controller.events import EventQueue
 from controller.failsafe import Failsafe
 from controller.grasp import GraspMachine
@@ -52,6 +56,8 @@ _FLAG_ARMED, _FLAG_HOST_REQUIRED, _FLAG_HOST_OK, _FLAG_RC_OK, _FLAG_SIM = (
     int(TelemetryFlags.SIM),
 )
 _HOLD_SHIFT = 5  # LengthHold.flags bit i -> TelemetryFlags.HOLD_1 << i
+_HOLD_MASK = 0b111  # the link's flags hold cables 1-3 (HOLD_1..HOLD_3)
+_LINK_MOTORS = 3  # motors in Telemetry's and MotorFrames' per-motor fields
 _TELEMETRY_FLAGS = tuple(TelemetryFlags(bits) for bits in range(1 << 8))
 """Every combination of the eight flags, by value (building an IntFlag per frame is slow)."""
 
@@ -108,7 +114,7 @@ class TelemetryBuilder:
             | (_FLAG_HOST_OK if fs.host_ok else 0)
             | (_FLAG_RC_OK if fs.rc_ok else 0)
             | (_FLAG_SIM if self._bus.simulated else 0)
-            | (self._hold.flags << _HOLD_SHIFT)
+            | ((self._hold.flags & _HOLD_MASK) << _HOLD_SHIFT)
         )
         rc_input = self._rc_input
         rc = rc_input.frame
@@ -128,13 +134,13 @@ class TelemetryBuilder:
             rc.channels if rc else (0, 0, 0, 0),
             rc.right_lever if rc else 0,
             rc.left_lever if rc else 0,
-            (m.angle[0], m.angle[1], m.angle[2]),
-            (m.speed_rpm[0], m.speed_rpm[1], m.speed_rpm[2]),
-            (m.current[0], m.current[1], m.current[2]),
-            (commanded_currents[0], commanded_currents[1], commanded_currents[2]),
-            (t[0], t[1], t[2]),
-            (est[0], est[1], est[2]),
-            (length[0], length[1], length[2]),
+            _three(m.angle, 0),
+            _three(m.speed_rpm, 0),
+            _three(m.current, 0),
+            _three(commanded_currents, 0),
+            _three(t, 0.0),
+            _three(est, 0.0),
+            _three(length, 0.0),
             ctl.late & u32,
             ctl.exec_p99_us,
             ctl.exec_max_us,
@@ -161,7 +167,7 @@ class TelemetryBuilder:
         seen = m.seen
         angle, speed, current, temperature = m.angle, m.speed_rpm, m.current, m.temperature
         frames = [_ZERO_FRAME, _ZERO_FRAME, _ZERO_FRAME]
-        for i in range(MOTOR_COUNT):
+        for i in range(min(m.motor_count, _LINK_MOTORS)):
             if seen[i]:
                 frames[i] = (FEEDBACK_ID_BASE + 1 + i, pack(angle[i], speed[i], current[i], temperature[i]))
         link.send(MotorFrames(now_us, (frames[0], frames[1], frames[2])))
@@ -200,3 +206,10 @@ class TelemetryBuilder:
                     tuple((float(q[0]), float(q[1]), float(q[2]), float(q[3])) for q in quats),
                 )
             )
+
+
+def _three(values: Sequence[Any], pad: Any) -> tuple[Any, Any, Any]:
+    """Motors 1-3 of a per-motor list (``pad`` for a motor the board does not have)."""
+    if len(values) >= _LINK_MOTORS:
+        return (values[0], values[1], values[2])
+    return (*values, *(pad,) * (_LINK_MOTORS - len(values)))  # type: ignore[return-value]

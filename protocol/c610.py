@@ -3,7 +3,9 @@
 Facts (DJI ``RoboMaster/Development-Board-C-Examples``, ``CAN_receive.c``; C610 manual):
 
 - Command: id 0x200 carries motors 1-4, id 0x1FF motors 5-8; 8 bytes = four big-endian int16 current
-  setpoints, -10000..10000 = -10 A..+10 A (1000 raw per amp). With three motors slot 4 is 0.
+  setpoints, -10000..10000 = -10 A..+10 A (1000 raw per amp). With three motors slot 4 is 0. One CAN
+  bus carries at most eight C610s (ids 1-8, set with each ESC's button); a board with up to four sends
+  only 0x200, with five to eight both frames (:func:`command_frames`).
 - Feedback: motor n answers on 0x200 + n at about 1 kHz: bytes 0-1 rotor angle 0..8191 (u16 BE, one
   rotor turn), 2-3 rotor speed in rpm (int16 BE, before the gearbox), 4-5 torque current (int16 BE,
   command scale), byte 6 temperature (°C; DJI's ``get_motor_measure`` reads it; a C610 may leave it 0),
@@ -34,11 +36,13 @@ __all__ = [
     "FEEDBACK_ID_BASE",
     "FRAME_LEN",
     "M2006_GEAR_RATIO",
+    "MOTORS_MAX",
     "MOTORS_PER_COMMAND",
     "RAW_PER_AMP",
     "MotorFeedback",
     "amps_to_raw",
     "angle_delta_counts",
+    "command_frames",
     "counts_to_output_rad",
     "current_command",
     "feedback_id",
@@ -54,8 +58,8 @@ __all__ = [
 ]
 
 DBC_PATH = Path(__file__).with_name("c610.dbc")
-"""The C610 frames as a DBC (package data beside this module): the command on 0x200 and the feedback on
-0x201-0x204, for cantools, SavvyCAN or a candump log's decoder (``cantools decode``)."""
+"""The C610 frames as a DBC (package data beside this module): the commands on 0x200 and 0x1FF and the
+feedback on 0x201-0x208, for cantools, SavvyCAN or a candump log's decoder (``cantools decode``)."""
 
 COMMAND_ID_LOW = 0x200
 """Command frame for motors 1-4."""
@@ -66,6 +70,8 @@ FEEDBACK_ID_BASE = 0x200
 FRAME_LEN = 8
 """Data bytes of every C610 frame."""
 MOTORS_PER_COMMAND = 4
+MOTORS_MAX = 2 * MOTORS_PER_COMMAND
+"""C610 ids 1..8: the most motors one bus (and one pair of command frames) carries."""
 CURRENT_RAW_MAX = 10_000
 """Largest |current setpoint| in raw units (10 A)."""
 RAW_PER_AMP = 1000
@@ -141,13 +147,35 @@ def current_command(currents: Sequence[int], can_id: int = COMMAND_ID_LOW) -> tu
     return can_id, COMMAND_FORMAT.pack(*values)
 
 
+def command_frames(currents: Sequence[int]) -> list[tuple[int, bytes]]:
+    """The command frames of a board driving motors 1..n, in the order it sends them.
+
+    Args:
+        currents: one raw setpoint per motor, motor 1 first (1 to 8 of them, -10000..10000).
+
+    Returns:
+        ``[(0x200, data)]`` for up to four motors (empty slots 0, the frame a three-motor board has
+        always sent); ``[(0x200, data), (0x1FF, data)]`` for five to eight.
+
+    Raises:
+        ValueError: no currents or more than eight, or a value :func:`current_command` refuses.
+    """
+    n = len(currents)
+    if not 1 <= n <= MOTORS_MAX:
+        raise ValueError(f"1..{MOTORS_MAX} currents, got {n}")
+    frames = [current_command(currents[:MOTORS_PER_COMMAND], COMMAND_ID_LOW)]
+    if n > MOTORS_PER_COMMAND:
+        frames.append(current_command(currents[MOTORS_PER_COMMAND:], COMMAND_ID_HIGH))
+    return frames
+
+
 def feedback_id(motor: int) -> int:
     """CAN id of the feedback frame of motor ``motor`` (1..8).
 
     Raises:
         ValueError: ``motor`` is not in 1..8.
     """
-    if not 1 <= motor <= 2 * MOTORS_PER_COMMAND:
+    if not 1 <= motor <= MOTORS_MAX:
         raise ValueError(f"motor must be 1..8, got {motor}")
     return FEEDBACK_ID_BASE + motor
 

@@ -206,3 +206,39 @@ def test_governor_follows_a_mirrored_motor() -> None:
     m = MotorModel(FirmwareConfig().replaced(motor_signs=(1, -1, 1), payin_limit_m_per_s=0.2))
     _reeling_in(m, 1, -1.0)  # rotor turns backwards: on the mirrored motor that reels in
     assert m.govern([10.0, 10.0, 10.0])[1] == 0.5
+
+
+# --- arms of one and two cables, arrays ---------------------------------------------------------
+
+
+@given(st.floats(-math.pi, math.pi))
+def test_a_one_cable_arm_takes_every_bending_share(direction: float) -> None:
+    assert bend_shares(direction, (0.0,)) == (1.0,)
+
+
+@given(st.floats(-math.pi, math.pi))
+def test_a_two_cable_arm_shares_the_bend_in_its_plane(direction: float) -> None:
+    s1, s2 = bend_shares(direction, (0.0, math.pi))
+    assert min(s1, s2) == pytest.approx(0.0, abs=1e-12)
+    assert s1 - s2 == pytest.approx(math.cos(direction))  # the in-plane moment, pull-only
+
+
+def test_the_mapping_of_one_and_two_cable_arms() -> None:
+    one = CableMapper(FirmwareConfig().with_arms(1, 1))
+    m = FirmwareConfig().mapping
+    assert one.manual([0, 0, 0, 660]) == pytest.approx([m.pretension_n + m.common_max_n * 640 / 660])
+    assert one.curl(5.0, 2.0) == pytest.approx([m.pretension_n + 5.0])  # any direction curls it
+    two = CableMapper(FirmwareConfig().with_arms(1, 2))
+    assert two.manual([660, 0, 0, 0]) == pytest.approx([m.pretension_n + m.bend_max_n, m.pretension_n])
+    assert two.manual([-660, 0, 0, 0]) == pytest.approx([m.pretension_n, m.pretension_n + m.bend_max_n])
+    assert two.curl(4.0, math.pi / 2) == pytest.approx([m.pretension_n] * 2)  # out of its plane
+
+
+def test_every_arm_of_an_array_takes_the_arms_targets() -> None:
+    lone = CableMapper(FirmwareConfig())
+    array = CableMapper(FirmwareConfig().with_arms(2))
+    for channels in ([0, 0, 0, 0], [300, -500, 0, 200], [-660, 0, 0, 660]):
+        assert array.manual(channels) == lone.manual(channels) * 2
+    assert array.curl(6.0, 1.0) == lone.curl(6.0, 1.0) * 2
+    assert array.direct([1.0, 2.0, 30.0]) == lone.direct([1.0, 2.0, 30.0]) * 2
+    assert array.arm_targets_n == lone.targets_n and lone.arm_targets_n is lone.targets_n

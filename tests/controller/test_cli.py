@@ -16,9 +16,10 @@ import can
 import pytest
 
 from controller.cli import can_bus_config, main, parse_args
+from controller.fake_c610 import FakeC610Set
 from controller.transport import SerialTransport
 from protocol.messages import Heartbeat, encode
-from tests.support.c610_rigs import C610TrioServer
+from tests.support.c610_rigs import C610SetServer
 from tests.support.terminal import ctrl_c, start_in_own_group
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -125,6 +126,12 @@ def test_bad_config_is_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]
             "--listen takes socket://HOST:PORT",
         ),
         (["--can-interface", "fake", "--link", "loop://", "--listen-any"], "--listen-any needs --listen"),
+        (["--can-interface", "fake", "--link", "loop://", "--arms", "9"], "--arms: must be 1..8"),
+        (["--can-interface", "fake", "--link", "loop://", "--arms", "two"], "--arms: must be a whole number"),
+        (
+            ["--can-interface", "fake", "--link", "loop://", "--cables-per-arm", "4"],
+            "--cables-per-arm: must be",
+        ),
         (
             ["--can-interface", "fake", "--link", "loop://", "--listen", "socket://127.0.0.1:1"],
             "not allowed with argument",
@@ -276,7 +283,7 @@ def test_can_log_of_a_firmware_run_on_python_cans_virtual_bus(
     channel = f"test-cli-canlog-{os.getpid()}"
     log = tmp_path / "run.log"
     argv = ["--can-interface", "virtual", "--can-channel", channel, "--can-log", str(log)]
-    with C610TrioServer(can.Bus(interface="virtual", channel=channel)) as server:
+    with C610SetServer(can.Bus(interface="virtual", channel=channel)) as server:
         assert main([*argv, "--link", "loop://", "--duration", "0.3", "--no-fifo"]) == 0
     assert server.error is None and "stopped:" in capsys.readouterr().err
     frames = list(can.LogReader(log))
@@ -285,6 +292,48 @@ def test_can_log_of_a_firmware_run_on_python_cans_virtual_bus(
     commands = [m for m in frames if m.arbitration_id == 0x200]
     assert len(commands) > 50 and all(not m.is_rx for m in commands)
     assert all(m.is_rx and m.channel == channel for m in frames if m.arbitration_id != 0x200)
+
+
+def test_an_array_that_does_not_fit_a_board_is_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["--can-interface", "fake", "--link", "loop://", "--arms", "3"]) == 2  # 3 x 3 cables
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "3 arm(s) of 3 cable(s) need 9 motors" in err, err
+
+
+def test_an_eight_arm_array_on_python_cans_virtual_bus(
+    tmp_path: Path, no_can_config: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--arms 8 --cables-per-arm 1``: eight C610s, commands on 0x200 and 0x1FF, feedback 0x201-0x208."""
+    channel = f"test-cli-arms-{os.getpid()}"
+    log = tmp_path / "run.log"
+    argv = ["--can-interface", "virtual", "--can-channel", channel, "--can-log", str(log)]
+    with C610SetServer(can.Bus(interface="virtual", channel=channel), FakeC610Set.of(8)) as server:
+        assert (
+            main(
+                [
+                    *argv,
+                    "--arms",
+                    "8",
+                    "--cables-per-arm",
+                    "1",
+                    "--link",
+                    "loop://",
+                    "--duration",
+                    "0.3",
+                    "--no-fifo",
+                ]
+            )
+            == 0
+        )
+    assert server.error is None and "stopped:" in capsys.readouterr().err
+    frames = list(can.LogReader(log))
+    assert {m.arbitration_id for m in frames} == {0x1FF, *range(0x200, 0x209)}
+    low = [m for m in frames if m.arbitration_id == 0x200]
+    high = [m for m in frames if m.arbitration_id == 0x1FF]
+    assert len(low) > 50 and len(high) == len(low)
+    assert [m.arbitration_id for m in frames if not m.is_rx][:4] == [0x200, 0x1FF, 0x200, 0x1FF]
 
 
 def test_spy_url_logs_the_firmwares_board_link(tmp_path: Path) -> None:

@@ -64,13 +64,13 @@ def test_gate_holds_while_right_lever_is_not_down_at_boot() -> None:
 def test_gate_needs_all_motors() -> None:
     # given motor 3 never answers
     rig = Rig()
-    rig.bus.trio.silent.add(3)
+    rig.bus.c610s.silent.add(3)
     # when the lever is DOWN for a while
     rig.tick(100)
     # then the gate stays closed
     assert rig.fw.phase == Phase.GATE
     # when motor 3 comes up, the gate opens
-    rig.bus.trio.silent.clear()
+    rig.bus.c610s.silent.clear()
     rig.until(lambda: rig.fw.phase == Phase.OK, 20)
 
 
@@ -149,7 +149,7 @@ def test_motor_silent_over_10_ms_zero_on_next_tick_and_latched() -> None:
     # given an armed board in MANUAL
     rig = armed_manual_rig()
     # when motor 2 stops answering
-    rig.bus.trio.silent.add(2)
+    rig.bus.c610s.silent.add(2)
     rig.tick()
     last_fb_us = rig.fw.motors.last_feedback_us[1]
     while rig.now_us <= last_fb_us + 10_000:
@@ -162,7 +162,7 @@ def test_motor_silent_over_10_ms_zero_on_next_tick_and_latched() -> None:
     assert rig.fw.phase == Phase.MOTOR_FAULT
     assert rig.fw.failsafe.motor_offline_events == 1
     # when the motor comes back with the lever still in MIDDLE
-    rig.bus.trio.silent.clear()
+    rig.bus.c610s.silent.clear()
     for _ in range(100):
         rig.tick()
         # then the fault stays latched
@@ -177,13 +177,13 @@ def test_motor_silent_over_10_ms_zero_on_next_tick_and_latched() -> None:
 
 def test_motor_fault_needs_the_motor_back_before_rearming() -> None:
     rig = armed_manual_rig()
-    rig.bus.trio.silent.add(1)
+    rig.bus.c610s.silent.add(1)
     rig.until(lambda: rig.fw.phase == Phase.MOTOR_FAULT, 20)
     # lever DOWN while the motor is still silent: stays latched
     rig.set_rc(frame())
     rig.tick(50)
     assert rig.fw.phase == Phase.MOTOR_FAULT
-    rig.bus.trio.silent.clear()
+    rig.bus.c610s.silent.clear()
     rig.until(lambda: rig.fw.phase == Phase.OK, 20)
 
 
@@ -326,7 +326,7 @@ def _slack_cable_snap(payin_limit_m_per_s: float) -> tuple[float, float]:
     """Reel 50 mm of slack in on every cable under a full MANUAL curl; the cables' largest tension and
     pay-in speed. The fake drives carry the M2006's 1.3 kg of reflected inertia on a stiff cable."""
     rig = Rig(FirmwareConfig().replaced(payin_limit_m_per_s=payin_limit_m_per_s))
-    for motor in rig.bus.trio.motors:
+    for motor in rig.bus.c610s.motors:
         motor.k = 48_000.0  # N/m: a 0.5 mm UHMWPE cable about 0.25 m long
         motor.j = 1.3 * motor.r**2  # 1.3 kg at the cable
         motor.b = 5.0 * motor.r**2  # 5 N·s/m at the cable: the drive's 1 N of friction at 0.2 m/s
@@ -336,7 +336,7 @@ def _slack_cable_snap(payin_limit_m_per_s: float) -> tuple[float, float]:
     peak_n = peak_m_s = 0.0
     for _ in range(1500):
         rig.tick()
-        for motor in rig.bus.trio.motors:
+        for motor in rig.bus.c610s.motors:
             peak_n = max(peak_n, motor.cable_tension_n)
             peak_m_s = max(peak_m_s, motor.speed_out_rad_s * motor.r)
     return peak_n, peak_m_s

@@ -361,7 +361,7 @@ def test_run_stops_on_a_stop_callable_and_sends_zero() -> None:
     clock = LockstepClock()
     fw.run(clock, stop=lambda: clock.now_us() >= 300_000)
     assert fw.scheduler["control"].runs == 300
-    assert all(m.current_raw == 0 for m in bus.trio.motors)
+    assert all(m.current_raw == 0 for m in bus.c610s.motors)
     assert fw.commanded_currents == ZERO
 
 
@@ -409,12 +409,12 @@ def test_board_link_over_a_pty(pty_link: tuple[int, SerialTransport]) -> None:
 def test_firmware_over_python_can_virtual_bus_in_lockstep() -> None:
     import can
 
-    from controller.fake_c610 import FakeC610Trio
+    from controller.fake_c610 import FakeC610Set
     from controller.motorbus import CanMotorBus
 
     channel = f"test-fw-virtual-{os.getpid()}"
     peer = can.Bus(interface="virtual", channel=channel)
-    trio = FakeC610Trio(start_angles_counts=(8190, 5, 4096))
+    trio = FakeC610Set(start_angles_counts=(8190, 5, 4096))
 
     def motors_answer() -> None:  # the trio on the far side of the bus, stepped synchronously
         while (msg := peer.recv(timeout=0)) is not None:

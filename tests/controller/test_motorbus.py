@@ -16,10 +16,10 @@ import pytest
 
 from controller import motorbus
 from controller.errors import BusError, PortError
-from controller.fake_c610 import FakeC610Trio
+from controller.fake_c610 import FakeC610Set
 from controller.motorbus import CAN_BITRATE, CanMotorBus, FakeMotorBus, MotorBus, feedback_filters
-from protocol.c610 import DBC_PATH, MotorFeedback, current_command
-from tests.support.c610_rigs import C610TrioServer, SlcanAdapterEmulator
+from protocol.c610 import DBC_PATH, MotorFeedback, command_frames, current_command
+from tests.support.c610_rigs import C610SetServer, SlcanAdapterEmulator
 
 
 class RecordingBus(MotorBus):
@@ -62,6 +62,83 @@ def test_send_packs_the_same_bytes_as_current_command() -> None:
             assert bus.sent[-1] == current_command(values[:motors])
 
 
+def test_every_motor_count_sends_the_frames_of_command_frames() -> None:
+    """1-4 motors: one 0x200 frame; 5-8: 0x200 then 0x1FF, byte for byte ``protocol.c610``'s layout."""
+    values = [10000, -10000, 0, 1, -1, 2000, -2000, 9999]
+    for motors in range(1, 9):
+        bus = RecordingBus(motor_count=motors)
+        assert bus.send_currents(values[:motors]) == tuple(values[:motors])
+        assert bus.sent == command_frames(values[:motors])
+        assert [can_id for can_id, _ in bus.sent] == ([0x200] if motors <= 4 else [0x200, 0x1FF])
+        assert bus.frames_sent == len(bus.sent) and bus.last_send_ok
+
+
+def test_eight_motors_golden_frames() -> None:
+    bus = RecordingBus(motor_count=8)
+    bus.send_currents([1, -2, 3, -4, 5, -6, 7, -8])
+    assert bus.sent == [
+        (0x200, bytes.fromhex("0001fffe0003fffc")),
+        (0x1FF, bytes.fromhex("0005fffa0007fff8")),
+    ]
+
+
+def test_the_clamp_applies_to_motors_5_to_8() -> None:
+    bus = RecordingBus(current_limit_raw=3000, motor_count=8)
+    sent = bus.send_currents([0, 0, 0, 0, 5000, -20000, 2999.6, -3001])  # type: ignore[list-item]
+    assert sent == (0, 0, 0, 0, 3000, -3000, 3000, -3000)
+    assert bus.sent[1] == (0x1FF, bytes.fromhex("0bb8f4480bb8f448"))
+    with pytest.raises(ValueError):
+        bus.send_currents([0] * 7)
+
+
+@pytest.mark.parametrize("motors", [0, 9])
+def test_a_bus_has_one_to_eight_motors(motors: int) -> None:
+    with pytest.raises(ValueError, match=r"motor_count must be 1\.\.8"):
+        RecordingBus(motor_count=motors)
+
+
+def test_a_failed_high_frame_is_counted_and_the_low_one_still_goes() -> None:
+    class HighFails(RecordingBus):
+        def _send_frame(self, can_id: int, data: bytes) -> None:
+            if can_id == 0x1FF:
+                raise BusError("bus off")
+            super()._send_frame(can_id, data)
+
+    bus = HighFails(motor_count=6)
+    bus.send_currents([1, 2, 3, 4, 5, 6])
+    assert [can_id for can_id, _ in bus.sent] == [0x200]
+    assert bus.can_errors == 1 and bus.frames_sent == 1 and not bus.last_send_ok
+
+
+def test_eight_motors_feedback_and_shutdown() -> None:
+    bus = RecordingBus(motor_count=8)
+    bus.inbox = [(0x200 + m, MotorFeedback(m, 0, 0).pack()) for m in range(1, 10)]
+    got = bus.read_feedback()
+    assert [motor for motor, _ in got] == list(range(1, 9)) and got[6][1].angle == 7
+    assert bus.frames_ignored == 1  # 0x209: not one of ours
+    bus.shutdown()
+    assert bus.sent == [(0x200, bytes(8)), (0x1FF, bytes(8))]
+    assert {f["can_id"] for f in feedback_filters(8)} == set(range(0x201, 0x209))
+
+
+def test_fake_bus_of_eight_motors_drives_motors_5_to_8() -> None:
+    bus = FakeMotorBus(FakeC610Set.of(8))
+    assert bus.motor_count == 8
+    bus.send_currents([0, 0, 0, 0, 0, 0, 0, 700])
+    assert [m.current_raw for m in bus.c610s.motors] == [0] * 7 + [700]
+    assert bus.c610s.commands == 2
+    fb = dict(bus.read_feedback())
+    assert set(fb) == set(range(1, 9)) and fb[8].current == 700  # stepped once, after 0x1FF
+    for _ in range(50):
+        bus.send_currents([0, 0, 0, 0, 0, 0, 0, 700])
+    fb = dict(bus.read_feedback())
+    assert fb[8].speed_rpm > 0 and fb[1].speed_rpm == 0
+    assert len(bus.read_feedback()) == 0
+    trio = FakeC610Set()
+    trio.handle_frame(0x1FF, bytes.fromhex("0001000200030004"))  # motors 5-8: not in a trio
+    assert trio.commands == 0 and [m.current_raw for m in trio.motors] == [0, 0, 0]
+
+
 def test_send_failure_is_counted_not_raised() -> None:
     bus = RecordingBus()
     bus.fail_send = True
@@ -96,7 +173,7 @@ def test_shutdown_sends_zero_once_and_is_safe_twice() -> None:
 
 def test_fake_bus_feedback_follows_commands() -> None:
     bus = FakeMotorBus()
-    bus.trio.silent.add(3)
+    bus.c610s.silent.add(3)
     bus.send_currents([500, 0, 0])
     fb = dict(bus.read_feedback())
     assert set(fb) == {1, 2}
@@ -116,13 +193,13 @@ def _drain(bus: MotorBus, want: int, timeout_s: float = 5.0) -> dict[int, MotorF
 
 def test_loopback_over_python_can_virtual_bus() -> None:
     channel = f"test-motorbus-{os.getpid()}"
-    trio = FakeC610Trio(start_angles_counts=(8000, 100, 4000))
-    with C610TrioServer(can.Bus(interface="virtual", channel=channel), trio) as server:
+    trio = FakeC610Set(start_angles_counts=(8000, 100, 4000))
+    with C610SetServer(can.Bus(interface="virtual", channel=channel), trio) as server:
         with CanMotorBus(channel, "virtual") as bus:
             bus.send_currents([300, -300, 0])
             got = _drain(bus, 3)
             assert set(got) == {1, 2, 3}
-            assert server.trio.motors[0].current_raw == 300 and server.trio.motors[1].current_raw == -300
+            assert server.c610s.motors[0].current_raw == 300 and server.c610s.motors[1].current_raw == -300
             assert got[1].current == 300 and got[2].current == -300
         assert server.error is None
     assert trio.motors[0].current_raw == 0  # shutdown sent zero current
@@ -151,9 +228,9 @@ def test_loopback_over_a_pty_with_an_slcan_adapter(pty_adapter: tuple[str, Slcan
         assert bus.can_errors == 0
     # The adapter is a thread reading the pty: give it (bounded) time to take shutdown's zero frame.
     deadline = time.monotonic() + 5.0
-    while adapter.trio.motors[0].current_raw != 0 and time.monotonic() < deadline:
+    while adapter.c610s.motors[0].current_raw != 0 and time.monotonic() < deadline:
         time.sleep(0.001)
-    assert adapter.trio.motors[0].current_raw == 0
+    assert adapter.c610s.motors[0].current_raw == 0
     assert adapter.error is None
 
 
@@ -162,6 +239,25 @@ def adapter_open(adapter: SlcanAdapterEmulator) -> bool:
     while not adapter.is_open and time.monotonic() < deadline:
         time.sleep(0.001)
     return adapter.is_open
+
+
+def test_eight_motors_loopback_over_python_can_virtual_bus() -> None:
+    channel = f"test-motorbus8-{os.getpid()}"
+    c610s = FakeC610Set((8000, 100, 4000, 1, 2, 3, 4, 5))
+    with C610SetServer(can.Bus(interface="virtual", channel=channel), c610s) as server:
+        with CanMotorBus(channel, "virtual", motor_count=8) as bus:
+            bus.send_currents([300, -300, 0, 0, 500, -500, 1000, -1000])
+            got = _drain(bus, 8)
+            assert set(got) == set(range(1, 9))
+            assert [m.current_raw for m in c610s.motors] == [300, -300, 0, 0, 500, -500, 1000, -1000]
+            assert got[5].current == 500 and got[8].current == -1000
+            assert len(bus.feedback_timestamps_s) == 8 and all(bus.feedback_timestamps_s)
+        # shutdown sends zero current on both frames; the server thread takes them (bounded wait)
+        deadline = time.monotonic() + 5.0
+        while any(m.current_raw for m in c610s.motors) and time.monotonic() < deadline:
+            time.sleep(0.001)
+        assert server.error is None
+    assert all(m.current_raw == 0 for m in c610s.motors)
 
 
 def test_missing_can_port_is_a_port_error() -> None:
@@ -229,9 +325,9 @@ def test_hardware_path_logs_every_frame_for_python_can_and_the_dbc(tmp_path: Pat
     holds both directions with their timestamps, and the shipped DBC decodes every frame to our values."""
     channel = f"test-canlog-{os.getpid()}-{suffix[1:]}"
     log = tmp_path / f"run{suffix}"
-    trio = FakeC610Trio(start_angles_counts=(8000, 100, 4000))
+    trio = FakeC610Set(start_angles_counts=(8000, 100, 4000))
     feedback: list[tuple[int, MotorFeedback]] = []
-    with C610TrioServer(can.Bus(interface="virtual", channel=channel), trio) as server:
+    with C610SetServer(can.Bus(interface="virtual", channel=channel), trio) as server:
         with CanMotorBus(channel, "virtual", log_file=log) as bus:
             for _ in range(5):
                 bus.send_currents([1500, -700, 0])

@@ -24,7 +24,8 @@ import pytest
 
 from controller.cli import main
 from controller.clock import LockstepClock
-from controller.fake_c610 import FakeC610Trio
+from controller.config import FirmwareConfig
+from controller.fake_c610 import FakeC610Set
 from controller.motorbus import FakeMotorBus
 from controller.preflight import run_preflight
 from controller.preflight_checks import (
@@ -47,7 +48,7 @@ from controller.transport import Transport
 from protocol.c610 import MotorFeedback
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import ClockKind, Heartbeat, VirtualRc, encode
-from tests.support.c610_rigs import C610TrioServer, SlcanAdapterProcess
+from tests.support.c610_rigs import C610SetServer, SlcanAdapterProcess
 from tests.support.realtime_guard import skip_if_others_were_busy
 
 LINE = re.compile(r"^(PASS|FAIL|SKIP) [a-z0-9 ()x]+: .+$")
@@ -120,7 +121,7 @@ class ScriptedHost(Transport):
         return len(data)
 
 
-class ZeroWatchTrio(FakeC610Trio):
+class ZeroWatchTrio(FakeC610Set):
     """The fake trio, remembering the largest |current| ever commanded to it."""
 
     def __init__(self) -> None:
@@ -139,12 +140,12 @@ def _by_name(report: PreflightReport) -> dict[str, Check]:
 def _lockstep_run(
     clock: FakeRealtimeClock | None = None,
     *,
-    trio: FakeC610Trio | None = None,
+    trio: FakeC610Set | None = None,
     radio: RcFrame | None = _NEUTRAL,
     host: bool = True,
 ) -> tuple[PreflightReport, FakeMotorBus]:
     clock = clock or FakeRealtimeClock()
-    bus = FakeMotorBus(trio or FakeC610Trio())
+    bus = FakeMotorBus(trio or FakeC610Set())
     rc = ScriptedRcSource(radio)
     link = ScriptedHost(clock) if host else None
     report = run_preflight(
@@ -154,6 +155,28 @@ def _lockstep_run(
 
 
 # --- the whole run on an injected clock --------------------------------------------------------------------
+
+
+def test_an_eight_motor_board_judges_each_of_its_motors() -> None:
+    clock = FakeRealtimeClock()
+    c610s = FakeC610Set.of(8)
+    c610s.silent.add(6)
+    config = FirmwareConfig().with_arms(8, 1)
+    report = run_preflight(
+        clock,
+        FakeMotorBus(c610s),
+        ScriptedRcSource(_NEUTRAL),
+        ScriptedHost(clock),
+        config=config,
+        rc_name="pty-rc",
+        link_name="pty-link",
+        exec_timer_ns=lambda: 0,
+    )
+    motors = [c for c in report.checks if c.name.startswith("motor ")]
+    assert [c.name for c in motors] == [f"motor {n} (0x{0x200 + n:03X})" for n in range(1, 9)]
+    assert [c.status for c in motors] == [Status.PASS] * 5 + [Status.FAIL] + [Status.PASS] * 2
+    with pytest.raises(ValueError, match="the bus has 3 motors, the configuration 8"):
+        run_preflight(clock, FakeMotorBus(), None, None, config=config)
 
 
 def test_a_good_rig_passes_every_check_with_zero_current_throughout() -> None:
@@ -214,7 +237,7 @@ class SlowBus(FakeMotorBus):
     """A motor bus whose n-th read takes ``stall_us`` of the clock's time (the loop's own work)."""
 
     def __init__(self, clock: LockstepClock, at: int, stall_us: int) -> None:
-        super().__init__(FakeC610Trio())
+        super().__init__(FakeC610Set())
         self.clock, self.at, self.stall_us, self.reads = clock, at, stall_us, 0
 
     def read_feedback(self) -> list[tuple[int, MotorFeedback]]:
@@ -251,7 +274,7 @@ def test_a_steady_small_lateness_passes_and_a_large_p99_fails() -> None:
 
 
 def test_a_silent_motor_the_radio_and_the_host_fail_with_their_fixes() -> None:
-    trio = FakeC610Trio()
+    trio = FakeC610Set()
     trio.silent.add(2)
     report, _ = _lockstep_run(trio=trio, radio=None, host=False)
     checks = _by_name(report)
@@ -438,11 +461,11 @@ def _heartbeats(k: int) -> bytes:
 
 
 @pytest.fixture
-def trio_bus(request: pytest.FixtureRequest) -> Iterator[tuple[str, FakeC610Trio]]:
+def trio_bus(request: pytest.FixtureRequest) -> Iterator[tuple[str, FakeC610Set]]:
     """The fake C610 trio answering on a python-can virtual bus; yields (channel, trio)."""
     channel = f"preflight-{os.getpid()}-{request.node.name}"
-    trio = FakeC610Trio()
-    with C610TrioServer(can.Bus(interface="virtual", channel=channel), trio):
+    trio = FakeC610Set()
+    with C610SetServer(can.Bus(interface="virtual", channel=channel), trio):
         yield channel, trio
 
 
@@ -483,7 +506,7 @@ def _parse(out: list[str]) -> dict[str, str]:
 
 
 def test_cli_a_missing_motor_fails_with_its_id_and_fix(
-    trio_bus: tuple[str, FakeC610Trio], capsys: pytest.CaptureFixture[str]
+    trio_bus: tuple[str, FakeC610Set], capsys: pytest.CaptureFixture[str]
 ) -> None:
     channel, trio = trio_bus
     trio.silent.add(2)
@@ -500,7 +523,7 @@ def test_cli_a_missing_motor_fails_with_its_id_and_fix(
 
 
 def test_cli_an_absent_radio_and_a_silent_host_fail(
-    trio_bus: tuple[str, FakeC610Trio], capsys: pytest.CaptureFixture[str]
+    trio_bus: tuple[str, FakeC610Set], capsys: pytest.CaptureFixture[str]
 ) -> None:
     channel, _ = trio_bus
     with PtyWriter(0.014, None) as radio, PtyWriter(0.1, None) as host:
@@ -514,7 +537,7 @@ def test_cli_an_absent_radio_and_a_silent_host_fail(
 
 
 def test_cli_invalid_radio_frames_fail(
-    trio_bus: tuple[str, FakeC610Trio], capsys: pytest.CaptureFixture[str]
+    trio_bus: tuple[str, FakeC610Set], capsys: pytest.CaptureFixture[str]
 ) -> None:
     channel, _ = trio_bus
     bad = RcFrame((0, 0, 0, 0), Lever.DOWN, 0)  # left lever 0: what a receiver never sends
@@ -529,7 +552,7 @@ def test_cli_invalid_radio_frames_fail(
 
 
 def test_cli_rc_from_the_host_link_without_virtual_rc_fails(
-    trio_bus: tuple[str, FakeC610Trio], capsys: pytest.CaptureFixture[str]
+    trio_bus: tuple[str, FakeC610Set], capsys: pytest.CaptureFixture[str]
 ) -> None:
     channel, _ = trio_bus
     with PtyWriter(0.1, _heartbeats) as host:

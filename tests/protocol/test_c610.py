@@ -17,9 +17,11 @@ from protocol.c610 import (
     CURRENT_RAW_MAX,
     FEEDBACK_ID_BASE,
     M2006_GEAR_RATIO,
+    MOTORS_MAX,
     MotorFeedback,
     amps_to_raw,
     angle_delta_counts,
+    command_frames,
     counts_to_output_rad,
     current_command,
     feedback_id,
@@ -51,6 +53,55 @@ def test_golden_command_frame() -> None:
 def test_command_pads_to_four_and_accepts_high_id() -> None:
     assert current_command([], COMMAND_ID_HIGH) == (0x1FF, bytes(8))
     assert current_command((5,), 0x1FF) == (0x1FF, bytes.fromhex("0005000000000000"))
+
+
+def test_golden_high_command_frame_carries_motors_5_to_8() -> None:
+    """0x1FF: the same layout as 0x200, motor 5 in bytes 0-1 ... motor 8 in bytes 6-7 (DJI CAN_receive.c)."""
+    assert current_command([1000, -1000, 10000, -10000], COMMAND_ID_HIGH) == (
+        0x1FF,
+        bytes.fromhex("03e8fc182710d8f0"),
+    )
+    assert current_command([-1, 2], COMMAND_ID_HIGH) == (0x1FF, bytes.fromhex("ffff000200000000"))
+
+
+def test_golden_command_frames_of_an_eight_motor_board() -> None:
+    assert MOTORS_MAX == 8
+    assert command_frames([1, -2, 3, -4, 5, -6, 7, -8]) == [
+        (0x200, bytes.fromhex("0001fffe0003fffc")),
+        (0x1FF, bytes.fromhex("0005fffa0007fff8")),
+    ]
+    assert command_frames([10000, -10000, 0, 1, -1, 2000, -2000, 9999]) == [
+        (0x200, bytes.fromhex("2710d8f000000001")),
+        (0x1FF, bytes.fromhex("ffff07d0f830270f")),
+    ]
+
+
+def test_command_frames_send_0x1ff_only_above_four_motors() -> None:
+    # three motors: the single 0x200 frame the board has always sent, slot 4 = 0
+    assert command_frames([1000, -1000, 10000]) == [(0x200, bytes.fromhex("03e8fc1827100000"))]
+    assert command_frames([1, 2, 3, 4]) == [(0x200, bytes.fromhex("0001000200030004"))]
+    # five motors: motor 5 alone in the 0x1FF frame, slots 6-8 = 0
+    assert command_frames([1, 2, 3, 4, -5]) == [
+        (0x200, bytes.fromhex("0001000200030004")),
+        (0x1FF, bytes.fromhex("fffb000000000000")),
+    ]
+
+
+@pytest.mark.parametrize("currents", [[], [0] * 9, [0, 0, 0, 0, 10001], [0] * 5 + [1.5]])
+def test_command_frames_reject_bad_arguments(currents: list[object]) -> None:
+    with pytest.raises(ValueError):
+        command_frames(currents)  # type: ignore[arg-type]
+
+
+@SETTINGS
+@given(st.lists(st.integers(-CURRENT_RAW_MAX, CURRENT_RAW_MAX), min_size=1, max_size=8))
+def test_command_frames_round_trip(currents: list[int]) -> None:
+    frames = command_frames(currents)
+    n = len(currents)
+    assert [can_id for can_id, _ in frames] == ([0x200] if n <= 4 else [0x200, 0x1FF])
+    decoded = [v for _, data in frames for v in unpack_currents(data)]
+    assert decoded[:n] == currents and not any(decoded[n:])
+    assert len(decoded) == 4 * len(frames)
 
 
 def test_command_accepts_numpy_integers() -> None:
@@ -158,6 +209,10 @@ def test_feedback_bytes_round_trip(angle: int, rest: bytes) -> None:
 )
 def test_feedback_fields_round_trip(fb: MotorFeedback) -> None:
     assert MotorFeedback.unpack(fb.pack()) == fb
+
+
+def test_feedback_ids_of_eight_motors() -> None:
+    assert [feedback_id(m) for m in range(1, MOTORS_MAX + 1)] == list(range(0x201, 0x209))
 
 
 def test_feedback_id() -> None:

@@ -15,12 +15,14 @@ from protocol.c610 import (
     CURRENT_RAW_MAX,
     DBC_PATH,
     MotorFeedback,
+    command_frames,
     current_command,
     feedback_id,
     pack_feedback,
 )
 
 GOLDEN_COMMAND = bytes.fromhex("03e8fc1827100000")  # motors 1-3 at 1000, -1000, 10000 raw
+GOLDEN_COMMAND_HIGH = bytes.fromhex("03e8fc182710d8f0")  # motors 5-8 at 1000, -1000, 10000, -10000 raw
 GOLDEN_FEEDBACK = bytes.fromhex("1fff03e8ff382400")  # angle 8191, 1000 rpm, -200 raw, 36 °C
 
 currents = st.integers(-CURRENT_RAW_MAX, CURRENT_RAW_MAX)
@@ -38,9 +40,9 @@ def c610_db() -> cantools.database.can.Database:
     return database
 
 
-def test_the_dbc_names_the_command_and_the_four_feedback_frames() -> None:
+def test_the_dbc_names_both_commands_and_the_eight_feedback_frames() -> None:
     db = c610_db()
-    assert sorted(m.frame_id for m in db.messages) == [0x200, 0x201, 0x202, 0x203, 0x204]
+    assert sorted(m.frame_id for m in db.messages) == [0x1FF, *range(0x200, 0x209)]
     assert all(m.length == 8 and not m.is_extended_frame for m in db.messages)
 
 
@@ -53,10 +55,31 @@ def test_golden_command_frame() -> None:
     )
 
 
+def test_golden_high_command_frame() -> None:
+    db = c610_db()
+    frames = command_frames([0, 0, 0, 0, 1000, -1000, 10000, -10000])
+    assert frames[1] == (0x1FF, GOLDEN_COMMAND_HIGH)
+    assert db.decode_message(*frames[1]) == pytest.approx(
+        {"Motor5_Current": 1.0, "Motor6_Current": -1.0, "Motor7_Current": 10.0, "Motor8_Current": -10.0}
+    )
+
+
+@given(st.lists(currents, min_size=5, max_size=8))
+def test_any_eight_motor_board_decodes_to_its_amps(values: list[int]) -> None:
+    db = c610_db()
+    decoded: dict[str, int] = {}
+    for can_id, data in command_frames(values):
+        fields = db.decode_message(can_id, data, scaling=False)
+        assert db.encode_message(can_id, fields, scaling=False) == data
+        decoded |= fields
+    padded = values + [0] * (8 - len(values))
+    assert decoded == {f"Motor{i + 1}_Current": v for i, v in enumerate(padded)}
+
+
 def test_golden_feedback_frame() -> None:
     db = c610_db()
     assert MotorFeedback(8191, 1000, -200, 36).pack() == GOLDEN_FEEDBACK
-    for motor in (1, 2, 3, 4):
+    for motor in range(1, 9):
         decoded = db.decode_message(feedback_id(motor), GOLDEN_FEEDBACK)
         assert decoded == {"Angle": 8191, "Speed": 1000, "Current": pytest.approx(-0.2), "Temperature": 36}
 

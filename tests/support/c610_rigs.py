@@ -1,7 +1,8 @@
-"""C610 test rigs that run in a thread: the fake trio on a python-can bus, or behind an slcan adapter.
+"""C610 test rigs that run in a thread: a fake C610 set on a python-can bus, or behind an slcan adapter.
 
-- :class:`C610TrioServer` answers every 0x200 on a python-can bus with 0x201-0x203;
-- :class:`SlcanAdapterEmulator` is a USB-CAN adapter speaking slcan on a pty, the trio behind it, so that
+- :class:`C610SetServer` answers every tick's commands on a python-can bus (0x200, and 0x1FF for a set of
+  more than four) with the feedback of motors 1..n (0x201..0x200+n); a trio by default;
+- :class:`SlcanAdapterEmulator` is a USB-CAN adapter speaking slcan on a pty, a trio behind it, so that
   ``CanMotorBus(interface="slcan", channel=<pty slave>)`` is tested end to end;
 - :class:`SlcanAdapterProcess` runs that adapter in a process of its own, for a firmware that runs in
   another: a thread would answer in bursts whenever the test's own threads hold its interpreter.
@@ -18,10 +19,10 @@ import tty
 from types import TracebackType
 from typing import Any
 
-from controller.fake_c610 import FakeC610Trio
-from protocol.c610 import COMMAND_ID_LOW
+from controller.fake_c610 import FakeC610Set
+from protocol.c610 import COMMAND_ID_HIGH, COMMAND_ID_LOW, MOTORS_PER_COMMAND
 
-__all__ = ["C610TrioServer", "SlcanAdapterEmulator", "SlcanAdapterProcess"]
+__all__ = ["C610SetServer", "SlcanAdapterEmulator", "SlcanAdapterProcess"]
 
 
 class _Worker:
@@ -54,23 +55,26 @@ class _Worker:
         raise NotImplementedError
 
 
-class C610TrioServer(_Worker):
-    """Answers each 0x200 command on a python-can bus with the trio's 0x201-0x203 feedback (a thread).
+class C610SetServer(_Worker):
+    """Answers each tick's commands on a python-can bus with the set's feedback (a thread).
 
-    Use as a context manager; the bus given is shut down on exit.
+    Every 0x200 / 0x1FF frame sets its motors' currents; the set steps and answers on the tick's last
+    frame: 0x200 for up to four motors, 0x1FF above (a board sends 0x200 first). Use as a context manager;
+    the bus given is shut down on exit.
     """
 
-    def __init__(self, bus: Any, trio: FakeC610Trio | None = None, *, dt_us: int = 1000) -> None:
-        """Serve ``trio`` (default: a fresh one) on the python-can ``bus``; each command steps ``dt_us``."""
-        super().__init__("c610-trio")
+    def __init__(self, bus: Any, c610s: FakeC610Set | None = None, *, dt_us: int = 1000) -> None:
+        """Serve ``c610s`` (default: a fresh trio) on the python-can ``bus``; each tick steps ``dt_us``."""
+        super().__init__("c610-set")
         import can
 
         self._can = can
         self.bus = bus
-        self.trio = trio if trio is not None else FakeC610Trio()
+        self.c610s = c610s if c610s is not None else FakeC610Set()
         self.dt_us = dt_us
+        self._step_id = COMMAND_ID_HIGH if len(self.c610s.motors) > MOTORS_PER_COMMAND else COMMAND_ID_LOW
 
-    def __enter__(self) -> C610TrioServer:
+    def __enter__(self) -> C610SetServer:
         self.start()
         return self
 
@@ -82,10 +86,12 @@ class C610TrioServer(_Worker):
 
     def _poll(self) -> None:
         msg = self.bus.recv(timeout=0.01)
-        if msg is None or msg.arbitration_id != COMMAND_ID_LOW or msg.is_extended_id:
+        if msg is None or msg.is_extended_id or msg.arbitration_id not in (COMMAND_ID_LOW, COMMAND_ID_HIGH):
             return
-        self.trio.handle_frame(msg.arbitration_id, bytes(msg.data))
-        for can_id, data in self.trio.step(self.dt_us):
+        self.c610s.handle_frame(msg.arbitration_id, bytes(msg.data))
+        if msg.arbitration_id != self._step_id:
+            return
+        for can_id, data in self.c610s.step(self.dt_us):
             self.bus.send(self._can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
 
 
@@ -101,11 +107,11 @@ class SlcanAdapterEmulator(_Worker):
         is_open: the host sent ``O`` (and not ``C`` since).
     """
 
-    def __init__(self, fd: int, trio: FakeC610Trio | None = None, *, dt_us: int = 1000) -> None:
+    def __init__(self, fd: int, c610s: FakeC610Set | None = None, *, dt_us: int = 1000) -> None:
         """Serve on the pty master ``fd``."""
         super().__init__("slcan-adapter")
         self.fd = fd
-        self.trio = trio if trio is not None else FakeC610Trio()
+        self.c610s = c610s if c610s is not None else FakeC610Set()
         self.dt_us = dt_us
         self.lines: list[str] = []
         self.is_open = False
@@ -160,10 +166,10 @@ class SlcanAdapterEmulator(_Worker):
             can_id = int(line[1:4], 16)
             dlc = int(line[4])
             data = bytes.fromhex(line[5 : 5 + 2 * dlc])
-            self.trio.handle_frame(can_id, data)
+            self.c610s.handle_frame(can_id, data)
             reply = b"\r" if not self.is_open else b""
             if can_id == COMMAND_ID_LOW and self.is_open:
-                for fid, fdata in self.trio.step(self.dt_us):
+                for fid, fdata in self.c610s.step(self.dt_us):
                     reply += f"t{fid:03X}8{fdata.hex().upper()}\r".encode("ascii")
         self._write(reply)
 
@@ -182,7 +188,7 @@ def _serve_slcan(fd: int, stop: Any, out: Any) -> None:
     """The body of :class:`SlcanAdapterProcess`: serve until ``stop`` is set, then report on ``out``."""
     with SlcanAdapterEmulator(fd) as adapter:
         stop.wait(120.0)  # bounded: the test's own time-out is far shorter
-    trio = adapter.trio
+    trio = adapter.c610s
     out.send(
         {
             "error": repr(adapter.error) if adapter.error is not None else None,

@@ -47,9 +47,10 @@ class Rig:
         link: bool = False,
         rc: RcSource | None = None,
         start: RcFrame | None = None,
+        bus: FakeMotorBus | None = None,
     ) -> None:
         self.config = config or FirmwareConfig()
-        self.bus = FakeMotorBus()
+        self.bus = bus if bus is not None else FakeMotorBus()
         self.radio = ScriptedRcSource(start if start is not None else frame())
         self.rc = rc if rc is not None else self.radio
         self.host: MemoryTransport | None = None
