@@ -6,6 +6,9 @@ stretching cable of issue 13 (wedge units, the default, and capsules) and with t
 joint limit active) and wrapping a cylinder; then a stability run of random cable currents up to the
 current limit (no divergence allowed).
 
+Arrays (issue 27): 1, 4 and 8 prototypes on a ring (``hil.sim.array``, the drives as MuJoCo dc motors,
+the 1 ms step), hanging and with every cable pulled, against the lone arm in the same form.
+
 Targets on a 2-core machine: free-swinging >= 10x real time, packed >= 3x (issue 3); with the stiff
 contacts of issue 13, free-swinging >= 5x. Wall-clock figures depend on what else the machine runs, so the
 CPU-time factor (this process only) is printed beside them.
@@ -164,6 +167,37 @@ def stability(design: SpiralDesign, seconds: float, seed: int, model: ModelConfi
     )
 
 
+def array_figures(seconds: float) -> list[str]:
+    """Arrays of the prototype on a ring (``hil.sim.array``: each arm's drives as MuJoCo dc motors, the
+    board physics' 1 ms step): the real-time factor hanging and with every cable pulled at 1.5 A, beside
+    the lone arm's in the same model form (the baseline of the ratio)."""
+    import mujoco
+
+    from hil.sim.array import RingConfig, build_array_spec
+
+    out = [f"  {'array (standalone drives, 1 ms step)':<70} {'bodies':>7} {'RTF wall':>9} {'RTF cpu':>8}"]
+    base: float | None = None
+    for arms in (1, 4, 8):
+        m = build_array_spec(ring=RingConfig(arms=arms, ring_radius_m=0.08)).compile()
+        for pulled in (False, True):
+            d = mujoco.MjData(m)
+            d.ctrl[:] = 1.5 if pulled else 0.0
+            steps = max(1, round(seconds / m.opt.timestep))
+            w0, c0 = time.perf_counter(), time.process_time()
+            for _ in range(steps):
+                mujoco.mj_step(m, d)
+            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+            rtf, rtf_cpu = steps * m.opt.timestep / wall, steps * m.opt.timestep / max(cpu, 1e-9)
+            label = f"{arms} arm(s), {'every cable at 1.5 A' if pulled else 'hanging'}"
+            ratio = ""
+            if arms == 1 and pulled:
+                base = rtf_cpu
+            elif pulled and base:
+                ratio = f"  (lone arm's cpu RTF / this: {base / rtf_cpu:.1f})"
+            out.append(f"  {label:<70} {m.nbody:>7d} {rtf:>8.1f}x {rtf_cpu:>7.1f}x{ratio}")
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds per scenario")
@@ -194,6 +228,9 @@ def main(argv: list[str] | None = None) -> int:
                     f"  {fig.label:<70} {fig.periods / fig.wall_s:>10.0f} {fig.rtf_wall:>8.1f}x "
                     f"{fig.rtf_cpu:>7.1f}x {fig.mean_constraints:>6.0f}"
                 )
+    print()
+    for line in array_figures(args.seconds):
+        print(line)
     print()
     design = SpiralDesign.paper_prototype()
     for label, model in MODELS:
