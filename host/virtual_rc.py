@@ -454,7 +454,7 @@ class ScriptRun:
             if self._echo_us is None:
                 self.fail(f"the board did not report this step's radio within {limit_s:.0f} s")
             elif step.until is not None:
-                self.fail(f"{step.until.describe()} not reached within {limit_s:.0f} s")
+                self.fail(f"{step.until.describe()} not reached within {limit_s:.3g} s")
             else:
                 self.fail(f"{step.for_s:g} s of board time did not pass within {limit_s:.0f} s")
 
