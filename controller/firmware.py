@@ -53,6 +53,7 @@ from protocol.messages import ClockKind, EventKind, GraspState, Mode, Phase, Tas
 __all__ = ["Firmware"]
 
 _MAX_DT_US = 20_000  # a stalled loop never makes the slew limiter jump further than this
+_LAYOUT_EVENT = 100  # INFO code of the layout event (0 RC, 1 host, 2 link changed; motors 1-8 online)
 # Enum members the control tick compares by identity (no class attribute lookup per tick).
 _SAFE, _MANUAL, _DIRECT = Mode.SAFE, Mode.MANUAL, Mode.DIRECT
 
@@ -161,6 +162,7 @@ class Firmware:
             scheduler=self.scheduler,
             events=self.events,
             link=self.link,
+            layout=(config.arm_count, config.cables_per_arm),
         )
         self._booted = False
 
@@ -213,6 +215,7 @@ class Firmware:
         a tick that wakes slightly earlier than the first one still finds its task due.
         """
         self.events.push(first_deadline_us, EventKind.BOOT, 0, 0.0, FIRMWARE_VERSION)
+        self._say_layout(first_deadline_us)
         self.scheduler.start(first_deadline_us)
         self._booted = True
 
@@ -412,6 +415,14 @@ class Firmware:
             self._last_host_ok = host_ok
             text = "host heartbeat ok" if host_ok else "host heartbeat lost"
             self.events.push(now_us, EventKind.INFO, 1, float(host_ok), text)
+            if host_ok:
+                self._say_layout(now_us)
+
+    def _say_layout(self, now_us: int) -> None:
+        """An array's layout as an INFO event (code 3), for hosts that cannot read ``ArmsTelemetry``."""
+        t = self.telemetry
+        if t.is_array:
+            self.events.push(now_us, EventKind.INFO, _LAYOUT_EVENT, float(t.layout[0]), t.layout_text())
 
     def _task_telemetry(self, now_us: int) -> None:
         self.telemetry.send(now_us, self.commanded_currents)

@@ -6,8 +6,9 @@ the control tick never pays for it.
 
 The board link's ``Telemetry`` and ``MotorFrames`` carry three motors (their layout is the three-cable
 arm's): a board with more reports motors 1-3 there (and the length-holds of cables 1-3), one with fewer
-reports zeros in the missing slots. ``motors_online`` has a bit for each of up to eight motors. Widening
-the link for arrays is a versioned change of its own (issue 27, item 2).
+reports zeros in the missing slots. ``motors_online`` has a bit for each of up to eight motors. A board
+laid out as an array also sends ``ArmsTelemetry`` (every motor, with the layout) and tells any host its
+layout in an INFO event at boot and whenever a host's heartbeat comes back (docs/board-link.md, 0x0109).
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from controller.rc import RcInput, RcSource
 from controller.scheduler import Scheduler
 from protocol.c610 import FEEDBACK_FORMAT, FEEDBACK_ID_BASE
 from protocol.messages import (
+    ArmsTelemetry,
     BoardStatus,
     ClockKind,
     MotorFrames,
@@ -86,8 +88,9 @@ class TelemetryBuilder:
         scheduler: Scheduler,
         events: EventQueue,
         link: BoardLink | None,
+        layout: tuple[int, int] = (1, 3),
     ) -> None:
-        """Keep references to the components."""
+        """Keep references to the components; ``layout`` is (arms, cables per arm)."""
         self._failsafe = failsafe
         self._motors = motors
         self._slew = slew
@@ -101,6 +104,10 @@ class TelemetryBuilder:
         self._control_task = scheduler["control"]
         self._events = events
         self._link = link
+        self.layout = layout
+        arms, cables = layout
+        self.is_array = arms > 1 or arms * cables > _LINK_MOTORS
+        """The board sends ``ArmsTelemetry``: more than one arm, or more motors than ``Telemetry`` holds."""
 
     def build(self, now_us: int, commanded_currents: tuple[int, ...]) -> Telemetry:
         """The ``Telemetry`` message for the present state (also usable without a link)."""
@@ -171,6 +178,8 @@ class TelemetryBuilder:
             if seen[i]:
                 frames[i] = (FEEDBACK_ID_BASE + 1 + i, pack(angle[i], speed[i], current[i], temperature[i]))
         link.send(MotorFrames(now_us, (frames[0], frames[1], frames[2])))
+        if self.is_array:
+            link.send(self.build_arms(now_us, commanded_currents))
         raw_rc = self._rc_input.raw
         if raw_rc:
             for t_us, frame in raw_rc:
@@ -181,6 +190,30 @@ class TelemetryBuilder:
             for event in events.pop_all():
                 link.send(event)
         link.transport.flush()
+
+    def build_arms(self, now_us: int, commanded_currents: tuple[int, ...]) -> ArmsTelemetry:
+        """The ``ArmsTelemetry`` message: every motor of an array (also usable without a link)."""
+        m = self._motors
+        n = m.motor_count
+        held = self._hold.flags
+        return ArmsTelemetry(
+            now_us,
+            self.layout[0],
+            self.layout[1],
+            tuple(m.angle[:n]),
+            tuple(m.speed_rpm[:n]),
+            tuple(m.current[:n]),
+            tuple(commanded_currents[:n]),
+            tuple(self._slew.tensions_n[:n]),
+            tuple(m.tension_est_n[:n]),
+            tuple(m.cable_length_m[:n]),
+            tuple(bool(held >> i & 1) for i in range(n)),
+        )
+
+    def layout_text(self) -> str:
+        """The INFO event that tells any host the layout (a host that predates ``ArmsTelemetry`` shows it)."""
+        arms, cables = self.layout
+        return f"array: {arms} arms x {cables} cable(s); Telemetry has motors 1-3 only"
 
     def send_status(self, now_us: int, clock_kind: ClockKind) -> None:
         """The status task: ``BoardStatus`` with every task's statistics."""

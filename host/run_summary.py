@@ -7,7 +7,7 @@ import logging
 import threading
 from dataclasses import dataclass, field
 
-from protocol.messages import Event, EventKind, Message, Mode, Phase, Telemetry
+from protocol.messages import ArmsTelemetry, Event, EventKind, Message, Mode, Phase, Telemetry
 
 __all__ = ["FAILSAFE_PHASES", "RunSummary", "SummaryReport"]
 
@@ -49,6 +49,7 @@ class SummaryReport:
     last_phase: Phase | None = None
     rc_gaps_n: int | None = None
     rc_max_gap_ms: float | None = None
+    layout: tuple[int, int] | None = None
 
     @property
     def ended_latched(self) -> bool:
@@ -83,8 +84,14 @@ class SummaryReport:
         faults = ", ".join(f"{text} at {t:.2f} s" for t, text in self.faults) or "none"
         last_mode = self.last_mode.name if self.last_mode is not None else "-"
         last_phase = self.last_phase.name if self.last_phase is not None else "-"
+        board = (
+            []
+            if self.layout is None
+            else [f"  board: an array of {self.layout[0]} arms x {self.layout[1]} cable(s)"]
+        )
         return [
             f"summary: {self.board_s:.1f} s of board time, {self.telemetry_n} telemetry messages",
+            *board,
             f"  mode:  {shares(self.mode_s)}",
             f"  phase: {shares(self.phase_s)}",
             f"  {rc}; failsafes: {failsafes}; faults: {faults}",
@@ -109,11 +116,24 @@ class RunSummary:
         self._board_us = 0
         self._failsafes: list[tuple[float, str]] = []
         self._faults: list[tuple[float, str]] = []
+        self._layout: tuple[int, int] | None = None
 
     def on_board_message(self, msg: Message) -> None:
-        """Listener: telemetry and fault events."""
+        """Listener: telemetry, an array's layout and fault events."""
         if isinstance(msg, Telemetry):
             self._on_telemetry(msg)
+        elif isinstance(msg, ArmsTelemetry):
+            layout = (msg.arms, msg.cables_per_arm)
+            with self._lock:
+                new = layout != self._layout
+                self._layout = layout
+            if new:  # once per layout: the board is an array (docs/board-link.md, 0x0109)
+                _log.info(
+                    "the board is an array of %d arms x %d cable(s), %d motors (ArmsTelemetry)",
+                    msg.arms,
+                    msg.cables_per_arm,
+                    len(msg.motor_angle),
+                )
         elif isinstance(msg, Event) and msg.kind == EventKind.FAULT:
             text = msg.text or f"fault code {msg.code}"
             with self._lock:
@@ -156,4 +176,5 @@ class RunSummary:
                 last_phase=None if last is None else last.phase,
                 rc_gaps_n=rc_gaps_n,
                 rc_max_gap_ms=None if rc_max_gap_us is None else rc_max_gap_us / 1000,
+                layout=self._layout,
             )

@@ -20,6 +20,8 @@ Callers import everything from here; the modules are ``enums`` (the wire enums a
 from __future__ import annotations
 
 from protocol.messages.board import (
+    ARMS_MOTORS_MAX,
+    ArmsTelemetry,
     BoardStatus,
     CommandAck,
     Event,
@@ -75,6 +77,7 @@ from protocol.messages.registry import MESSAGES, Message, decode, encode
 
 __all__ = [
     "ACK_TEXT_MAX",
+    "ARMS_MOTORS_MAX",
     "EVENT_TEXT_MAX",
     "HEARTBEAT_PERIOD_US",
     "HOLD_HERE",
@@ -92,6 +95,7 @@ __all__ = [
     "VERSION_LEN",
     "AckResult",
     "ArmBlocker",
+    "ArmsTelemetry",
     "BoardStatus",
     "ClockKind",
     "Command",

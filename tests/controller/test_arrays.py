@@ -27,9 +27,12 @@ from controller.rc import ScriptedRcSource
 from protocol.c610 import command_frames, unpack_currents
 from protocol.dbus import Lever
 from protocol.messages import (
+    ArmsTelemetry,
     Command,
     CommandAck,
     CommandCode,
+    Event,
+    EventKind,
     GraspState,
     Heartbeat,
     Mode,
@@ -276,6 +279,42 @@ def test_the_links_telemetry_reports_motors_1_to_3(arms: int, cables: int) -> No
     assert rig.fw.hold.held[n - 1]
     hold_bits = int(tel.flags) & (0b111 * TelemetryFlags.HOLD_1)
     assert hold_bits == (TelemetryFlags.HOLD_1 << (n - 1) if n <= 3 else 0)  # motors 4-8: not on the link
+
+
+@pytest.mark.parametrize(
+    ("arms", "cables", "sent"), [(1, 3, False), (1, 2, False), (2, 1, True), (8, 1, True), (2, 3, True)]
+)
+def test_an_array_sends_every_motor_in_arms_telemetry_and_says_its_layout(
+    arms: int, cables: int, sent: bool
+) -> None:
+    """ArmsTelemetry (0x0109) with each Telemetry carries every motor of an array, with its layout; a board
+    of one arm of up to three cables sends none (its bytes stay as they were). The layout is also an INFO
+    event at boot and when a host's heartbeat comes back, for hosts that cannot read 0x0109."""
+    config = FirmwareConfig().with_arms(arms, cables)
+    n = config.motor_count
+    rig = Rig(config, link=True, bus=RecordingFakeBus(n))
+    rig.arm()
+    rig.set_rc(frame(right=Lever.MIDDLE, ch3=400))
+    rig.tick(300)
+    rig.fw.hold.engage(n - 1)
+    rig.tick(20)
+    received = rig.drain()
+    arrays = [m for m in received if isinstance(m, ArmsTelemetry)]
+    telemetry = [m for m in received if isinstance(m, Telemetry)]
+    layout = [m for m in received if isinstance(m, Event) and m.kind == EventKind.INFO and m.code == 100]
+    if not sent:
+        assert not arrays and not layout
+        return
+    assert len(arrays) == len(telemetry) > 0  # one with each Telemetry
+    last, tel = arrays[-1], telemetry[-1]  # sent together
+    assert (last.arms, last.cables_per_arm, len(last.motor_angle)) == (arms, cables, n)
+    assert all(last.commanded_current) and last.time_us == tel.time_us
+    shown = min(n, 3)
+    for field in ("commanded_current", "motor_angle", "motor_current", "tension_target_n", "cable_length_m"):
+        assert getattr(last, field)[:shown] == pytest.approx(getattr(tel, field)[:shown]), field
+    assert last.hold == tuple(i == n - 1 for i in range(n))  # the hold of motor n, beyond Telemetry's three
+    text = f"array: {arms} arms x {cables} cable(s); Telemetry has motors 1-3 only"
+    assert [e.text for e in layout] == [text]
 
 
 # --- the grasp: the array is one gripper ----------------------------------------------------------

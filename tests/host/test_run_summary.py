@@ -13,7 +13,7 @@ from host.options import HostOptions
 from host.panel.arbiter import CLI_CLIENT
 from host.run_summary import RunSummary
 from protocol.dbus import Lever
-from protocol.messages import Event, EventKind, Mode, Phase, Telemetry
+from protocol.messages import ArmsTelemetry, Event, EventKind, Mode, Phase, Telemetry
 from tests.support.link_peer import LinkPeer
 from tests.support.realtime_guard import wait_for
 
@@ -64,6 +64,22 @@ def test_a_fault_fails_the_run_and_a_gap_in_telemetry_is_not_counted() -> None:
     s.on_board_message(Event(5_000_000, EventKind.FAULT, 2, 0.0, "motor 2 silent"))
     assert s.report().failure() == "1 fault(s), the first: motor 2 silent"
     assert RunSummary().report().failure() == "no telemetry from the board"
+
+
+def test_an_arrays_layout_is_logged_once_and_summarised(caplog: pytest.LogCaptureFixture) -> None:
+    """A board that sends ArmsTelemetry is an array: the host says its layout once, and in the summary;
+    a board that never does (a 3-motor board, or one that predates 0x0109) is read as one arm."""
+    s = RunSummary()
+    s.on_board_message(Telemetry(time_us=0, mode=Mode.MANUAL, phase=Phase.OK))
+    assert not any("board:" in line for line in s.report().lines())
+    z = (0,) * 8
+    arms = ArmsTelemetry(0, 8, 1, z, z, z, z, (0.0,) * 8, (0.0,) * 8, (0.0,) * 8, (False,) * 8)
+    with caplog.at_level(logging.INFO, logger="spirob-host"):
+        for _ in range(3):
+            s.on_board_message(arms)
+    said = [r.getMessage() for r in caplog.records if "array" in r.getMessage()]
+    assert said == ["the board is an array of 8 arms x 1 cable(s), 8 motors (ArmsTelemetry)"]
+    assert "  board: an array of 8 arms x 1 cable(s)" in s.report().lines()
 
 
 def test_a_virtual_rc_run_that_ends_latched_exits_1(capsys: pytest.CaptureFixture[str]) -> None:

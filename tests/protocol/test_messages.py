@@ -18,6 +18,7 @@ from protocol.errors import DecodeError, UnknownMessageError
 from protocol.link import MAX_PAYLOAD, LinkFrame, LinkParser, crc8, crc16, encode_frame
 from protocol.messages import (
     ACK_TEXT_MAX,
+    ARMS_MOTORS_MAX,
     EVENT_TEXT_MAX,
     HOST_TO_BOARD_MAX_PAYLOAD,
     MAX_SIM_BODIES,
@@ -25,6 +26,7 @@ from protocol.messages import (
     MESSAGES,
     AckResult,
     ArmBlocker,
+    ArmsTelemetry,
     BoardStatus,
     ClockKind,
     Command,
@@ -65,6 +67,7 @@ EXPECTED_IDS = {
     SimPoses: 0x0106,
     BoardStatus: 0x0107,
     CommandAck: 0x0108,
+    ArmsTelemetry: 0x0109,
     Heartbeat: 0x0201,
     VirtualRc: 0x0202,
     Command: 0x0203,
@@ -90,6 +93,9 @@ name12 = st.text(st.characters(min_codepoint=1, max_codepoint=127), max_size=12)
 def utf8_text(max_bytes: int) -> st.SearchStrategy[str]:
     return st.text(max_size=max_bytes).filter(lambda s: len(s.encode()) <= max_bytes)
 
+
+_LAYOUTS = [(a, c) for c in (1, 2, 3) for a in range(1, 9) if a * c <= ARMS_MOTORS_MAX]
+"""(arms, cables per arm) of every layout an ArmsTelemetry can carry."""
 
 STRATEGIES: dict[type[Message], st.SearchStrategy[Any]] = {
     Telemetry: st.builds(
@@ -149,6 +155,20 @@ STRATEGIES: dict[type[Message], st.SearchStrategy[Any]] = {
     ),
     CommandAck: st.builds(
         CommandAck, st.one_of(st.sampled_from(CommandCode), u8), st.sampled_from(AckResult), u8, utf8_text(48)
+    ),
+    ArmsTelemetry: st.sampled_from(
+        [(a, c) for c in (1, 2, 3) for a in range(1, 9) if a * c <= ARMS_MOTORS_MAX]
+    ).flatmap(
+        lambda ac: st.builds(
+            ArmsTelemetry,
+            u64,
+            st.just(ac[0]),
+            st.just(ac[1]),
+            *[
+                st.lists(e, min_size=ac[0] * ac[1], max_size=ac[0] * ac[1]).map(tuple)
+                for e in (u16, i16, i16, i16, f32, f32, f32, st.booleans())
+            ],
+        )
     ),
     Heartbeat: st.builds(Heartbeat, u64, u32),
     VirtualRc: st.builds(VirtualRc, st.binary(min_size=18, max_size=18)),
@@ -341,6 +361,27 @@ def test_golden_status_and_poses_layouts() -> None:
     assert poses.tip_position_m == (1.0, 2.0, 3.0)
 
 
+def test_golden_arms_telemetry() -> None:
+    """Two one-cable arms: the head (time, arms, cables per arm, motors) then 21 bytes per motor."""
+    msg = ArmsTelemetry(
+        5, 2, 1, (1, 2), (3, -4), (5, 6), (7, 8), (1.5, 2.5), (0.5, 0.25), (0.125, 0.0), (True, False)
+    )
+    assert msg.pack().hex() == (
+        "0500000000000000" "020102"
+        "0100" "0300" "0500" "0700" "0000c03f" "0000003f" "0000003e" "01"
+        "0200" "fcff" "0600" "0800" "00002040" "0000803e" "00000000" "00"
+    )  # fmt: skip
+    assert ArmsTelemetry.unpack(msg.pack()) == msg
+    with pytest.raises(ValueError, match="one value per motor"):
+        ArmsTelemetry(
+            5, 2, 1, (1, 2), (3,), (5, 6), (7, 8), (1.5, 2.5), (0.5, 0.25), (0.1, 0.0), (True, False)
+        ).pack()
+    with pytest.raises(ValueError, match="arms x cables"):
+        ArmsTelemetry(
+            5, 3, 1, (1, 2), (3, 4), (5, 6), (7, 8), (1.5, 2.5), (0.5, 0.25), (0.1, 0.0), (True, False)
+        ).pack()
+
+
 def test_golden_motor_frames_and_rc() -> None:
     fb = bytes.fromhex("1fff03e8ff382400")
     mf = MotorFrames(9, ((0x201, fb), (0x202, fb), (0, bytes(8))))
@@ -413,6 +454,7 @@ def _sample(cls: type[Message]) -> Message:
         SimPoses: SimPoses(1, ((0.0, 0.0, 0.0),), ((1.0, 0.0, 0.0, 0.0),)),
         BoardStatus: BoardStatus(1, "v", ClockKind.REALTIME_FIFO, (TaskStats("c", 1000),)),
         CommandAck: CommandAck(CommandCode.ARM, AckResult.ACCEPTED, 0, "ok"),
+        ArmsTelemetry: ArmsTelemetry(1, 1, 1, (0,), (0,), (0,), (0,), (0.0,), (0.0,), (0.0,), (False,)),
         Heartbeat: Heartbeat(1, 2),
         VirtualRc: VirtualRc(bytes(18)),
         Command: Command(CommandCode.ARM),
@@ -437,6 +479,10 @@ def _sample(cls: type[Message]) -> Message:
         (ParamSet, b"\xe9" + bytes(19)),  # not ASCII
         (ParamRequest, b"\xfd\xff" + bytes(16)),  # index -3
         (SimPoses, bytes(8) + bytes([MAX_SIM_BODIES + 1]) + bytes(28 * (MAX_SIM_BODIES + 1))),
+        (ArmsTelemetry, bytes(8) + bytes([9, 1, 9]) + bytes(21 * 9)),  # nine motors
+        (ArmsTelemetry, bytes(8) + bytes([2, 2, 3]) + bytes(21 * 3)),  # 2 arms x 2 cables is not 3
+        (ArmsTelemetry, bytes(8) + bytes([1, 4, 4]) + bytes(21 * 4)),  # 4 cables per arm
+        (ArmsTelemetry, bytes(8) + bytes([1, 1, 1]) + bytes(20) + b"\x02"),  # hold 2
         (BoardStatus, bytes(24) + b"\x03\x00"),  # clock kind 3
         (BoardStatus, bytes(24) + b"\x00" + bytes([MAX_TASKS + 1])),
     ],
