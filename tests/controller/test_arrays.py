@@ -446,3 +446,15 @@ def test_an_eight_motor_board_runs_its_1_khz_loop_on_a_python_can_virtual_bus() 
     assert all(p > 0 for p in peak) and len(set(peak)) == 1  # motors 5-8 as 1-4: one command for all
     assert all(m.current_raw == 0 for m in c610s.motors)
     assert c610s.commands >= 2 * 800  # 0x200 and 0x1FF on every tick
+
+
+def test_an_array_says_its_layout_again_when_a_hosts_heartbeat_returns() -> None:
+    """A host that connects after boot (or comes back) learns the layout from the INFO event too."""
+    rig = Rig(FirmwareConfig().with_arms(4, 2), link=True, bus=RecordingFakeBus(8))
+    rig.tick(30)  # past a telemetry period: the boot's layout event has gone out
+    assert any(isinstance(m, Event) and m.code == 100 for m in rig.drain())
+    for k in range(3):  # heartbeats: the host is back
+        rig.send(Heartbeat(k * 100_000, k))
+        rig.tick(100)
+    said = [m for m in rig.drain() if isinstance(m, Event) and m.kind == EventKind.INFO and m.code == 100]
+    assert [e.text for e in said] == ["array: 4 arms x 2 cable(s); Telemetry has motors 1-3 only"]
