@@ -361,3 +361,32 @@ def test_a_slow_physics_step_is_not_an_rc_loss_when_the_link_kept_sending() -> N
     first_ok = phases.index(Phase.OK)
     assert set(phases[first_ok:]) == {Phase.OK}, f"{phases.count(Phase.RC_LOST)} ticks RC_LOST"
     board.close()
+
+
+@pytest.mark.parametrize(("stall_us", "lag_us"), [(12_000, 0), (50_000, 30_000)])
+def test_after_a_late_tick_the_plant_keeps_the_wall_clocks_time(stall_us: int, lag_us: int) -> None:
+    """The firmware skips a late tick's missed deadlines; the arm does not wait: the plant steps through
+    them under the last command (up to PLANT_CATCH_UP_MAX periods), so its time stays the firmware's. A
+    plant that lagged moved slower than the firmware's clock said (a speed dip the grasp read as a
+    contact). Beyond the cap the lag is counted, not hidden."""
+    from hil.board import PLANT_CATCH_UP_MAX
+
+    host_end, board_end = MemoryTransport.pair()
+    clock = _StallingClock(lambda _now_us: host_end.read())
+    board = VirtualBoard(BoardConfig(rc="radio"), link=board_end)
+    step = board.plant.step
+
+    def slow_step() -> None:
+        step()
+        if board.plant.time_us == 500_000:  # once, half a second in
+            clock.elapse_us(stall_us)
+
+    board.plant.step = slow_step  # type: ignore[method-assign]
+    run_realtime(board, clock, duration_us=1_000_000)
+    period = board.period_us
+    assert PLANT_CATCH_UP_MAX * period < 50_000 - period
+    # The stall ended a period into its own tick's wait: 49-50 periods missed, 20 caught up.
+    assert lag_us - period <= board.plant_lag_us <= lag_us
+    # The plant stepped one period ahead of the firmware's last tick, less exactly the lag it counts.
+    assert board.plant.time_us == board.now_us + period - board.plant_lag_us
+    board.close()
