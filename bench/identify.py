@@ -16,6 +16,7 @@ exact, and how long does it take (issue 23's proof without hardware).
 Every row is written to ``--out`` (JSON lines) as it finishes; ``--resume`` skips the rows already there.
 Prints the figures and their intervals (Wilson for rates, bootstrap for medians) with the sample sizes.
 
+``--no-timing-noise`` records without late feedback frames and tick jitter (the current noise stays).
 ``--known-torque`` gives each draw's true torque constant to the fit (as a lab gives the datasheet's, or a
 bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
 
@@ -44,7 +45,13 @@ import numpy as np  # noqa: E402
 from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E402
 from hil.identify.fit import FitOptions, FitResult, fit  # noqa: E402
 from hil.identify.motor_data import load_motor_data  # noqa: E402
-from hil.identify.synthetic import MISMATCHES, draw_truth, record_truth, relative_error  # noqa: E402
+from hil.identify.synthetic import (  # noqa: E402
+    MISMATCHES,
+    SensorLimits,
+    draw_truth,
+    record_truth,
+    relative_error,
+)
 from hil.sim.config import ModelConfig  # noqa: E402
 from hil.sim.uncertain import ID_PARAMS, apply, by_name  # noqa: E402
 
@@ -72,8 +79,9 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
     truth = draw_truth(np.random.default_rng(seed))
     paths = [work / f"truth{seed}-{k}.mcap" for k in range(2)]
     t0 = time.monotonic()
+    limits = SensorLimits(can_late_rate=0.0, loop_jitter_us=0) if args.no_timing_noise else None
     for k, p in enumerate(paths):
-        record_truth(p, truth, seed=1000 * seed + k, profile_name=args.profile)
+        record_truth(p, truth, seed=1000 * seed + k, profile_name=args.profile, limits=limits)
     record_s = time.monotonic() - t0
     # Both recordings go in; the fit's budget (``--fit-s``, at least ``min_span_s`` per recording) is spent
     # on the first one's start, so the second is held out whole and simulated for the traces.
@@ -104,6 +112,7 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
         "kind": "truth",
         "seed": seed,
         "known": known,
+        "timing_noise": not args.no_timing_noise,
         "params": params,
         "held_out_rms_m": result.rms_m(True),
         "held_out_rms_nominal_m": result.rms_m(True, "nominal"),
@@ -244,6 +253,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mismatch", action="store_true", help="also the model-mismatch plants")
     ap.add_argument("--fit-time", action="store_true", help="also five 60 s recordings, timed")
     ap.add_argument("--quick", action="store_true", help="3 draws of the quick profile (a smoke run)")
+    ap.add_argument(
+        "--no-timing-noise",
+        action="store_true",
+        help="record without late feedback frames and tick jitter (the current noise stays)",
+    )
     ap.add_argument(
         "--known-torque",
         action="store_true",
