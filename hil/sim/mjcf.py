@@ -45,6 +45,8 @@ from hil.sim.config import (
     ArmConfig,
     ModelConfig,
 )
+from hil.sim.mjcf_text import num as _f
+from hil.sim.mjcf_text import vec as _v
 from hil.sim.object_shapes import object_mesh_vertices, object_shape_xml
 from hil.sim.spiral import SpiralDesign
 from hil.sim.standalone import (
@@ -295,14 +297,6 @@ def cable_layout(design: SpiralDesign, cables: int, config: ModelConfig | None =
         if i < n - 1:
             length += 2.0 * geo.cable_radius_tip_side_m[i] * ratio  # the open wedge gap to the next unit
     return CableLayout(angles, ratio, lead, travel, travel, length)
-
-
-def _f(x: float) -> str:
-    return f"{x:.9g}"
-
-
-def _v(*xs: float) -> str:
-    return " ".join(_f(x) for x in xs)
 
 
 def build_mjcf(

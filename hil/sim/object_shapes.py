@@ -6,16 +6,10 @@ from __future__ import annotations
 import math
 
 from hil.sim.config import ObjectConfig
+from hil.sim.mjcf_text import num as _f
+from hil.sim.mjcf_text import vec as _v
 
 __all__ = ["CONE_SIDES", "object_mesh_vertices", "object_shape_xml"]
-
-
-def _f(x: float) -> str:
-    return f"{x:.9g}"  # as hil.sim.mjcf writes every number
-
-
-def _v(*xs: float) -> str:
-    return " ".join(_f(x) for x in xs)
 
 
 CONE_SIDES = 24
