@@ -21,8 +21,7 @@ from controller.config import MOTOR_COUNT, FirmwareConfig
 from controller.hostlink import BoardLink
 from controller.motorbus import MotorBus
 from controller.preflight_checks import (
-    _PORT_FIX,
-    _TIMES_KEPT,
+    PORT_FIX,
     WINDOW_US,
     Check,
     LatenessStats,
@@ -75,9 +74,7 @@ class _Probe:
             for received in link.receive():
                 msg = received.msg
                 if isinstance(msg, Heartbeat):
-                    hb = self.link_stats.heartbeats_us
-                    if len(hb) < _TIMES_KEPT:
-                        hb.append(now_us)
+                    self.link_stats.take_heartbeat(now_us)
                 elif isinstance(msg, VirtualRc) and self.link_rc is not None:
                     self.link_rc.push(msg.data, now_us)
         bus = self.bus
@@ -228,7 +225,7 @@ def run_preflight(
         for n in range(1, cfg.motor_count + 1)
     ]
     if rc is None and rc_error is not None:
-        checks.append(Check("rc", Status.FAIL, rc_error, _PORT_FIX))
+        checks.append(Check("rc", Status.FAIL, rc_error, PORT_FIX))
     elif rc is not None:
         checks.append(
             judge_rc(
@@ -242,7 +239,7 @@ def run_preflight(
             )
         )
     if link_error is not None:
-        checks.append(Check("link", Status.FAIL, link_error, _PORT_FIX))
+        checks.append(Check("link", Status.FAIL, link_error, PORT_FIX))
     else:
         checks.append(
             judge_link(

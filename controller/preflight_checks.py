@@ -198,11 +198,16 @@ class LinkStats:
     frames_ok: int = 0
     bad_bytes: int = 0
 
+    def take_heartbeat(self, now_us: int) -> None:
+        """Account a heartbeat received at ``now_us`` (the first 4096 are kept)."""
+        if len(self.heartbeats_us) < _TIMES_KEPT:
+            self.heartbeats_us.append(now_us)
+
 
 # --- the judgements --------------------------------------------------------------------------------------
 
 _HW = "docs/hardware.md"
-_PORT_FIX = (
+PORT_FIX = (
     "is the adapter plugged in, the name right (ls /dev/serial/by-id) and the port free (another firmware "
     "running?); your user needs the dialout group"
 )
