@@ -21,6 +21,7 @@ frames are those it has always sent), of five to eight a 0x200 and then a 0x1FF 
 
 from __future__ import annotations
 
+import functools
 import os
 import time
 from abc import ABC, abstractmethod
@@ -242,6 +243,7 @@ def feedback_filters(motor_count: int = 3) -> list[dict[str, int | bool]]:
     ]
 
 
+@functools.cache  # one class, made on first use (python-can's slcan only when slcan is asked for)
 def _slcan_bus_class() -> type[Any]:
     """python-can's slcan bus, reading what the adapter has sent in one call instead of byte by byte.
 
@@ -256,9 +258,6 @@ def _slcan_bus_class() -> type[Any]:
     timed write selects after every write and raised "Write timeout" on frames already written). Same
     lines, same terminators (``\\r`` ok, ``\\a`` error), same errors.
     """
-    global _SLCAN_BULK
-    if _SLCAN_BULK is not None:
-        return _SLCAN_BULK
     import serial
     from can.exceptions import CanOperationError, error_check
     from can.interfaces.slcan import slcanBus
@@ -313,11 +312,9 @@ def _slcan_bus_class() -> type[Any]:
                         return None
                     buf.extend(port.read(1))  # waits up to the port's time-out for the next byte
 
-    _SLCAN_BULK = BulkSlcanBus
     return BulkSlcanBus
 
 
-_SLCAN_BULK: type[Any] | None = None
 _SLCAN_TX_PENDING_MAX = 4096
 """Bytes of slcan commands an adapter may leave untaken (about 180 command frames) before it is an error."""
 
