@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from hil.experiments import (
+    array,
     contact,
     convergence,
     dynamic,
@@ -54,6 +55,7 @@ _ALL: tuple[Entry, ...] = (
     dynamic.EXPERIMENT,
     sensitivity.EXPERIMENT,
     convergence.EXPERIMENT,
+    array.EXPERIMENT,
 )
 
 EXPERIMENTS: dict[str, Entry] = {e.name: e for e in _ALL}
