@@ -7,6 +7,7 @@ from typing import Protocol
 
 from hil.experiments import (
     array,
+    bands,
     contact,
     convergence,
     dynamic,
@@ -56,6 +57,7 @@ _ALL: tuple[Entry, ...] = (
     sensitivity.EXPERIMENT,
     convergence.EXPERIMENT,
     array.EXPERIMENT,
+    bands.EXPERIMENT,
 )
 
 EXPERIMENTS: dict[str, Entry] = {e.name: e for e in _ALL}
