@@ -25,3 +25,8 @@ class PlantDivergedError(HilError):
     def __init__(self, message: str, time_us: int) -> None:
         super().__init__(message)
         self.time_us = time_us
+
+    def __reduce__(self) -> tuple[type[PlantDivergedError], tuple[str, int]]:
+        # Picklable with its time: a worker process's divergence reaches the parent (multiprocessing
+        # rebuilds an exception from its args, which lack the time).
+        return (type(self), (str(self), self.time_us))

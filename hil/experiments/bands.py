@@ -19,7 +19,9 @@ the 3-cable prototype hanging under gravity (the project's), and the paper's: th
 bending in a plane with gravity off, as the authors' model (:func:`~hil.trial.arm_45cm.paper_arm_45cm`,
 the prototype's model scaled to it, :func:`~hil.trial.arm_45cm.scaled_model`).
 
-Each placement is grasped with the strategy off (the ramp) and on (the firmware's detector), paired.
+Each placement is grasped with the strategy off (the ramp) and on (the firmware's detector), paired. A
+grasp whose physics diverges is run again at half the step (:func:`band_grasp`); if it diverges again its
+pair is left out of the rates and counted (``diverged``).
 Success is the grasp experiments' criterion, fixed before any of them ran (held ``hold_s`` after release,
 wrapped at least 180°, :data:`~hil.trial.scene.SUCCESS_WRAP_DEG`). Per set-up and band: Wilson 95 %
 intervals and McNemar's exact test. The verdict rule, fixed before the run: the claim holds in a set-up
@@ -37,6 +39,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from hil.errors import PlantDivergedError
 from hil.experiments.base import Conditions, Experiment, Sizes
 from hil.experiments.common import Row, extremes_rows, pct, pyplot, save_figure, worst_extremes
 from hil.experiments.geometry import ArmFootprint, Envelope, joint_points_xz
@@ -46,8 +49,8 @@ from hil.sim.config import ModelConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes, PlantConfig
-from hil.trial.arm_45cm import paper_arm_45cm, scaled_model
-from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_rig, grasp_trial_job
+from hil.trial.arm_45cm import paper_arm_45cm, scaled_model, with_timestep
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_rig, grasp_trial
 from hil.trial.scene import BASE_Z_M, MS, SUCCESS_WRAP_DEG, S
 from protocol.messages import GraspState
 
@@ -209,6 +212,19 @@ def draw_placements(
     raise ValueError(f"band(s) {', '.join(short)} too small: fewer than {p.per_band} placements found")
 
 
+def band_grasp(job: tuple[GraspSetup, SpiralDesign]) -> GraspOutcome | None:
+    """One grasp; diverged physics once more at half the step; None if that diverges too."""
+    setup, design = job
+    for attempt in range(2):
+        try:
+            return grasp_trial(setup, design)
+        except PlantDivergedError:
+            if attempt == 0:
+                step = setup.model.solver.timestep_s / 2
+                setup = dataclasses.replace(setup, model=with_timestep(setup.model, step))
+    return None
+
+
 @dataclass(frozen=True)
 class BandsResult:
     """Every band's paired grasps (a :class:`~hil.experiments.base.Result`)."""
@@ -217,21 +233,36 @@ class BandsResult:
     seed: int
     placements: tuple[tuple[str, str, float, float], ...]
     """``(set-up, band, x, z)`` of each placement, in the order of the outcomes' pairs."""
-    outcomes: tuple[GraspOutcome, ...]
-    """Per placement, the ramp's grasp then the strategy's."""
+    outcomes: tuple[GraspOutcome | None, ...]
+    """Per placement, the ramp's grasp then the strategy's (None: its physics diverged twice)."""
 
     @property
     def extremes(self) -> PhysicsExtremes:
         """The worst physics over every grasp."""
-        return worst_extremes(o.extremes for o in self.outcomes)
+        return worst_extremes(o.extremes for o in self.outcomes if o is not None)
+
+    def diverged(self, setup: str | None = None) -> int:
+        """Pairs left out because a grasp diverged at both steps (of one set-up, or all)."""
+        return sum(
+            1
+            for i, (s, _, _, _) in enumerate(self.placements)
+            if (setup is None or s == setup)
+            and (self.outcomes[2 * i] is None or self.outcomes[2 * i + 1] is None)
+        )
+
+    def finer_step(self) -> int:
+        """Grasps that diverged once and were run at half the step."""
+        steps = [o.setup.model.solver.timestep_s for o in self.outcomes if o is not None]
+        return sum(1 for t in steps if t < max(steps)) if steps else 0
 
     def pairs(self, setup: str, band: str) -> list[tuple[GraspOutcome, GraspOutcome]]:
-        """The (ramp, strategy) grasps of one set-up and band."""
-        return [
-            (self.outcomes[2 * i], self.outcomes[2 * i + 1])
-            for i, (s, b, _, _) in enumerate(self.placements)
-            if s == setup and b == band
-        ]
+        """The (ramp, strategy) grasps of one set-up and band (pairs with a diverged grasp left out)."""
+        out = []
+        for i, (s, b, _, _) in enumerate(self.placements):
+            off, on = self.outcomes[2 * i], self.outcomes[2 * i + 1]
+            if s == setup and b == band and off is not None and on is not None:
+                out.append((off, on))
+        return out
 
     def cell(self, setup: str, band: str) -> dict[str, Any]:
         """Rates with Wilson intervals of both arms, discordant pairs and McNemar's p."""
@@ -262,9 +293,11 @@ class BandsResult:
             "cells": {s: {b: self.cell(s, b) for b in p.bands} for s in p.setups},
             "verdicts": {s: self.verdict(s) for s in p.setups},
             "placements": [list(x) for x in self.placements],
+            "diverged_pairs": self.diverged(),
+            "finer_step_grasps": self.finer_step(),
             "extremes": self.extremes.as_dict(),
             "trials": len(self.outcomes),
-            "outcomes": [o.as_dict() for o in self.outcomes],
+            "outcomes": [None if o is None else o.as_dict() for o in self.outcomes],
             "params": dataclasses.asdict(p),
         }
 
@@ -286,6 +319,13 @@ class BandsResult:
                     )
                 )
             rows.append((f"{s}: the claim in its between band", self.verdict(s), "holds (Note S4)"))
+        rows.append(
+            (
+                "grasps run again at half the step / pairs left out (diverged twice)",
+                f"{self.finer_step()} / {self.diverged()}",
+                "",
+            )
+        )
         rows.extend(extremes_rows(self.extremes))
         return rows
 
@@ -309,7 +349,10 @@ class BandsResult:
             for i, (setup, band, x, z) in enumerate(self.placements):
                 if setup != s:
                     continue
-                off, on = self.outcomes[2 * i].success, self.outcomes[2 * i + 1].success
+                a, b = self.outcomes[2 * i], self.outcomes[2 * i + 1]
+                if a is None or b is None:
+                    continue
+                off, on = a.success, b.success
                 ax.plot(x * 1000, z * 1000, marker=marker[(on, off)], color=colour[band], ls="", ms=7)
             verdict = self.verdict(s)
             ax.set_title(f"{s}: claim {verdict}", fontsize=9)
@@ -354,7 +397,7 @@ def bands(p: BandsParams, on: Conditions) -> BandsResult:
                         seed=on.seed,
                     )
                     jobs.append((setup, design))
-    outcomes = parallel_map(grasp_trial_job, jobs, on.jobs, on.progress)
+    outcomes = parallel_map(band_grasp, jobs, on.jobs, on.progress)
     return BandsResult(p, on.seed, tuple(placements), tuple(outcomes))
 
 

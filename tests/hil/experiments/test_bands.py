@@ -70,3 +70,30 @@ def test_the_claim_holds_only_on_a_significant_paired_win_in_the_between_band() 
     assert _result([(False, True)] * 4).verdict("prototype") == "not reproduced"  # p = 0.125
     assert _result([(True, False)] * 10).verdict("prototype") == "not reproduced"  # the ramp wins
     assert any("between band" in r[0] for r in win.table_rows())
+
+
+def test_a_diverged_grasp_runs_again_at_half_the_step_then_is_left_out(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from hil.errors import PlantDivergedError
+    from hil.experiments import bands as module
+
+    steps: list[float] = []
+
+    def diverging(setup: GraspSetup, design: object) -> GraspOutcome:
+        steps.append(setup.model.solver.timestep_s)
+        if len(steps) < limit:
+            raise PlantDivergedError("diverged", 1)
+        return _grasp(True)
+
+    monkeypatch.setattr(module, "grasp_trial", diverging)
+    setup = GraspSetup(0.05, -0.1, 0.02, model=DEFAULT_MODEL)
+    limit = 2
+    assert module.band_grasp((setup, setup_arm("prototype", DEFAULT_MODEL)[0])) is not None
+    assert steps == [DEFAULT_MODEL.solver.timestep_s, DEFAULT_MODEL.solver.timestep_s / 2]
+    steps.clear()
+    limit = 3
+    assert module.band_grasp((setup, setup_arm("prototype", DEFAULT_MODEL)[0])) is None
+    result = _result([(True, True), (False, True)])
+    result = BandsResult(result.params, 0, result.placements, (None, *result.outcomes[1:]))
+    assert result.diverged() == 1 and result.cell("prototype", "between")["n"] == 1

@@ -476,3 +476,12 @@ def test_joint_friction_sits_under_the_capstan_friction_and_is_none_by_default()
         plant.step()
     dof1 = m.jnt_dofadr[m.joint("joint_01").id]
     assert m.dof_frictionloss[dof1] > expected[1]  # the capstan friction on top of it
+
+
+def test_a_divergence_crosses_process_boundaries_with_its_time() -> None:
+    """A worker's diverged plant reaches the parent whole (multiprocessing pickles the exception): an
+    unpicklable one killed the pool's result thread and hung the experiment that met it."""
+    import pickle
+
+    again = pickle.loads(pickle.dumps(PlantDivergedError("plant diverged at t = 7 us: NaN", 7)))
+    assert isinstance(again, PlantDivergedError) and again.time_us == 7 and "t = 7 us" in str(again)
