@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from protocol.messages.board import (
     ARMS_MOTORS_MAX,
+    ArmPoses,
     ArmsTelemetry,
     BoardStatus,
     CommandAck,
@@ -95,6 +96,7 @@ __all__ = [
     "VERSION_LEN",
     "AckResult",
     "ArmBlocker",
+    "ArmPoses",
     "ArmsTelemetry",
     "BoardStatus",
     "ClockKind",

@@ -393,17 +393,7 @@ class SimPoses(Message):
 
     def pack(self) -> bytes:
         """Encode the payload (see :meth:`Message.pack`)."""
-        n = len(self.positions_m)
-        if n != len(self.quats_wxyz):
-            raise ValueError(f"{n} positions but {len(self.quats_wxyz)} quaternions")
-        if n > MAX_SIM_BODIES:
-            raise ValueError(f"at most {MAX_SIM_BODIES} bodies, got {n}")
-        flat: list[float] = []
-        for p, q in zip(self.positions_m, self.quats_wxyz, strict=True):
-            if len(p) != 3 or len(q) != 4:
-                raise ValueError("positions are (x, y, z), quaternions (w, x, y, z)")
-            flat += p
-            flat += q
+        n, flat = _flat_poses(self.positions_m, self.quats_wxyz, "bodies")
         try:
             return _SIM_HEAD.pack(self.time_us, n) + _POSES[n].pack(*flat)
         except (struct.error, OverflowError) as exc:
@@ -418,10 +408,99 @@ class SimPoses(Message):
         if n > MAX_SIM_BODIES:
             raise DecodeError(f"SimPoses: {n} bodies, at most {MAX_SIM_BODIES}")
         _check_len(payload, _SIM_HEAD.size + _POSES[n].size, "SimPoses")
-        v = _POSES[n].unpack_from(payload, _SIM_HEAD.size)
-        positions = tuple(v[i : i + 3] for i in range(0, len(v), _POSE_FLOATS))
-        quats = tuple(v[i + 3 : i + 7] for i in range(0, len(v), _POSE_FLOATS))
-        return cls(t, positions, quats)
+        return cls(t, *_unpack_poses(payload, _SIM_HEAD.size, n))
+
+
+_ARM_POSES_HEAD = struct.Struct("<QBBB")
+
+
+@_register
+@dataclass(frozen=True, slots=True)
+class ArmPoses(Message):
+    """World poses of one arm's units of an array (simulation only, with each ``SimPoses``). 11 + 28 n bytes.
+
+    ``SimPoses`` keeps the drone and arm 0 (a host that predates arrays draws that arm); a board whose
+    plant has more than one arm sends one ``ArmPoses`` for each of arms 1 .. arms-1 right after it, at
+    the same time. Units go from base to tip, in the same world frame and with the same 28-byte pose as
+    ``SimPoses``.
+
+    Attributes:
+        time_us: simulation time (the ``SimPoses`` it goes with has the same).
+        arm: the arm, 0 .. arms-1.
+        arms: arms of the plant, 1 .. 8.
+        positions_m: n positions (x, y, z) in the world frame.
+        quats_wxyz: n orientations as unit quaternions (w, x, y, z).
+    """
+
+    CMD_ID: ClassVar[int] = 0x010A
+    DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
+
+    time_us: int
+    arm: int
+    arms: int
+    positions_m: tuple[Vec3f, ...]
+    quats_wxyz: tuple[Vec4f, ...]
+
+    @property
+    def tip_position_m(self) -> Vec3f:
+        """Position of the arm's tip unit (the last).
+
+        Raises:
+            IndexError: no units.
+        """
+        return self.positions_m[-1]
+
+    def pack(self) -> bytes:
+        """Encode the payload (see :meth:`Message.pack`)."""
+        _check_arm(self.arm, self.arms, ValueError)
+        n, flat = _flat_poses(self.positions_m, self.quats_wxyz, "units")
+        try:
+            return _ARM_POSES_HEAD.pack(self.time_us, self.arm, self.arms, n) + _POSES[n].pack(*flat)
+        except (struct.error, OverflowError) as exc:
+            raise _pack_error("ArmPoses", exc) from exc
+
+    @classmethod
+    def unpack(cls, payload: bytes) -> ArmPoses:
+        """Decode the payload (see :meth:`Message.unpack`)."""
+        head = _ARM_POSES_HEAD.size
+        if len(payload) < head:
+            raise DecodeError(f"ArmPoses payload is at least {head} bytes, got {len(payload)}")
+        t, arm, arms, n = _ARM_POSES_HEAD.unpack_from(payload)
+        _check_arm(arm, arms, DecodeError)
+        if n > MAX_SIM_BODIES:
+            raise DecodeError(f"ArmPoses: {n} units, at most {MAX_SIM_BODIES}")
+        _check_len(payload, head + _POSES[n].size, "ArmPoses")
+        return cls(t, arm, arms, *_unpack_poses(payload, head, n))
+
+
+def _flat_poses(
+    positions_m: tuple[Vec3f, ...], quats_wxyz: tuple[Vec4f, ...], what: str
+) -> tuple[int, list[float]]:
+    """Count and flat floats of poses (x, y, z, w, x, y, z per body), checked for the wire."""
+    n = len(positions_m)
+    if n != len(quats_wxyz):
+        raise ValueError(f"{n} positions but {len(quats_wxyz)} quaternions")
+    if n > MAX_SIM_BODIES:
+        raise ValueError(f"at most {MAX_SIM_BODIES} {what}, got {n}")
+    flat: list[float] = []
+    for p, q in zip(positions_m, quats_wxyz, strict=True):
+        if len(p) != 3 or len(q) != 4:
+            raise ValueError("positions are (x, y, z), quaternions (w, x, y, z)")
+        flat += p
+        flat += q
+    return n, flat
+
+
+def _unpack_poses(payload: bytes, at: int, n: int) -> tuple[tuple[Vec3f, ...], tuple[Vec4f, ...]]:
+    v = _POSES[n].unpack_from(payload, at)
+    positions = tuple(v[i : i + 3] for i in range(0, len(v), _POSE_FLOATS))
+    quats = tuple(v[i + 3 : i + 7] for i in range(0, len(v), _POSE_FLOATS))
+    return positions, quats
+
+
+def _check_arm(arm: int, arms: int, error: type[Exception]) -> None:
+    if not (1 <= arms <= ARMS_MOTORS_MAX and 0 <= arm < arms):
+        raise error(f"ArmPoses: arm {arm} of {arms} (1-{ARMS_MOTORS_MAX} arms, numbered from 0)")
 
 
 @dataclass(frozen=True, slots=True)
