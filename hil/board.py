@@ -53,7 +53,7 @@ from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PlantConfig
 from protocol.dbus import RcFrame
-from protocol.messages import SimPoses
+from protocol.messages import ARMS_MOTORS_MAX, ArmPoses, Message, SimPoses
 
 _log = logging.getLogger(__name__)
 
@@ -324,6 +324,36 @@ def poses_message(time_us: int, positions_m: Any, quats_wxyz: Any) -> SimPoses:
         tuple(map(tuple, np.asarray(positions_m).tolist())),
         tuple(map(tuple, np.asarray(quats_wxyz).tolist())),
     )
+
+
+def pose_messages(time_us: int, positions_m: Any, quats_wxyz: Any, arms: int = 1) -> SimPoses | list[Message]:
+    """What the poses task sends for the plant's body poses (the drone, then each arm's units, arm after arm).
+
+    One arm: the one ``SimPoses`` it always was (byte-identical). An array: ``SimPoses`` with the drone and
+    arm 0 (what a host that predates arrays draws), then one ``ArmPoses`` for each further arm
+    (docs/board-link.md, 0x010A), all stamped ``time_us``.
+
+    Raises:
+        ValueError: ``arms`` is not 1-8, or the units do not split into ``arms`` equal arms.
+    """
+    if not 1 <= arms <= ARMS_MOTORS_MAX:
+        raise ValueError(f"{arms} arms: 1-{ARMS_MOTORS_MAX}")
+    if arms == 1:
+        return poses_message(time_us, positions_m, quats_wxyz)
+    positions = np.asarray(positions_m).tolist()
+    quats = np.asarray(quats_wxyz).tolist()
+    units, rest = divmod(len(positions) - 1, arms)
+    if rest or units < 1 or len(quats) != len(positions):
+        raise ValueError(f"{len(positions)} body poses are not a drone and {arms} arms of as many units")
+    msgs: list[Message] = [
+        SimPoses(time_us, tuple(map(tuple, positions[: 1 + units])), tuple(map(tuple, quats[: 1 + units])))
+    ]
+    for arm in range(1, arms):
+        lo, hi = 1 + arm * units, 1 + (arm + 1) * units
+        msgs.append(
+            ArmPoses(time_us, arm, arms, tuple(map(tuple, positions[lo:hi])), tuple(map(tuple, quats[lo:hi])))
+        )
+    return msgs
 
 
 # --- real time ------------------------------------------------------------------------------------

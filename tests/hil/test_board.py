@@ -6,6 +6,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
 import pytest
 import serial
 
@@ -17,6 +18,8 @@ from hil.board import (
     LinkWire,
     VirtualBoard,
     VirtualBoardProcess,
+    pose_messages,
+    poses_message,
     realtime_board,
     run_realtime,
 )
@@ -26,6 +29,7 @@ from hil.radio import RadioScript
 from protocol.dbus import Lever, RcFrame
 from protocol.link import LinkParser
 from protocol.messages import (
+    ArmPoses,
     Event,
     EventKind,
     Heartbeat,
@@ -53,6 +57,45 @@ def test_lockstep_tick_order_and_time() -> None:
     assert len(host.telemetry) == 10  # 100 Hz
     assert any(isinstance(m, SimPoses) for m in host.other)
     board.close()
+
+
+def _bodies(arms: int, units: int) -> tuple[np.ndarray, np.ndarray]:
+    """Body poses as a plant gives them: the drone, then each arm's units; arm a's unit u at z = a + u/100."""
+    z = [0.0] + [a + u / 100 for a in range(arms) for u in range(units)]
+    positions = np.array([[0.0, 0.0, v] for v in z])
+    quats = np.tile([1.0, 0.0, 0.0, 0.0], (len(z), 1))
+    return positions, quats
+
+
+def test_one_arms_poses_are_the_one_simposes_it_always_was() -> None:
+    positions, quats = _bodies(1, 21)
+    got = pose_messages(5, positions, quats)
+    assert isinstance(got, SimPoses) and got == poses_message(5, positions, quats)
+    assert got.pack() == poses_message(5, positions, quats).pack()
+
+
+@pytest.mark.parametrize(("arms", "units"), [(2, 21), (4, 21), (8, 21), (3, 1)])
+def test_an_arrays_poses_split_into_simposes_and_one_armposes_per_further_arm(arms: int, units: int) -> None:
+    """8 arms of the 21-unit prototype (169 bodies) overflow one SimPoses (64): one ArmPoses per arm."""
+    positions, quats = _bodies(arms, units)
+    got = pose_messages(9, positions, quats, arms)
+    assert isinstance(got, list)
+    first, *rest = got
+    assert isinstance(first, SimPoses) and len(first.positions_m) == 1 + units  # the drone and arm 0
+    assert first.positions_m[0] == (0.0, 0.0, 0.0)
+    assert first.tip_position_m[2] == pytest.approx((units - 1) / 100)
+    further = [m for m in rest if isinstance(m, ArmPoses)]
+    assert len(further) == len(rest)
+    assert [(m.arm, m.arms, m.time_us) for m in further] == [(a, arms, 9) for a in range(1, arms)]
+    for m in further:
+        assert [p[2] for p in m.positions_m] == pytest.approx([m.arm + u / 100 for u in range(units)])
+        m.pack()  # fits the wire
+
+
+@pytest.mark.parametrize(("bodies_of", "arms"), [((2, 4), 3), ((1, 4), 0), ((1, 4), 9), ((0, 0), 2)])
+def test_poses_that_do_not_split_into_the_arms_are_refused(bodies_of: tuple[int, int], arms: int) -> None:
+    with pytest.raises(ValueError):
+        pose_messages(0, *_bodies(*bodies_of), arms)
 
 
 def test_control_period_mismatch_is_refused() -> None:
