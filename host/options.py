@@ -536,7 +536,8 @@ _INPUT_MAJOR = 13
 
 
 def _objects_from_args(ns: argparse.Namespace) -> tuple[ObjectSpec, ...]:
-    """``--object`` / ``--no-object``: the virtual board's objects (the default demo's one if neither).
+    """``--object`` / ``--no-object``: the virtual board's objects (the default demo's one if neither, for one
+    arm).
 
     Raises:
         HostError: a malformed spec, or objects asked of a board that has no scene to add them to.
@@ -551,7 +552,9 @@ def _objects_from_args(ns: argparse.Namespace) -> tuple[ObjectSpec, ...]:
     if ns.no_object:
         return ()
     if not ns.object:
-        return (DEFAULT_OBJECT,)
+        # The one arm's pole stands where an array's first arm hangs (6 cm from the axis): an array
+        # starts with an empty scene unless --object places something.
+        return () if ns.arms not in (None, 1) else (DEFAULT_OBJECT,)
     specs = []
     for text in ns.object:
         try:

@@ -167,6 +167,8 @@ def test_object_flags_choose_the_virtual_boards_scene() -> None:
 
     assert objects() == (DEFAULT_OBJECT,)  # the default demo has something to grasp
     assert objects("--no-object") == ()
+    assert objects("--arms", "4") == ()  # the one arm's pole would stand inside an array's arm 0
+    assert objects("--arms", "1") == (DEFAULT_OBJECT,)
     assert objects("--port", "loop://") == ()  # a real board's scene is not ours to fill
     two = objects("--object", "cylinder:d=20mm,x=40mm,z=-110mm", "--object", "capsule:d=1cm,z=-0.2m")
     assert [(o.shape, o.diameter_m, o.z_m) for o in two] == [
