@@ -7,13 +7,15 @@ joint limit active) and wrapping a cylinder; then a stability run of random cabl
 current limit (no divergence allowed).
 
 Arrays (issue 27): 1, 4 and 8 prototypes on a ring (``hil.sim.array``, the drives as MuJoCo dc motors,
-the 1 ms step), hanging and with every cable pulled, against the lone arm in the same form.
+the 1 ms step), hanging and with every cable pulled, against the lone arm in the same form; and the
+project's ``Plant`` of 1, 2, 4, 6 and 8 one-cable arms (the Python drives, live capstan friction, feedback
+frames), as a board for an array steps it, against its one arm.
 
 Targets on a 2-core machine: free-swinging >= 10x real time, packed >= 3x (issue 3); with the stiff
 contacts of issue 13, free-swinging >= 5x. Wall-clock figures depend on what else the machine runs, so the
 CPU-time factor (this process only) is printed beside them.
 
-Usage: ``.venv/bin/python bench/plant.py [--seconds 5] [--stability-seconds 60] [--seed 0]``
+Usage: ``.venv/bin/python bench/plant.py [--seconds 5] [--stability-seconds 60] [--seed 0] [--arrays]``
 """
 
 from __future__ import annotations
@@ -173,7 +175,8 @@ def array_figures(seconds: float) -> list[str]:
     the lone arm's in the same model form (the baseline of the ratio)."""
     import mujoco
 
-    from hil.sim.array import RingConfig, build_array_spec
+    from hil.sim.array import build_array_spec
+    from hil.sim.types import RingConfig
 
     out = [f"  {'array (standalone drives, 1 ms step)':<70} {'bodies':>7} {'RTF wall':>9} {'RTF cpu':>8}"]
     base: float | None = None
@@ -198,12 +201,53 @@ def array_figures(seconds: float) -> list[str]:
     return out
 
 
+def plant_array_figures(seconds: float) -> list[str]:
+    """The ``Plant`` of an array of one-cable prototypes (``PlantConfig.ring``) at the board physics (1 ms),
+    every cable at 1.5 A, feedback frames read every period as the board's bus does: real-time factor,
+    and the cost against the one-arm ``Plant`` (the baseline, measured in the same run)."""
+    import dataclasses
+
+    from hil.sim.types import RingConfig
+
+    design = dataclasses.replace(SpiralDesign.paper_prototype(), cables=1)
+    out = [
+        f"  {'Plant of one-cable arms (1 ms, board physics)':<70} {'motors':>7} {'RTF wall':>9} "
+        f"{'RTF cpu':>8}"
+    ]
+    base: float | None = None
+    for arms in (1, 2, 4, 6, 8):
+        plant = Plant(design, PlantConfig(ring=RingConfig(arms=arms)))
+        plant.apply_currents([1500] * arms + [0] * (-arms % 4))
+        periods = max(1, round(seconds * 1000))
+        w0, c0 = time.perf_counter(), time.process_time()
+        for _ in range(periods):
+            plant.step()
+            plant.feedback_payloads()
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        rtf, rtf_cpu = periods * 1e-3 / wall, periods * 1e-3 / max(cpu, 1e-9)
+        ratio = ""
+        if arms == 1:
+            base = rtf_cpu
+        elif base:
+            ratio = f"  (one arm's cpu RTF / this: {base / rtf_cpu:.1f})"
+        out.append(
+            f"  {f'{arms} arm(s), every cable at 1.5 A':<70} {plant.motors:>7d} {rtf:>8.1f}x "
+            f"{rtf_cpu:>7.1f}x{ratio}"
+        )
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds per scenario")
     parser.add_argument("--stability-seconds", type=float, default=60.0, help="length of the stability run")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--arrays", action="store_true", help="only the arrays' figures")
     args = parser.parse_args(argv)
+    if args.arrays:
+        for line in array_figures(args.seconds) + plant_array_figures(args.seconds):
+            print(line)
+        return 0
 
     probe = Plant()
     sol = probe.config.model.solver
@@ -230,6 +274,8 @@ def main(argv: list[str] | None = None) -> int:
                 )
     print()
     for line in array_figures(args.seconds):
+        print(line)
+    for line in plant_array_figures(args.seconds):
         print(line)
     print()
     design = SpiralDesign.paper_prototype()

@@ -51,7 +51,7 @@ from hil.radio import RadioScript, VirtualRadio
 from hil.recording import Recorder
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
-from hil.sim.types import PlantConfig
+from hil.sim.types import PlantConfig, RingConfig
 from protocol.dbus import RcFrame
 from protocol.messages import ARMS_MOTORS_MAX, ArmPoses, Message, SimPoses
 
@@ -176,6 +176,29 @@ class BoardConfig:
         }
 
 
+def board_plant_config(cfg: BoardConfig) -> PlantConfig:
+    """The plant a board drives: an array of the firmware's arms when it lays itself out as one.
+
+    A firmware of N > 1 arms drives ``RingConfig(arms=N)`` unless ``cfg.plant.ring`` says where they hang;
+    every arm is ``cfg.design``, whose cables must be the firmware's cables per arm.
+
+    Raises:
+        ValueError: the firmware's layout and the plant's differ.
+    """
+    fw, plant = cfg.firmware, cfg.plant
+    ring = plant.ring
+    if ring is None and fw.arm_count > 1:
+        ring = RingConfig(arms=fw.arm_count)
+    if ring is None:
+        return plant
+    if ring.arms != fw.arm_count or cfg.design.cables != fw.cables_per_arm:
+        raise ValueError(
+            f"the firmware drives {fw.arm_count} arm(s) of {fw.cables_per_arm} cable(s); the plant has "
+            f"{ring.arms} arm(s) of {cfg.design.cables}"
+        )
+    return dataclasses.replace(plant, ring=ring)
+
+
 class VirtualBoard:
     """Firmware + plant + radio + link, advanced one control period at a time.
 
@@ -205,7 +228,7 @@ class VirtualBoard:
         plant_rng, fault_rng = rng.spawn(2)
         self.faults = FaultSet(faults, fault_rng)
         self.recorder = recorder
-        self.plant = Plant(cfg.design, cfg.plant, plant_rng)
+        self.plant = Plant(cfg.design, board_plant_config(cfg), plant_rng)
         self.plant_lag_us = 0
         """Real time only: physics a late tick could not catch up (:data:`PLANT_CATCH_UP_MAX`), by which the
         plant lags the firmware's clock."""
@@ -224,6 +247,7 @@ class VirtualBoard:
             faults=self.faults,
             recorder=recorder,
             current_limit_raw=cfg.firmware.motor.current_limit_raw,
+            motor_count=cfg.firmware.motor_count,
         )
         self.radio: VirtualRadio | None = None
         rc: RcSource
@@ -254,10 +278,14 @@ class VirtualBoard:
 
     def _poses(self) -> SimPoses:
         poses = self.plant.body_poses()
+        positions, quats = poses.positions_m, poses.quats_wxyz
+        if self.plant.arms > 1:  # SimPoses: the drone and arm 0 (an array's arms do not fit one message)
+            n = 1 + self.plant.units_per_arm
+            positions, quats = positions[:n], quats[:n]
         if self.recorder is not None:  # an input of the firmware like any other: replay needs it
-            data = recording.pack_poses(poses.positions_m, poses.quats_wxyz)
+            data = recording.pack_poses(positions, quats)
             self.recorder.write_raw(recording.POSES, self.now_us, data)
-        return poses_message(self.now_us, poses.positions_m, poses.quats_wxyz)
+        return poses_message(self.now_us, positions, quats)
 
     def tick(self, now_us: int | None = None) -> None:
         """One control period in lockstep order: physics, delivery, firmware, command delivery.

@@ -4,8 +4,9 @@ The bus is where bytes cross, so faults are injected and frames recorded here, a
 (:mod:`hil.sim.drives`) know neither. As python-can's virtual bus does for its tests, each bus gives the
 firmware exactly what a real CAN bus gives it, with no hardware:
 
-- :class:`SimMotorBus`: the far end is the simulated C610 trio (the plant), one 0x200 frame out per control
-  tick and 0x201-0x203 feedback frames in. The driver of the simulation decides when frames cross:
+- :class:`SimMotorBus`: the far end is the simulated C610s (the plant: a trio, or an array's 1-8), one
+  0x200 frame out per control tick (and 0x1FF for motors 5-8) and 0x201-0x20n feedback frames in. The
+  driver of the simulation decides when frames cross:
 
   1. :meth:`SimMotorBus.deliver_feedback` after each plant step puts the motors' feedback frames (through
      the fault set) in the bus's receive queue;
@@ -28,6 +29,8 @@ from hil import recording
 from hil.faults import FaultSet
 from hil.recording import Recorder
 from protocol.c610 import (
+    COMMAND_FORMAT,
+    COMMAND_ID_HIGH,
     COMMAND_ID_LOW,
     CURRENT_RAW_MAX,
     FEEDBACK_ID_BASE,
@@ -46,10 +49,10 @@ class Motors(Protocol):
     """What the bus needs of the plant: C610-shaped commands in, C610-shaped feedback out."""
 
     def apply_currents(self, raw: Sequence[int]) -> object:
-        """Set the three ESC current setpoints (raw, 1000 per amp)."""
+        """Set the ESCs' current setpoints (raw, 1000 per amp), one per motor."""
 
     def feedback(self) -> Sequence[MotorFeedback]:
-        """The three motors' feedback now."""
+        """Every motor's feedback now, motor 1 first."""
 
 
 @runtime_checkable
@@ -61,10 +64,12 @@ class PayloadMotors(Motors, Protocol):
 
 
 class SimMotorBus(MotorBus):
-    """Motor bus whose far end is a simulated C610 trio.
+    """Motor bus whose far end is simulated C610s (a trio by default).
 
     Args:
         motors: the plant (anything with ``apply_currents`` and ``feedback``).
+        motor_count: the motors (1..8; an array's arms x cables). Above four the command is two frames
+            (0x200 for motors 1-4, 0x1FF for 5-8); the ESCs take a command once both have crossed.
         now_us: the simulation clock, for fault windows and recording timestamps.
         faults: faults on the bus (silence, stuck, wrong feedback, bus off).
         recorder: optional recording of every frame that crosses.
@@ -81,17 +86,20 @@ class SimMotorBus(MotorBus):
         faults: FaultSet | None = None,
         recorder: Recorder | None = None,
         current_limit_raw: int = CURRENT_RAW_MAX,
+        motor_count: int = 3,
     ) -> None:
-        super().__init__(current_limit_raw=current_limit_raw, motor_count=3)
+        super().__init__(current_limit_raw=current_limit_raw, motor_count=motor_count)
         self.motors = motors
         self._now_us = now_us
         self.faults = faults
         self.recorder = recorder
         self._inbox: list[tuple[int, bytes]] = []
         self._command: bytes | None = None
+        self._command_high: bytes | None = None
         self._applied: bytes | None = None
-        self.applied: tuple[int, int, int] = (0, 0, 0)
-        """The setpoints the ESCs hold now (raw)."""
+        self._applied_high: bytes | None = None
+        self.applied: tuple[int, ...] = (0,) * motor_count
+        """The setpoints the ESCs hold now (raw), one per motor."""
         self.commands_applied = 0
 
     @property
@@ -135,8 +143,11 @@ class SimMotorBus(MotorBus):
                 recorder.write_raw(recording.CAN_RX, t, recording.pack_can(can_id, data))
 
     def deliver_command(self) -> None:
-        """Hand the last command frame, if a new one was sent, to the ESCs."""
+        """Hand the last command frame(s), if new ones were sent, to the ESCs."""
         data = self._command
+        if self._two_frames:
+            self._deliver_two(data)
+            return
         if data is None:
             return
         self._command = None
@@ -144,7 +155,28 @@ class SimMotorBus(MotorBus):
         if data == self._applied:  # the ESCs already hold these setpoints
             return
         self._applied = data
-        self.applied = unpack_currents3(data)  # 8 bytes: MotorBus packed them
+        n = self.motor_count
+        # MotorBus packed it: 8 bytes.
+        self.applied = unpack_currents3(data) if n == 3 else COMMAND_FORMAT.unpack(data)[:n]
+        self._motors.apply_currents(self.applied)
+
+    def _deliver_two(self, low: bytes | None) -> None:
+        """Motors 5-8 as well: each frame's ESCs take their own frame (a lost one keeps its old setpoints)."""
+        high = self._command_high
+        if low is None and high is None:
+            return
+        self._command = self._command_high = None
+        self.commands_applied += 1
+        low = low if low is not None else self._applied
+        high = high if high is not None else self._applied_high
+        if low == self._applied and high == self._applied_high:
+            return
+        self._applied, self._applied_high = low, high
+        zeros = (0, 0, 0, 0)
+        values = (COMMAND_FORMAT.unpack(low) if low is not None else zeros) + (
+            COMMAND_FORMAT.unpack(high) if high is not None else zeros
+        )
+        self.applied = values[: self.motor_count]
         self._motors.apply_currents(self.applied)
 
     def _send_frame(self, can_id: int, data: bytes) -> None:
@@ -153,6 +185,8 @@ class SimMotorBus(MotorBus):
             raise BusError("CAN bus off")
         if can_id == COMMAND_ID_LOW:
             self._command = data
+        elif can_id == COMMAND_ID_HIGH:
+            self._command_high = data
         if self.recorder is not None:
             self.recorder.write_raw(recording.CAN_TX, self._now_us(), recording.pack_can(can_id, data))
 
@@ -172,8 +206,8 @@ class ReplayBus(MotorBus):
 
     simulated: ClassVar[bool] = True
 
-    def __init__(self, current_limit_raw: int = CURRENT_RAW_MAX) -> None:
-        super().__init__(current_limit_raw=current_limit_raw, motor_count=3)
+    def __init__(self, current_limit_raw: int = CURRENT_RAW_MAX, motor_count: int = 3) -> None:
+        super().__init__(current_limit_raw=current_limit_raw, motor_count=motor_count)
         self.inbox: list[tuple[int, bytes]] = []
         """Feedback frames ``(can_id, data)`` the firmware reads next."""
         self.sent: list[bytes] = []

@@ -136,7 +136,7 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
         )
     _check_format(meta)
     config, rc_kind = _firmware_from(meta)
-    bus = ReplayBus(config.motor.current_limit_raw)
+    bus = ReplayBus(config.motor.current_limit_raw, config.motor_count)
     link = WireEnd()
     uart: MemoryUart | None = None
     rc: RcSource

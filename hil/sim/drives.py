@@ -47,7 +47,7 @@ class Drives:
 
     Args:
         motor: the drives' figures (all drives are alike).
-        count: number of drives (= cables, 1..4).
+        count: number of drives (= motors, 1..8: an array's arms x cables).
         rng: the only source of randomness (encoder zeros at :meth:`reset`, current noise). ``None`` = no
             randomness: encoders start at 0 and ``motor.current_noise_raw`` must be 0.
         actuator: what the spool actuators are (default: the motor). For ``tension`` the actuator's
@@ -83,7 +83,10 @@ class Drives:
         self._ctrl_per_a = fpa / muscle_force_n if muscle_force_n is not None and kind == "muscle" else fpa
         self._ctrl_max = 1.0 if kind == "muscle" else math.inf
         self._amps_per_n = 1.0 / fpa
+        if not 1 <= count <= 8:
+            raise ValueError(f"drives: 1..8 motors on a C610 bus, got {count}")
         self._n = count
+        self._slots = -(-count // 4) * 4  # the command frames' slots (four per frame)
         self._rng = rng
         self.spool_radius_m = motor.spool_radius_m
         """Cable spool radius [m]."""
@@ -222,20 +225,22 @@ class Drives:
         """Set the motors' current setpoints in raw C610 units (1000 per amp), one per cable.
 
         Values beyond the configured current limit are clamped, like the ESC does. A C610 command frame
-        has four slots: values beyond the drives (e.g. slot 3 for a 2-cable arm) are accepted and
-        ignored, like a slot with no ESC on it.
+        has four slots (motors 1-4 on 0x200, 5-8 on 0x1FF): values beyond the drives up to the end of
+        the last frame (e.g. slot 3 for a 2-cable arm) are accepted and ignored, like a slot with no ESC.
 
         Args:
-            currents_raw: one int per cable (up to four); positive winds the cable in (pulls).
+            currents_raw: one int per motor (up to the frames' slots); positive winds the cable in.
 
         Returns:
             The setpoints actually applied (after clamping), one per cable.
 
         Raises:
-            ValueError: fewer values than cables or more than four, or a value that is not an integer.
+            ValueError: fewer values than motors or more than their frames' slots, or a value that is not an
+                integer.
         """
-        if not self._n <= len(currents_raw) <= 4:
-            raise ValueError(f"expected {self._n} currents (at most 4), got {len(currents_raw)}")
+        slots = self._slots
+        if not self._n <= len(currents_raw) <= slots:
+            raise ValueError(f"expected {self._n} currents (at most {slots}), got {len(currents_raw)}")
         lim = self._limit_raw
         out = []
         for i, value in enumerate(currents_raw):

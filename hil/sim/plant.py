@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hil.errors import PlantDivergedError
+from hil.sim.array import arm_prefix, build_array_spec
 from hil.sim.config import ObjectConfig
 from hil.sim.drives import Drives
 from hil.sim.mjcf import build_mjcf, cable_layout, joint_friction_nm, unit_geometry
@@ -56,7 +57,13 @@ _BADQACC = int(mujoco.mjtWarning.mjWARN_BADQACC)
 
 
 class Plant:
-    """The simulated arm, its three (or one or two) motors and the drone it hangs from.
+    """The simulated arm, its three (or one or two) motors and the drone it hangs from; or an array of such
+    arms on a ring under the drone (``PlantConfig.ring``), each with its own cables and drives.
+
+    In an array, every per-motor or per-unit value runs arm after arm: motor ``m`` (1-based) drives cable
+    ``(m-1) % C`` of arm ``(m-1) // C``; units, joint angles, tensions and lengths are concatenated the
+    same way, and names carry the arm's prefix (``a2_unit_05``, :func:`hil.sim.array.arm_prefix`). The
+    drone, the objects and a single arm's names are as without a ring.
 
     Args:
         design: the spiral design; ``None`` = the paper's 3-cable prototype. ``design.cables`` sets the
@@ -110,9 +117,11 @@ class Plant:
         if rng is not None and not isinstance(rng, np.random.Generator):
             raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
         model = self._config.model
+        ring = self._config.ring
+        self._arms = 1 if ring is None else ring.arms
         drives = Drives(
             model.motor,
-            self._design.cables,
+            self._arms * self._design.cables,
             rng,
             model.actuator,
             model.muscle_force_n,
@@ -141,8 +150,16 @@ class Plant:
 
     def _build(self) -> None:
         cfg = self._config.model
-        xml = build_mjcf(self._design, None, cfg)
-        m = mujoco.MjModel.from_xml_string(xml)
+        ring = self._config.ring
+        if ring is None:
+            xml = build_mjcf(self._design, None, cfg)
+            m = mujoco.MjModel.from_xml_string(xml)
+            prefixes = [""]
+        else:
+            spec = build_array_spec(self._design, cfg, ring, standalone=False)
+            m = spec.compile()
+            xml = spec.to_xml()
+            prefixes = [arm_prefix(i) for i in range(ring.arms)]
         # Divergence is reported (PlantDivergedError), never silently reset.
         m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
         self._xml = xml
@@ -150,6 +167,7 @@ class Plant:
         self._d = mujoco.MjData(m)
         n_cables = self._design.cables
         n_units = self._design.units
+        arms = len(prefixes)
         self._n_cables = n_cables
         self._geo = unit_geometry(self._design, cfg.arm)
         self._layout = cable_layout(self._design, n_cables, cfg)
@@ -161,22 +179,28 @@ class Plant:
         def bid(name: str) -> int:
             return int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name))
 
-        spool_j = [jid(f"spool_{k}") for k in range(n_cables)]
+        def named(kind: Any, name: str) -> int:
+            return int(mujoco.mj_name2id(m, kind, name))
+
+        # Every per-cable and per-unit index runs arm after arm (motor m drives cable (m-1) % C of arm
+        # (m-1) // C, as the firmware lays out an array).
+        spool_j = [jid(f"{p}spool_{k}") for p in prefixes for k in range(n_cables)]
         self._spool_qadr = np.array([m.jnt_qposadr[j] for j in spool_j], dtype=np.intp)
         self._spool_dadr = np.array([m.jnt_dofadr[j] for j in spool_j], dtype=np.intp)
         self._tendon_ids = np.array(
-            [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, f"cable_{k}") for k in range(n_cables)],
+            [named(mujoco.mjtObj.mjOBJ_TENDON, f"{p}cable_{k}") for p in prefixes for k in range(n_cables)],
             dtype=np.intp,
         )
         self._tension_adr = np.array(
             [
-                m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, f"tension_{k}")]
+                m.sensor_adr[named(mujoco.mjtObj.mjOBJ_SENSOR, f"{p}tension_{k}")]
+                for p in prefixes
                 for k in range(n_cables)
             ],
             dtype=np.intp,
         )
-        self._unit_bodies = np.array([bid(f"unit_{i:02d}") for i in range(n_units)], dtype=np.intp)
-        self._unit_names = tuple(f"unit_{i:02d}" for i in range(n_units))
+        self._unit_names = tuple(f"{p}unit_{i:02d}" for p in prefixes for i in range(n_units))
+        self._unit_bodies = np.array([bid(name) for name in self._unit_names], dtype=np.intp)
         self._body_name_of = {
             int(b): name for b, name in zip(self._unit_bodies, self._unit_names, strict=True)
         }
@@ -184,8 +208,8 @@ class Plant:
         self._drone_mocap = int(m.body_mocapid[self._drone_body])
         self._pose_bodies = np.concatenate([[self._drone_body], self._unit_bodies])
         self._pose_names = ("drone", *self._unit_names)
-        self._tip_site = int(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "tip"))
-        arm_j = [jid(f"joint_{i:02d}") for i in range(1, n_units)]
+        self._tip_sites = [named(mujoco.mjtObj.mjOBJ_SITE, f"{p}tip") for p in prefixes]
+        arm_j = [jid(f"{p}joint_{i:02d}") for p in prefixes for i in range(1, n_units)]
         self._ball = n_cables == 3
         self._arm_qadr = np.array([m.jnt_qposadr[j] for j in arm_j], dtype=np.intp)
         self._arm_dadr = np.array([m.jnt_dofadr[j] for j in arm_j], dtype=np.intp)
@@ -196,16 +220,32 @@ class Plant:
         )
         self._friction_scale = np.array(self._geo.cable_radius_base_side_m[1:], dtype=np.float64)
         self._bend_dofs_flat = self._bend_dofs.ravel()
-        self._alpha_buf = np.empty(n_units - 1)
-        self._wrap_buf = np.empty(n_units - 1)
+        # Per joint of every arm, flat (arm after arm) and as rows (one per arm) for the capstan law.
+        self._alpha_buf = np.empty(arms * (n_units - 1))
+        self._wrap_buf = np.empty(arms * (n_units - 1))
+        self._alpha_rows = self._alpha_buf.reshape(arms, n_units - 1)
+        self._wrap_rows = self._wrap_buf.reshape(arms, n_units - 1)
+        self._totals = np.zeros((arms, 1))
         self._friction_on = False
         self._mu = cfg.arm.cable_mu
         # The joints' own dry friction (a fitted model's; none by default): under the capstan friction.
-        self._joint_friction = np.array(joint_friction_nm(cfg.arm, self._geo)[1:], dtype=np.float64)
+        self._joint_friction = np.tile(
+            np.array(joint_friction_nm(cfg.arm, self._geo)[1:], dtype=np.float64), arms
+        )
         self._joint_friction_on = bool(np.any(self._joint_friction > 0.0))
         self._tension_adr_list = [int(a) for a in self._tension_adr]
-        self._arm_slice = slice(int(self._arm_dofs.min()), int(self._arm_dofs.max()) + 1)
-        self._spool_slice = slice(int(self._spool_dadr.min()), int(self._spool_dadr.max()) + 1)
+        self._tension_adr_by_arm = [
+            self._tension_adr_list[a * n_cables : (a + 1) * n_cables] for a in range(arms)
+        ]
+        if arms == 1:  # contiguous: a slice is cheaper than a gather
+            self._arm_slice: slice | NDArray[np.intp] = slice(
+                int(self._arm_dofs.min()), int(self._arm_dofs.max()) + 1
+            )
+            self._spool_slice: slice | NDArray[np.intp] = slice(
+                int(self._spool_dadr.min()), int(self._spool_dadr.max()) + 1
+            )
+        else:  # the arms' joints and spools interleave
+            self._arm_slice, self._spool_slice = self._arm_dofs, self._spool_dadr
         objects = SceneObjects(m, self._d, cfg.objects)
         self._object_names = objects.names
         self._object_bodies = objects.bodies
@@ -216,7 +256,7 @@ class Plant:
         self.object_held = objects.object_held
         self.set_object_velocity = objects.set_object_velocity
         self.apply_object_force = objects.apply_object_force
-        self._angles_buf = np.empty(n_units - 1)
+        self._angles_buf = np.empty(arms * (n_units - 1))
         radii = object_radii(m, [(o.name, o.radius_m) for o in cfg.objects])
         self._monitor = ExtremesMonitor(
             m, self._unit_bodies.tolist(), radii, self._tension_adr_list, self._design.dtheta_rad
@@ -242,8 +282,23 @@ class Plant:
 
     @property
     def cables(self) -> int:
-        """Number of cables = number of motors."""
+        """Cables of each arm (of the only arm: the number of motors)."""
         return self._n_cables
+
+    @property
+    def arms(self) -> int:
+        """Arms on the drone (1 without a ring)."""
+        return self._arms
+
+    @property
+    def motors(self) -> int:
+        """Motors (drives): arms x cables."""
+        return self._arms * self._n_cables
+
+    @property
+    def units_per_arm(self) -> int:
+        """Units of each arm."""
+        return self._design.units
 
     @property
     def time_us(self) -> int:
@@ -385,31 +440,37 @@ class Plant:
         radius; MuJoCo's frictionloss makes it a stick-slip constraint, not an explicit force.
         """
         sens = self._d.sensordata
-        total = 0.0
-        for adr in self._tension_adr_list:
-            t = sens[adr]
-            if t > 0.0:
-                total += t
-        if total == 0.0:
+        totals = self._totals  # each arm's cables' tension, an arm's holes rub only its own cables
+        tensed = False
+        for a, adrs in enumerate(self._tension_adr_by_arm):
+            total = 0.0
+            for adr in adrs:
+                t = sens[adr]
+                if t > 0.0:
+                    total += t
+            totals[a, 0] = -total
+            tensed = tensed or total > 0.0
+        if not tensed:
             if self._friction_on:
                 self._rest_friction()
                 self._friction_on = False
             return
-        alpha = self._alpha_buf
-        wrap = self._wrap_buf
-        self._joint_angles_into(alpha)
+        alpha = self._alpha_rows
+        wrap = self._wrap_rows
+        self._joint_angles_into(self._alpha_buf)
         np.abs(alpha, out=alpha)
-        np.cumsum(alpha, out=wrap)
+        np.cumsum(alpha, axis=1, out=wrap)
         wrap -= alpha
         wrap *= -self._mu
         np.exp(wrap, out=wrap)  # share of the tension arriving at each joint
         alpha *= -self._mu
         np.expm1(alpha, out=alpha)  # −(share lost in that joint's holes)
         wrap *= alpha
-        wrap *= self._friction_scale * -total  # cable radius at each joint
+        wrap *= self._friction_scale * totals  # cable radius at each joint
+        flat = self._wrap_buf
         if self._joint_friction_on:
-            wrap += self._joint_friction
-        self._m.dof_frictionloss[self._bend_dofs] = wrap[:, None]
+            flat += self._joint_friction
+        self._m.dof_frictionloss[self._bend_dofs] = flat[:, None]
         self._friction_on = True
 
     def _rest_friction(self) -> None:
@@ -470,10 +531,17 @@ class Plant:
         else:
             np.take(q, self._arm_qadr, out=out)
 
-    def tip_pose(self) -> Pose:
-        """Pose of the tip (the knot end of the last unit)."""
+    def tip_pose(self, arm: int = 0) -> Pose:
+        """Pose of an arm's tip (the knot end of its last unit).
+
+        Raises:
+            IndexError: no such arm.
+        """
+        if not 0 <= arm < self._arms:
+            raise IndexError(f"arm {arm} outside 0..{self._arms - 1}")
         d = self._d
-        return Pose(d.site_xpos[self._tip_site].copy(), d.xquat[self._unit_bodies[-1]].copy())
+        last = self._unit_bodies[(arm + 1) * self._design.units - 1]
+        return Pose(d.site_xpos[self._tip_sites[arm]].copy(), d.xquat[last].copy())
 
     def unit_poses(self) -> tuple[FloatArray, FloatArray]:
         """Frames of all units, base first: positions (n, 3) and quaternions w, x, y, z (n, 4).
@@ -586,7 +654,8 @@ class Plant:
     # ------------------------------------------------------------------ poses for tests and scenarios
 
     def set_packed(self, cable: int = 0) -> None:
-        """Put the arm kinematically into its packed spiral, curled towards ``cable``, at rest.
+        """Put the arm (every arm of an array) kinematically into its packed spiral, curled towards ``cable``,
+        at rest.
 
         Every joint is set to its limit Δθ bending towards that cable (for 1-2 cables the hinge limit on
         that side), and every spool is set so its cable is exactly taut. Currents are unchanged.

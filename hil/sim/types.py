@@ -17,9 +17,40 @@ from numpy.typing import NDArray
 from controller.config import CONTROL_PERIOD_US
 from hil.sim.config import ModelConfig
 
-__all__ = ["BodyPoses", "Contact", "PhysicsExtremes", "PlantConfig", "Pose"]
+__all__ = ["MAX_ARMS", "BodyPoses", "Contact", "PhysicsExtremes", "PlantConfig", "Pose", "RingConfig"]
 
 FloatArray = NDArray[np.float64]
+
+
+MAX_ARMS = 8
+"""Arms an array may have (the C-board drives up to eight C610s; the supplement's arrays have 2-8 arms)."""
+
+
+@dataclass(frozen=True)
+class RingConfig:
+    """Where the arms of an array hang (:mod:`hil.sim.array`).
+
+    Arm ``i`` hangs at angle ``π + 2πi/N`` from the drone's +x, ``ring_radius_m`` from its axis, with its
+    cable 0 facing the axis: a one-cable arm curls inwards, around what is under the drone.
+
+    Attributes:
+        arms: how many (1..:data:`MAX_ARMS`).
+        ring_radius_m: their bases' distance from the drone's axis.
+        tilt_rad: each arm's tilt outwards from straight down (0 = hanging plumb).
+    """
+
+    arms: int = 4
+    ring_radius_m: float = 0.06
+    tilt_rad: float = 0.0
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` for a value out of range."""
+        if isinstance(self.arms, bool) or not isinstance(self.arms, int) or not 1 <= self.arms <= MAX_ARMS:
+            raise ValueError(f"arms must be 1..{MAX_ARMS}, got {self.arms!r}")
+        if not (math.isfinite(self.ring_radius_m) and 0.0 <= self.ring_radius_m <= 1.0):
+            raise ValueError(f"ring_radius_m must be 0..1 m, got {self.ring_radius_m!r}")
+        if not (math.isfinite(self.tilt_rad) and abs(self.tilt_rad) <= math.pi / 2):
+            raise ValueError(f"tilt_rad must be within ±90°, got {self.tilt_rad!r}")
 
 
 @dataclass(frozen=True)
@@ -32,12 +63,16 @@ class PlantConfig:
         control_period_us: length of one :meth:`Plant.step`; must be a whole number of physics steps.
         max_joint_speed_rad_s: any arm joint faster than this counts as divergence.
         max_spool_speed_m_s: any spool (cable) faster than this counts as divergence.
+        ring: ``None``: one arm (the classic plant). Else an array of ``ring.arms`` arms of the design on a
+            ring under the drone (:mod:`hil.sim.array`), motor ``m`` driving cable ``(m-1) % C`` of arm
+            ``(m-1) // C`` (the firmware's layout, ``controller.config``).
     """
 
     model: ModelConfig = field(default_factory=ModelConfig)
     control_period_us: int = CONTROL_PERIOD_US
     max_joint_speed_rad_s: float = 5.0e3
     max_spool_speed_m_s: float = 50.0
+    ring: RingConfig | None = None
 
     def validate(self) -> None:
         """Raise ``ValueError`` if a value is out of range."""
@@ -50,6 +85,8 @@ class PlantConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be > 0, got {value!r}")
+        if self.ring is not None:
+            self.ring.validate()
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from hil.radio import RadioScript
 from hil.sim.config import ModelConfig, ObjectConfig
 from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
-from hil.sim.types import PlantConfig
+from hil.sim.types import PlantConfig, RingConfig
 from hil.trial.scene import MS
 from protocol.c610 import MotorFeedback
 from protocol.dbus import Lever, RcFrame
@@ -57,6 +57,8 @@ class Rig(Environment):
         seed: seed of the board's random choices.
         model: the plant's model (a preset or a sensitivity variant; None = ``ModelConfig()``); the
             objects are appended to its own.
+        ring: where an array's arms hang (the firmware's layout gives their number; None = the
+            default ring for an array, or the one arm).
     """
 
     def __init__(
@@ -69,14 +71,15 @@ class Rig(Environment):
         start_packed: bool = False,
         seed: int = 0,
         model: ModelConfig | None = None,
+        ring: RingConfig | None = None,
     ) -> None:
         base = model if model is not None else ModelConfig()
-        plant = dataclasses.replace(PlantConfig(), model=base.with_objects(*objects))
+        plant = dataclasses.replace(PlantConfig(), model=base.with_objects(*objects), ring=ring)
         cfg = BoardConfig(
             design=design, plant=plant, firmware=firmware, rc="radio", seed=seed, start_packed=start_packed
         )
         super().__init__(cfg, radio=RadioScript(list(radio)))
-        if design.cables < 3:
+        if design.cables < 3 and firmware.arm_count == 1:
             self.board.bus.motors = _ThreeMotors(self.board.plant)
         self.plant = self.board.plant
         self.firmware = self.board.firmware

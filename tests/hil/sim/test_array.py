@@ -9,13 +9,21 @@ import mujoco
 import numpy as np
 import pytest
 
-from hil.sim.array import MAX_ARMS, RingConfig, arm_prefix, build_array_spec
+from hil.sim.array import arm_prefix, build_array_spec
 from hil.sim.mjcf import build_mjcf
 from hil.sim.spiral import SpiralDesign
+from hil.sim.types import MAX_ARMS, RingConfig
 
 
 def _site(m: mujoco.MjModel, d: mujoco.MjData, name: str) -> np.ndarray:
     return d.site_xpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)].copy()
+
+
+def drone_xy(m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
+    """The drone's position with its height zeroed."""
+    p = d.xpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "drone")].copy()
+    p[2] = 0.0
+    return p
 
 
 def test_eight_arms_each_with_its_cables_and_drives_hang_on_the_ring() -> None:
@@ -28,8 +36,8 @@ def test_eight_arms_each_with_its_cables_and_drives_hang_on_the_ring() -> None:
     drone = d.xpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "drone")]
     for i in range(8):
         tip = _site(m, d, f"a{i}_tip") - drone
-        yaw = 2 * math.pi * i / 8
-        assert tip[:2] == pytest.approx([0.06 * math.cos(yaw), 0.06 * math.sin(yaw)], abs=1e-6)  # plumb
+        place = math.pi + 2 * math.pi * i / 8
+        assert tip[:2] == pytest.approx([0.06 * math.cos(place), 0.06 * math.sin(place)], abs=1e-6)  # plumb
 
 
 def test_an_arm_moves_only_by_its_own_cable() -> None:
@@ -43,9 +51,12 @@ def test_an_arm_moves_only_by_its_own_cable() -> None:
     moved = [float(np.linalg.norm(_site(m, d, f"a{i}_tip") - before[i])) for i in range(4)]
     assert moved[2] > 0.05, moved  # it curls
     assert max(moved[:2] + moved[3:]) < 1e-3, moved  # the others hang still
-    # It curls outwards: cable 0 of every arm faces away from the drone's axis.
-    tip = _site(m, d, "a2_tip")
-    assert math.hypot(tip[0], tip[1]) > math.hypot(before[2][0], before[2][1]) + 0.02
+    # It curls inwards: cable 0 of every arm faces the drone's axis.
+    tip = _site(m, d, "a2_tip") - drone_xy(m, d)
+    start = before[2] - drone_xy(m, d)
+    tip[2] = start[2] = 0.0  # horizontally
+    inwards = -start / np.linalg.norm(start)
+    assert (tip - start) @ inwards > 0.02, (tip, start)
 
 
 def test_one_arm_at_the_centre_is_the_lone_arm() -> None:
