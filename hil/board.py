@@ -276,16 +276,18 @@ class VirtualBoard:
         if recorder is not None:
             recorder.write_json("/board/config", 0, cfg.describe())
 
-    def _poses(self) -> SimPoses:
+    def _poses(self) -> SimPoses | list[Message]:
+        # Every body: SimPoses carries the drone and arm 0 (an array's arms do not fit one message), one
+        # ArmPoses each further arm (pose_messages; docs/board-link.md, 0x010A).
         poses = self.plant.body_poses()
         positions, quats = poses.positions_m, poses.quats_wxyz
-        if self.plant.arms > 1:  # SimPoses: the drone and arm 0 (an array's arms do not fit one message)
-            n = 1 + self.plant.units_per_arm
-            positions, quats = positions[:n], quats[:n]
+        arms = self.plant.arms
         if self.recorder is not None:  # an input of the firmware like any other: replay needs it
             data = recording.pack_poses(positions, quats)
-            self.recorder.write_raw(recording.POSES, self.now_us, data)
-        return poses_message(self.now_us, positions, quats)
+            # The Foxglove view draws one chain: an array's drone and arm 0.
+            view = None if arms == 1 else 1 + self.plant.units_per_arm
+            self.recorder.write_raw(recording.POSES, self.now_us, data, view_bodies=view)
+        return pose_messages(self.now_us, positions, quats, arms)
 
     def tick(self, now_us: int | None = None) -> None:
         """One control period in lockstep order: physics, delivery, firmware, command delivery.

@@ -26,6 +26,7 @@ from hil.board import (
 from hil.errors import HilError
 from hil.harness import ScriptedHost
 from hil.radio import RadioScript
+from hil.sim.spiral import SpiralDesign
 from protocol.dbus import Lever, RcFrame
 from protocol.link import LinkParser
 from protocol.messages import (
@@ -96,6 +97,33 @@ def test_an_arrays_poses_split_into_simposes_and_one_armposes_per_further_arm(ar
 def test_poses_that_do_not_split_into_the_arms_are_refused(bodies_of: tuple[int, int], arms: int) -> None:
     with pytest.raises(ValueError):
         pose_messages(0, *_bodies(*bodies_of), arms)
+
+
+def test_an_array_board_sends_every_arms_poses() -> None:
+    """4 arms of 2 cables: each pose tick brings SimPoses (drone + arm 0) and ArmPoses of arms 1-3, which
+    are the plant's own body poses arm by arm."""
+    cfg = BoardConfig(
+        design=SpiralDesign.paper_prototype().with_cables(2), firmware=FirmwareConfig().with_arms(4, 2)
+    )
+    with VirtualBoard(cfg, radio_script=RadioScript([(0, RcFrame.neutral())])) as board:
+        assert board.wire is not None
+        host = ScriptedHost(board.wire.host, board.faults)
+        for _ in range(40):
+            host.before_tick(board.now_us)
+            board.tick()
+            host.after_tick(board.now_us)
+        units = board.plant.units_per_arm
+        sims = [m for m in host.other if isinstance(m, SimPoses)]
+        arms = [m for m in host.other if isinstance(m, ArmPoses)]
+        assert len(sims) == 2 and len(arms) == 3 * len(sims)  # 50 Hz, arms 1-3 after each SimPoses
+        assert all(len(m.positions_m) == 1 + units for m in sims)
+        assert [(m.arm, m.arms, len(m.positions_m)) for m in arms[-3:]] == [(a, 4, units) for a in (1, 2, 3)]
+        assert {m.time_us for m in arms[-3:]} == {sims[-1].time_us}
+        # The last ones are the plant's poses now (nothing moved since: the arms hang at rest).
+        bodies = board.plant.body_poses().positions_m
+        for m in arms[-3:]:
+            lo = 1 + m.arm * units
+            assert np.allclose(m.positions_m, bodies[lo : lo + units], atol=1e-3)
 
 
 def test_control_period_mismatch_is_refused() -> None:
