@@ -463,7 +463,7 @@ def run_realtime(
     try:
         run_periodic(clock, step, begin=begin, duration_us=duration_us, stop=stop)
     finally:
-        board.bus.send_currents((0, 0, 0))
+        board.bus.send_currents((0,) * board.bus.motor_count)
         board.bus.deliver_command()
 
 

@@ -461,3 +461,15 @@ def test_after_a_late_tick_the_plant_keeps_the_wall_clocks_time(stall_us: int, l
     # The plant stepped one period ahead of the firmware's last tick, less exactly the lag it counts.
     assert board.plant.time_us == board.now_us + period - board.plant_lag_us
     board.close()
+
+
+def test_a_real_time_array_board_ends_with_zero_current_on_every_motor() -> None:
+    """The end of a real-time run sends zero current to all the board's motors (eight here, both frames)."""
+    cfg = BoardConfig(
+        design=SpiralDesign.paper_prototype().with_cables(1), firmware=FirmwareConfig().with_arms(8, 1)
+    )
+    host_end, board_end = MemoryTransport.pair()
+    with VirtualBoard(cfg, link=board_end, radio_script=RadioScript([(0, RcFrame.neutral())])) as board:
+        run_realtime(board, _StallingClock(lambda _now_us: host_end.read()), duration_us=50_000)
+        assert board.bus.motor_count == 8
+        assert board.plant.commanded_currents_raw() == (0,) * 8
