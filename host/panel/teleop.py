@@ -48,6 +48,7 @@ import viser
 from host.panel.arbiter import ControlArbiter
 from host.panel.board_params import BoardParams
 from host.panel.board_state import BoardState, PoseSource
+from host.panel.camera import camera_view
 from host.panel.console import console_html
 from host.panel.controls import ControlHandles, build_control_panel, refresh_control
 from host.panel.guard import request_token
@@ -62,7 +63,6 @@ from host.panel.scene import (
     SceneObject,
     SceneView,
     build_scene,
-    camera_view,
     default_hanging_pose,
 )
 from host.worker import Worker
@@ -228,7 +228,7 @@ class TeleopPanel:
         self.arbiter.client_left(client.client_id)
 
     def set_camera(self, client: viser.ClientHandle, preset: str) -> None:
-        """Move one tab's camera to a preset (``host.panel.scene.CAMERA_PRESETS``)."""
+        """Move one tab's camera to a preset (``host.panel.camera.CAMERA_PRESETS``)."""
         sv = self.scene
         position, look_at = camera_view(preset, sv.centre_m, sv.drone, sv.tip_m)
         with client.atomic():

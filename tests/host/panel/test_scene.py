@@ -102,7 +102,8 @@ def test_quaternion_helpers() -> None:
 
 
 def test_camera_presets_follow_the_stick_axes() -> None:
-    from host.panel.scene import CAMERA_PRESETS, NOSE_AXIS, camera_view
+    from host.panel.camera import CAMERA_PRESETS, camera_view
+    from host.panel.scene import NOSE_AXIS
 
     assert NOSE_AXIS == (0.0, 1.0, 0.0)  # stick forward (+y) is the nose; stick right (+x) the pilot's right
     drone = DronePose((0.0, 0.0, 1.0))
