@@ -118,7 +118,9 @@ class BoardState:
         with self._lock:
             prev = self.telemetry
             if prev is not None and t.time_us < prev.time_us:
-                self.history.clear()  # the board restarted
+                self.history.clear()  # the board restarted, perhaps with another layout: it says it again
+                self.layout = None
+                self.arm_poses.clear()
             self.telemetry = t
             self.telemetry_count += 1
             self.history.append(t.time_us / 1e6, row)

@@ -88,6 +88,10 @@ def test_an_arrays_layout_comes_from_arms_telemetry() -> None:
         ArmsTelemetry(1, 4, 2, four, four, four, four, (0.0,) * 8, (0.0,) * 8, (0.0,) * 8, (False,) * 8)
     )
     assert b.layout == (4, 2) and b.arms == 4
+    b.on_board_message(Telemetry(time_us=10))
+    b.on_board_message(ArmPoses(10, 1, 4, *_units(1, 3)))
+    b.on_board_message(Telemetry(time_us=5))  # the board restarted: what it was is forgotten
+    assert b.layout is None and b.arm_poses == {} and b.arms == 1
 
 
 def test_ring_buffer_keeps_newest_and_decimates() -> None:
