@@ -10,6 +10,7 @@ every executor: each run builds its own board from its inputs and seed, and shar
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import math
@@ -25,8 +26,11 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import IO, Any
 
+import numpy as np
+
 from hil.campaign.spec import CampaignError, Run, build_design, build_firmware
 from hil.sim.spiral import SpiralDesign
+from hil.trial.array_grasp import ArrayGraspSetup, array_grasp_trial
 from hil.trial.grasp import GraspSetup, grasp_trial
 
 __all__ = [
@@ -34,6 +38,7 @@ __all__ = [
     "POLL_S",
     "RAY_MISSING",
     "ResultsFile",
+    "array_setup",
     "check_ray_address",
     "execute_local",
     "execute_ray",
@@ -59,7 +64,8 @@ def run_one(run: Run) -> dict[str, Any]:
     """
     t0 = time.perf_counter()
     try:
-        measured = _grasp(run) if run.inputs["kind"] == "grasp" else _scenario(run)
+        kind = run.inputs["kind"]
+        measured = _grasp(run) if kind == "grasp" else _array(run) if kind == "array" else _scenario(run)
         outcome = "success" if measured["success"] else "failure"
         error = None
     except Exception as exc:  # a run's failure is data: the campaign goes on
@@ -102,6 +108,44 @@ def _grasp(run: Run) -> dict[str, Any]:
     setup, design = grasp_setup(run.inputs)
     out = grasp_trial(setup, design).as_dict()
     del out["setup"]  # the row's inputs say it
+    return out
+
+
+def array_setup(i: Mapping[str, Any]) -> ArrayGraspSetup:
+    """The array grasp of an array run's inputs: its jitter drawn from the run's seed, its ring the array
+    experiment's for the object unless ``array.ring_radius_m`` says (:mod:`hil.experiments.array`)."""
+    from hil.experiments.array import ArrayParams, ring_radius_m
+
+    design, model = build_design(i, physics="fine")
+    design = design.with_cables(1)
+    defaults = ArrayParams()
+    jitter = i.get("array.jitter_m", defaults.jitter_m)
+    key = i["array.object"]
+    rng = np.random.default_rng([i["seed"], i["array.arms"], sum(map(ord, key))])
+    offset = tuple(float(v) for v in rng.uniform(-jitter, jitter, 3))
+    radius = i.get("array.ring_radius_m")
+    if radius is None:
+        radius = ring_radius_m(key, dataclasses.replace(defaults, jitter_m=jitter), design)
+    return ArrayGraspSetup(
+        i["array.arms"],
+        key,
+        depth_m=i.get("array.depth_m", defaults.depth_m),
+        offset_m=(offset[0], offset[1], offset[2]),
+        ring_radius_m=radius,
+        hold_s=i.get("array.hold_s", defaults.hold_s),
+        firmware=build_firmware(i),
+        model=model,
+        seed=i["seed"],
+        design=design,
+    )
+
+
+def _array(run: Run) -> dict[str, Any]:
+    setup = array_setup(run.inputs)
+    out = array_grasp_trial(setup).as_dict()
+    out["ring_radius_m"] = setup.ring_radius_m
+    out["offset_m"] = list(setup.offset_m)
+    del out["setup"]
     return out
 
 

@@ -48,9 +48,9 @@ __all__ = [
     "run_key",
 ]
 
-KINDS = ("grasp", "scenario")
-"""What one run is: a grasp trial (:func:`hil.trial.grasp.grasp_trial`) or a scenario
-(:func:`hil.scenarios.run_scenario`)."""
+KINDS = ("grasp", "scenario", "array")
+"""What one run is: a grasp trial (:func:`hil.trial.grasp.grasp_trial`), a scenario
+(:func:`hil.scenarios.run_scenario`) or an array's grasp (:func:`hil.trial.array_grasp.array_grasp_trial`)."""
 
 MAX_RUNS_N = 1_000_000
 """The most runs a campaign expands to: more is a typo in a grid (each run is seconds of simulation)."""
@@ -58,9 +58,9 @@ MAX_RUNS_N = 1_000_000
 _MAX_UNITS_N = 1000  # as on the command line (hil.cli.design.MAX_UNITS_N): every unit is a body and a joint
 
 _TOP_KEYS = frozenset(
-    {"kind", "sampling", "samples", "seed", "seeds", "design", "object", "controller", "scenario"}
+    {"kind", "sampling", "samples", "seed", "seeds", "design", "object", "controller", "scenario", "array"}
 )
-_SECTIONS = ("design", "object", "controller", "scenario")
+_SECTIONS = ("design", "object", "controller", "scenario", "array")
 _FLOAT, _INT, _BOOL, _STR = "float", "int", "bool", "str"
 _DESIGN_KEYS = {
     "preset": _STR,
@@ -84,6 +84,17 @@ _OBJECT_KEYS = {
     "length_m": _FLOAT,
     "friction": _FLOAT,
 }
+_ARRAY_KEYS = {
+    "arms": _INT,
+    "object": _STR,
+    "ring_radius_m": _FLOAT,
+    "depth_m": _FLOAT,
+    "jitter_m": _FLOAT,
+    "hold_s": _FLOAT,
+}
+"""An array run: how many arms, which of the ten objects, the ring (default: the array experiment's,
+sized to the object), the object's depth under the bases, its jitter (drawn from the run's seed) and the
+hold (:mod:`hil.trial.array_grasp`)."""
 _GRASP_CONTROLLER_KEYS = {"strategy_on": _BOOL, "contact_oracle": _BOOL}
 """Controller keys of a grasp trial itself; any other controller key is a firmware configuration name."""
 _RIG_FIRMWARE_KEYS = frozenset({"grasp_strategy_on", "grasp_direction_deg"})
@@ -258,14 +269,15 @@ def load_campaign(
 
 
 def _apply_params(raw: dict[str, Any], params: Mapping[str, Any]) -> None:
-    if raw.get("kind") != "grasp":
-        raise CampaignError("--params is for grasp campaigns (a scenario builds its own firmware)")
+    kind = raw.get("kind")
+    if kind not in ("grasp", "array"):
+        raise CampaignError("--params is for grasp and array campaigns (a scenario builds its own firmware)")
     section = raw.setdefault("controller", {})
     if not isinstance(section, dict):
         raise CampaignError("controller must be a table")
     for name, value in params.items():
-        if name == "grasp_direction_deg":
-            continue
+        if name == "grasp_direction_deg" or (kind == "array" and name == "grasp_strategy_on"):
+            continue  # the trial's own (an array closes by the plain ramp)
         if isinstance(value, tuple | list):
             raise CampaignError(
                 f"--params: {name} is not a scalar key; a campaign run takes scalar keys only"
@@ -396,10 +408,14 @@ def _key_type(kind: str, name: str) -> str | None:
         return _DESIGN_KEYS.get(key)
     if section == "object":
         return _OBJECT_KEYS.get(key) if kind == "grasp" else None
+    if section == "array":
+        return _ARRAY_KEYS.get(key) if kind == "array" else None
     if section == "controller":
-        if kind != "grasp":
+        if kind == "scenario":
             return None
         if key in _GRASP_CONTROLLER_KEYS:
+            if kind == "array":
+                return None
             return _GRASP_CONTROLLER_KEYS[key]
         if key in _RIG_FIRMWARE_KEYS:
             raise CampaignError(f"{name}: the grasp trial sets it (use controller.strategy_on)")
@@ -428,7 +444,11 @@ def _check_axes(kind: str, axes: Mapping[str, Any], sampling: str) -> None:
             raise CampaignError(f"{name}: an empty list gives no run")
         for v in values:
             _check_value(name, v, typ)
-    required = ("object.diameter_m", "object.x_m", "object.z_m") if kind == "grasp" else ("scenario.name",)
+    required = {
+        "grasp": ("object.diameter_m", "object.x_m", "object.z_m"),
+        "scenario": ("scenario.name",),
+        "array": ("array.arms", "array.object"),
+    }[kind]
     for name in required:
         if name not in axes:
             raise CampaignError(f"a {kind} campaign needs {name}")
@@ -495,7 +515,9 @@ def _check_points(campaign: Campaign) -> None:
             continue
         seen.add(sig)
         build_design(point)
-        if campaign.kind == "grasp":
+        if campaign.kind == "array":
+            _check_array_point(point)
+        elif campaign.kind == "grasp":
             build_firmware(point)
             for name in ("object.diameter_m", "object.mass_kg", "object.length_m"):
                 if name in point and not point[name] > 0:
@@ -505,6 +527,30 @@ def _check_points(campaign: Campaign) -> None:
             raise CampaignError(
                 f"scenario.name: unknown scenario {point['scenario.name']!r} (known: {known})"
             )
+
+
+def _check_array_point(point: Mapping[str, Any]) -> None:
+    from hil.trial.objects import ARRAY_OBJECTS
+
+    build_firmware(point)
+    design, _ = build_design(point)
+    if design.cables != 1 and "design.cables" in point:
+        raise CampaignError("design.cables: an array's arms have one cable each")
+    if not 1 <= point["array.arms"] <= 8:
+        raise CampaignError(f"array.arms must be 1..8 (a C-board's motors), got {point['array.arms']}")
+    keys = [o.key for o in ARRAY_OBJECTS]
+    if point["array.object"] not in keys:
+        raise CampaignError(f"array.object: unknown {point['array.object']!r} (known: {', '.join(keys)})")
+    limits = {
+        "ring_radius_m": (0.0, 1.0),
+        "depth_m": (0.0, 2.0),
+        "jitter_m": (0.0, 0.1),
+        "hold_s": (0.0, 60.0),
+    }
+    for key, (lo, hi) in limits.items():
+        v = point.get(f"array.{key}")
+        if v is not None and not lo <= v <= hi:
+            raise CampaignError(f"array.{key} must be {lo:g}..{hi:g}, got {v}")
 
 
 # ---------------------------------------------------------------------- what a run's inputs build
@@ -581,8 +627,8 @@ def _physical_design(d: Mapping[str, Any]) -> SpiralDesign:
 
 
 def build_firmware(inputs: Mapping[str, Any]) -> FirmwareConfig:
-    """The firmware of a grasp run: the grasp experiments' (:func:`hil.trial.grasp.grasp_firmware`)
-    with the run's ``controller.*`` firmware keys changed.
+    """The firmware of a grasp or array run: the grasp experiments' (:func:`hil.trial.grasp.grasp_firmware`)
+    with the run's ``controller.*`` firmware keys changed (an array run lays it out as its arms).
 
     Raises:
         CampaignError: a value the firmware refuses.

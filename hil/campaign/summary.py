@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 __all__ = ["DesignRate", "campaign_pictures", "design_rates", "success_maps"]
 
-_CHOICE_PREFIXES = ("design.", "controller.")
+_CHOICE_PREFIXES = ("design.", "controller.", "array.")
 _MAP_BINS_N = 8
 """The most cells along a placement axis of a map."""
 
@@ -195,6 +195,11 @@ def campaign_pictures(
         if row is None:
             continue
         i = row["inputs"]
+        if i["kind"] == "array":
+            notes.append(
+                f"a {label}: {_label(row)}, seed {i['seed']} (run {row['key']}); array runs are not filmed"
+            )
+            continue
         if i["kind"] != "grasp":
             notes += _scenario_pictures(label, row, out_dir / f"run-{label}")
             continue

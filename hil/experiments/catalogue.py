@@ -6,6 +6,8 @@ from __future__ import annotations
 from typing import Protocol
 
 from hil.experiments import (
+    array,
+    bands,
     contact,
     convergence,
     dynamic,
@@ -54,6 +56,8 @@ _ALL: tuple[Entry, ...] = (
     dynamic.EXPERIMENT,
     sensitivity.EXPERIMENT,
     convergence.EXPERIMENT,
+    array.EXPERIMENT,
+    bands.EXPERIMENT,
 )
 
 EXPERIMENTS: dict[str, Entry] = {e.name: e for e in _ALL}

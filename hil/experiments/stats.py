@@ -22,6 +22,7 @@ import numpy as np
 __all__ = [
     "Slope",
     "bootstrap_interval",
+    "cochran_armitage",
     "mcnemar_exact",
     "ols_slope",
     "student_t_quantile",
@@ -78,6 +79,44 @@ def mcnemar_exact(only_a: int, only_b: int) -> float:
     k = min(only_a, only_b)
     tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n
     return min(1.0, 2.0 * tail)
+
+
+def cochran_armitage(
+    successes: Sequence[int], totals: Sequence[int], scores: Sequence[float]
+) -> tuple[float, float]:
+    """Cochran-Armitage test for a linear trend of a success rate across ordered groups.
+
+    ``z = Σ s_i (k_i − n_i p̄) / sqrt(p̄ (1 − p̄) (Σ n_i s_i² − (Σ n_i s_i)² / N))`` with the pooled rate
+    ``p̄``; ``z > 0``: the rate grows with the score. The p-value is two-sided, from the normal
+    approximation. No spread to test (every trial alike, or one score): ``(0.0, 1.0)``.
+
+    Args:
+        successes: per group, its successes ``k_i``.
+        totals: per group, its trials ``n_i``.
+        scores: per group, its score ``s_i`` (e.g. the array's size).
+
+    Returns:
+        ``(z, p)``.
+
+    Raises:
+        ValueError: lengths differ, or a count is negative or above its total.
+    """
+    if not len(successes) == len(totals) == len(scores):
+        raise ValueError("successes, totals and scores need one entry per group")
+    for k, n in zip(successes, totals, strict=True):
+        if n < 0 or not 0 <= k <= n:
+            raise ValueError(f"successes must be 0..n per group, got {k} of {n}")
+    big_n = sum(totals)
+    if big_n == 0:
+        return (0.0, 1.0)
+    p = sum(successes) / big_n
+    sum_ns = sum(n * s for n, s in zip(totals, scores, strict=True))
+    var = p * (1.0 - p) * (sum(n * s * s for n, s in zip(totals, scores, strict=True)) - sum_ns**2 / big_n)
+    if var <= 0.0:
+        return (0.0, 1.0)
+    t = sum(s * (k - n * p) for k, n, s in zip(successes, totals, scores, strict=True))
+    z = t / math.sqrt(var)
+    return (z, math.erfc(abs(z) / math.sqrt(2.0)))
 
 
 def bootstrap_interval(

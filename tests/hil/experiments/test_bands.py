@@ -1,0 +1,72 @@
+"""The bands experiment (issue 24, item 1): its sweep geometry, its set-ups and its verdict rule (the run
+itself at tiny size is in test_experiments.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hil.experiments.bands import BandsParams, BandsResult, Sweep, setup_arm
+from hil.experiments.common import DEFAULT_MODEL
+from hil.sim.types import PhysicsExtremes
+from hil.trial.grasp import GraspOutcome, GraspSetup
+
+
+def test_the_sweep_clearance_is_the_gap_to_the_nearest_swept_unit() -> None:
+    # Two snapshots of a 2-unit arm: straight down, then its second unit swung to +x.
+    a = np.array([[0j, -0.1j], [0j, -0.1j]])
+    b = np.array([[-0.1j, -0.2j], [-0.1j, 0.1 - 0.1j]])
+    sweep = Sweep(a, b, np.array([0.01, 0.005]))
+    assert sweep.clearance_m(0.05, -0.05, 0.01) == pytest.approx(0.05 - 0.01 - 0.01)  # beside unit 0
+    assert sweep.clearance_m(0.05, -0.13, 0.01) == pytest.approx(0.03 - 0.005 - 0.01)  # under the swung unit
+    assert sweep.clearance_m(0.0, -0.15, 0.001) < 0  # inside unit 1's first pose
+
+
+def test_the_papers_set_up_is_the_45_cm_two_cable_arm_without_gravity() -> None:
+    arm, model = setup_arm("paper", DEFAULT_MODEL)
+    assert arm.cables == 2 and arm.length_m == pytest.approx(0.467, abs=0.005)
+    assert model.mounting == "gravity-off"
+    assert model.arm.base_stiffness_nm_per_rad > DEFAULT_MODEL.arm.base_stiffness_nm_per_rad  # scaled up
+    proto, same = setup_arm("prototype", DEFAULT_MODEL)
+    assert proto.cables == 3 and same is DEFAULT_MODEL
+    with pytest.raises(ValueError, match="unknown set-up"):
+        setup_arm("nope", DEFAULT_MODEL)
+
+
+def _grasp(success: bool) -> GraspOutcome:
+    nothing = PhysicsExtremes(0.0, 0.0, 1.0, 0.0)
+    return GraspOutcome(
+        GraspSetup(0.05, -0.1, 0.02),
+        "HOLD",
+        1.0,
+        math.nan,
+        3,
+        3,
+        200.0,
+        0.0,
+        0.0,
+        success,
+        success,
+        0,
+        nothing,
+    )
+
+
+def _result(pairs: list[tuple[bool, bool]]) -> BandsResult:
+    p = BandsParams(setups=("prototype",), bands=("between",), per_band=len(pairs))
+    placements = tuple(("prototype", "between", 0.05, -0.1) for _ in pairs)
+    outcomes = tuple(g for off, on in pairs for g in (_grasp(off), _grasp(on)))
+    return BandsResult(p, 0, placements, outcomes)
+
+
+def test_the_claim_holds_only_on_a_significant_paired_win_in_the_between_band() -> None:
+    win = _result([(False, True)] * 8 + [(True, True)] * 4)  # 8 only-strategy pairs: p = 2 / 2^8
+    cell = win.cell("prototype", "between")
+    assert (cell["only_on"], cell["only_off"]) == (8, 0) and cell["p_value"] == pytest.approx(2 / 256)
+    assert cell["on"]["rate"] == 1.0 and cell["off"]["rate"] == pytest.approx(4 / 12)
+    assert win.verdict("prototype") == "holds"
+    assert _result([(False, True)] * 4).verdict("prototype") == "not reproduced"  # p = 0.125
+    assert _result([(True, False)] * 10).verdict("prototype") == "not reproduced"  # the ramp wins
+    assert any("between band" in r[0] for r in win.table_rows())
