@@ -8,7 +8,7 @@ Task table (rates are the config's defaults; tasks due on the same tick run in t
     detect      100 Hz   device liveness summary (RC, host) and its events
     telemetry   100 Hz   Telemetry, MotorFrames, RawRc, Event out                    (with a link)
     status      2 Hz     BoardStatus (per-task statistics) out                        (with a link)
-    sim_poses   50 Hz    SimPoses out                               (with a link and a pose provider)
+    sim_poses   50 Hz    SimPoses (+ an array's ArmPoses) out         (with a link and a pose provider)
 
 Each body calls into a module: RC intake (``controller.rc.RcInput``), the failsafe
 (``controller.failsafe``), mode selection (``controller.modes``), the cables' mapping, slew and motor

@@ -45,7 +45,8 @@ FIRMWARE_VERSION = "spirob-fw 0.1.0"
 """Reported in ``BoardStatus`` (at most 16 ASCII characters)."""
 
 PoseProvider = Callable[[], Any]
-"""Returns a ``SimPoses``, or ``(positions_m, quats_wxyz)`` to be stamped with board time, or None."""
+"""Returns a ``SimPoses``, a list of messages (an array's ``SimPoses`` then one ``ArmPoses`` per further arm,
+sent in order), ``(positions_m, quats_wxyz)`` to be stamped with board time, or None."""
 
 _ZERO_FRAME = (0, bytes(8))
 _U32 = 0xFFFF_FFFF
@@ -221,7 +222,8 @@ class TelemetryBuilder:
             self._link.send(BoardStatus(now_us, FIRMWARE_VERSION, clock_kind, self._scheduler.stats()))
 
     def send_poses(self, now_us: int, provider: PoseProvider) -> None:
-        """The poses task: the provider's ``SimPoses`` (stamped with ``now_us`` if it gives arrays)."""
+        """The poses task: the provider's ``SimPoses`` (stamped with ``now_us`` if it gives arrays), or each
+        message of its list (an array's ``SimPoses`` and ``ArmPoses``)."""
         link = self._link
         if link is None:
             return
@@ -230,6 +232,9 @@ class TelemetryBuilder:
             return
         if isinstance(poses, SimPoses):
             link.send(poses)
+        elif isinstance(poses, list):
+            for msg in poses:
+                link.send(msg)
         else:
             positions, quats = poses
             link.send(

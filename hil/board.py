@@ -53,7 +53,7 @@ from hil.sim.plant import Plant
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PlantConfig, RingConfig
 from protocol.dbus import RcFrame
-from protocol.messages import SimPoses
+from protocol.messages import ARMS_MOTORS_MAX, ArmPoses, Message, SimPoses
 
 _log = logging.getLogger(__name__)
 
@@ -276,16 +276,18 @@ class VirtualBoard:
         if recorder is not None:
             recorder.write_json("/board/config", 0, cfg.describe())
 
-    def _poses(self) -> SimPoses:
+    def _poses(self) -> SimPoses | list[Message]:
+        # Every body: SimPoses carries the drone and arm 0 (an array's arms do not fit one message), one
+        # ArmPoses each further arm (pose_messages; docs/board-link.md, 0x010A).
         poses = self.plant.body_poses()
         positions, quats = poses.positions_m, poses.quats_wxyz
-        if self.plant.arms > 1:  # SimPoses: the drone and arm 0 (an array's arms do not fit one message)
-            n = 1 + self.plant.units_per_arm
-            positions, quats = positions[:n], quats[:n]
+        arms = self.plant.arms
         if self.recorder is not None:  # an input of the firmware like any other: replay needs it
             data = recording.pack_poses(positions, quats)
-            self.recorder.write_raw(recording.POSES, self.now_us, data)
-        return poses_message(self.now_us, positions, quats)
+            # The Foxglove view draws one chain: an array's drone and arm 0.
+            view = None if arms == 1 else 1 + self.plant.units_per_arm
+            self.recorder.write_raw(recording.POSES, self.now_us, data, view_bodies=view)
+        return pose_messages(self.now_us, positions, quats, arms)
 
     def tick(self, now_us: int | None = None) -> None:
         """One control period in lockstep order: physics, delivery, firmware, command delivery.
@@ -352,6 +354,36 @@ def poses_message(time_us: int, positions_m: Any, quats_wxyz: Any) -> SimPoses:
         tuple(map(tuple, np.asarray(positions_m).tolist())),
         tuple(map(tuple, np.asarray(quats_wxyz).tolist())),
     )
+
+
+def pose_messages(time_us: int, positions_m: Any, quats_wxyz: Any, arms: int = 1) -> SimPoses | list[Message]:
+    """What the poses task sends for the plant's body poses (the drone, then each arm's units, arm after arm).
+
+    One arm: the one ``SimPoses`` it always was (byte-identical). An array: ``SimPoses`` with the drone and
+    arm 0 (what a host that predates arrays draws), then one ``ArmPoses`` for each further arm
+    (docs/board-link.md, 0x010A), all stamped ``time_us``.
+
+    Raises:
+        ValueError: ``arms`` is not 1-8, or the units do not split into ``arms`` equal arms.
+    """
+    if not 1 <= arms <= ARMS_MOTORS_MAX:
+        raise ValueError(f"{arms} arms: 1-{ARMS_MOTORS_MAX}")
+    if arms == 1:
+        return poses_message(time_us, positions_m, quats_wxyz)
+    positions = np.asarray(positions_m).tolist()
+    quats = np.asarray(quats_wxyz).tolist()
+    units, rest = divmod(len(positions) - 1, arms)
+    if rest or units < 1 or len(quats) != len(positions):
+        raise ValueError(f"{len(positions)} body poses are not a drone and {arms} arms of as many units")
+    msgs: list[Message] = [
+        SimPoses(time_us, tuple(map(tuple, positions[: 1 + units])), tuple(map(tuple, quats[: 1 + units])))
+    ]
+    for arm in range(1, arms):
+        lo, hi = 1 + arm * units, 1 + (arm + 1) * units
+        msgs.append(
+            ArmPoses(time_us, arm, arms, tuple(map(tuple, positions[lo:hi])), tuple(map(tuple, quats[lo:hi])))
+        )
+    return msgs
 
 
 # --- real time ------------------------------------------------------------------------------------
@@ -431,7 +463,7 @@ def run_realtime(
     try:
         run_periodic(clock, step, begin=begin, duration_us=duration_us, stop=stop)
     finally:
-        board.bus.send_currents((0, 0, 0))
+        board.bus.send_currents((0,) * board.bus.motor_count)
         board.bus.deliver_command()
 
 

@@ -288,14 +288,18 @@ class Recorder:
         """The ``log_time`` (and ``publish_time``) of a message written at ``time_us``."""
         return time_us * 1000 + self._offset_ns
 
-    def write_raw(self, topic: str, time_us: int, data: bytes) -> None:
+    def write_raw(self, topic: str, time_us: int, data: bytes, *, view_bodies: int | None = None) -> None:
         """Records the exact bytes that crossed a wire at ``time_us``.
 
-        Poses (:data:`POSES`) are also written as Foxglove transforms (and the arm's shape when due).
+        Poses (:data:`POSES`) are also written as Foxglove transforms (and the arm's shape when due): of
+        their first ``view_bodies`` bodies if given (an array's drone and arm 0: the view draws one chain).
         """
         self._add(self._raw_channel(topic), time_us, bytes(data))
         if topic == POSES:
-            self.write_poses(time_us, *unpack_poses(data))
+            positions, quats = unpack_poses(data)
+            if view_bodies is not None:
+                positions, quats = positions[:view_bodies], quats[:view_bodies]
+            self.write_poses(time_us, positions, quats)
 
     def write_poses(self, time_us: int, positions_m: npt.ArrayLike, quats_wxyz: npt.ArrayLike) -> None:
         """Records body poses (drone first, then the units base to tip) as Foxglove transforms."""

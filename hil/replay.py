@@ -21,7 +21,7 @@ from controller.config import FirmwareConfig
 from controller.firmware import Firmware
 from controller.rc import DbusSerialSource, LinkRcSource, RcSource
 from hil import recording
-from hil.board import WireEnd, poses_message
+from hil.board import WireEnd, pose_messages
 from hil.canbus import ReplayBus
 from hil.errors import HilError
 from hil.radio import MemoryUart
@@ -193,7 +193,7 @@ def replay(path: str | Path, progress: Callable[[int], None] | None = None) -> R
         # Poses are pulled by the firmware during this tick, so they were recorded after its mark.
         poses.clear()
         poses.extend(
-            poses_message(r.time_us, *recording.unpack_poses(r.data))
+            pose_messages(r.time_us, *recording.unpack_poses(r.data), config.arm_count)
             for r in segment
             if r.topic == recording.POSES
         )

@@ -248,7 +248,7 @@ class HostApp:
             ) from exc
         from hil.errors import HilError  # type: ignore[import-not-found,unused-ignore]
 
-        config = virtual_board_config(self.board_config, self.preset, self.options.objects)
+        config = virtual_board_config(self.board_config, self.preset, self.options.objects, self.options.arms)
         self.board_config = config
         self.design = config.design
         self.board = VirtualBoardProcess(config, listen="socket://127.0.0.1:0")

@@ -21,6 +21,7 @@ from host.errors import HostError
 from host.gamepad import DEFAULT_MAPPING, GamepadMapping, format_mapping, parse_mapping
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec, describe_object, parse_object
 from host.panel.arbiter import new_token
+from host.plant_model import ARMS_MAX
 from host.virtual_rc import RadioScript, ScriptError
 from protocol.dbus import Lever
 
@@ -81,6 +82,18 @@ def _preset(text: str) -> str:
     return str(preset_arg(text))
 
 
+def _arms(text: str) -> int:
+    try:
+        arms = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of arms (1-{ARMS_MAX})") from None
+    if not 1 <= arms <= ARMS_MAX:
+        raise argparse.ArgumentTypeError(
+            f"{arms} arms: a C-board drives 1-{ARMS_MAX} (one motor each at least)"
+        )
+    return arms
+
+
 def _excite_profile(text: str) -> str:
     from hil.identify.excitation import profile  # type: ignore[import-not-found,unused-ignore]
 
@@ -136,6 +149,14 @@ def build_parser() -> argparse.ArgumentParser:
         f"Default: one {describe_object(DEFAULT_OBJECT)}, a pole the grasp strategy wraps",
     )
     src.add_argument("--no-object", action="store_true", help="virtual board only: an empty scene")
+    src.add_argument(
+        "--arms",
+        type=_arms,
+        metavar="N",
+        help=f"virtual board only: an array of N arms (1-{ARMS_MAX}) on a ring under the drone, as many "
+        "cables per arm as fit the board's eight motors, at most 3 (1-2 arms: 3, 3-4: 2, 5-8: 1); one stick "
+        "and the grasp drive them all. A real board's layout comes from the board. Default: one arm",
+    )
     src.add_argument(
         "--preset",
         type=_preset,
@@ -289,6 +310,8 @@ class HostOptions:
             ``<key file>.timestamp``).
         follow_servo: the autopilot output followed as the gripper (None = off).
         shadow: with ``port``, run the shadow plant when the board sends no poses.
+        arms: arms of the virtual board (``host.plant_model.array_cables`` cables each); 1: the one
+            3-cable arm.
         objects: fixed objects added to the virtual board's scene (the command line's default:
             ``host.object_spec.DEFAULT_OBJECT``; ``--no-object``: none).
         gamepad: joystick device driving the virtual radio (None: none).
@@ -320,6 +343,7 @@ class HostOptions:
     mav_signing_timestamp: Path | None = None
     follow_servo: ServoFollowConfig | None = None
     shadow: bool = True
+    arms: int = 1
     objects: tuple[ObjectSpec, ...] = ()
     gamepad: str | None = None
     gamepad_map: GamepadMapping = DEFAULT_MAPPING
@@ -334,6 +358,12 @@ class HostOptions:
         Raises:
             HostError: flags that cannot go together, or a missing file.
         """
+        if ns.arms is not None and (ns.port is not None or ns.replay is not None):
+            flag = "--port" if ns.port is not None else "--replay"
+            raise HostError(
+                f"--arms is for the virtual board, not with {flag}: a board's layout comes from the board "
+                "(its ArmsTelemetry)"
+            )
         if ns.replay_speed is not None and ns.replay is None:
             raise HostError("--replay-speed needs --replay")
         if ns.replay is not None:
@@ -414,6 +444,7 @@ class HostOptions:
             mav_signing_timestamp=ns.mav_signing_timestamp,
             follow_servo=ns.follow_servo,
             shadow=not ns.no_shadow,
+            arms=1 if ns.arms is None else ns.arms,
             objects=objects,
             gamepad=ns.gamepad,
             gamepad_map=gamepad_map,
@@ -505,7 +536,8 @@ _INPUT_MAJOR = 13
 
 
 def _objects_from_args(ns: argparse.Namespace) -> tuple[ObjectSpec, ...]:
-    """``--object`` / ``--no-object``: the virtual board's objects (the default demo's one if neither).
+    """``--object`` / ``--no-object``: the virtual board's objects (the default demo's one if neither, for one
+    arm).
 
     Raises:
         HostError: a malformed spec, or objects asked of a board that has no scene to add them to.
@@ -520,7 +552,9 @@ def _objects_from_args(ns: argparse.Namespace) -> tuple[ObjectSpec, ...]:
     if ns.no_object:
         return ()
     if not ns.object:
-        return (DEFAULT_OBJECT,)
+        # The one arm's pole stands where an array's first arm hangs (6 cm from the axis): an array
+        # starts with an empty scene unless --object places something.
+        return () if ns.arms not in (None, 1) else (DEFAULT_OBJECT,)
     specs = []
     for text in ns.object:
         try:

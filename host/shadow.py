@@ -24,6 +24,10 @@ as the real one (up to the model's friction and constants). See ``docs/host.md``
 - As soon as the board sends ``SimPoses`` (a virtual board behind ``--port``), the shadow switches off
   for good: the true shape is on the link. While telemetry says ``SIM``, it waits ``sim_grace_us`` of
   board time for those poses before building a plant at all.
+- A board laid out as an array (it sends ``ArmsTelemetry``, docs/board-link.md 0x0109) switches it off
+  too: the shadow plant is one arm driven by motors 1-3, which on an array are cables of different arms,
+  so its shape would be a wrong one. ``ArmsTelemetry`` follows each ``Telemetry``, and the check is made
+  again after the (slow) plant build, so an array's shadow never publishes a pose.
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
-from protocol.messages import Message, SimPoses, Telemetry, TelemetryFlags
+from protocol.messages import ArmsTelemetry, Message, SimPoses, Telemetry, TelemetryFlags
 
 __all__ = ["ShadowConfig", "ShadowPlant", "ShadowState", "ShadowStats", "reel_in_currents"]
 
@@ -54,6 +58,7 @@ class ShadowState(enum.Enum):
     WAITING = "waiting for telemetry"
     RUNNING = "running"
     OFF_SIM_POSES = "off (the board sends SimPoses)"
+    OFF_ARRAY = "off (the board is an array of arms: the shadow plant models one arm)"
     FAILED = "failed"
     STOPPED = "stopped"
 
@@ -172,6 +177,7 @@ class ShadowPlant:
         self._thread: threading.Thread | None = None
         self._latest: Telemetry | None = None
         self._sim_poses = False
+        self._array = False
         self._sim_since_us: int | None = None
         self._state = ShadowState.IDLE
         self._updates = 0
@@ -187,13 +193,17 @@ class ShadowPlant:
     # ------------------------------------------------------------------ listener (board client thread)
 
     def on_board_message(self, msg: Message) -> None:
-        """Listener: keep the newest telemetry (cheap, never blocks); ``SimPoses`` switch the shadow off."""
+        """Listener: keep the newest telemetry (cheap, never blocks); ``SimPoses`` or ``ArmsTelemetry`` switch
+        the shadow off."""
         if isinstance(msg, Telemetry):
             with self._lock:
                 self._latest = msg
             self._wake.set()
         elif isinstance(msg, SimPoses) and not self._sim_poses:
             self._sim_poses = True
+            self._wake.set()
+        elif isinstance(msg, ArmsTelemetry) and not self._array:
+            self._array = True
             self._wake.set()
 
     # ------------------------------------------------------------------ life cycle
@@ -263,9 +273,7 @@ class ShadowPlant:
                 self._wake.clear()
                 if self._stop.is_set():
                     break
-                if self._sim_poses:
-                    self._state = ShadowState.OFF_SIM_POSES
-                    _log.info("the board sends SimPoses: shadow plant off")
+                if self._off():
                     break
                 with self._lock:
                     t, self._latest = self._latest, None
@@ -279,11 +287,25 @@ class ShadowPlant:
                     except Exception as exc:  # no MuJoCo, a bad model: say so, never crash the host
                         self._fail(f"cannot build the plant: {exc}")
                         break
+                    if self._off():  # what arrived while the plant was built
+                        break
                     self._state = ShadowState.RUNNING
                 self._update(plant, t)
         except Exception as exc:
             _log.exception("shadow plant failed")
             self._fail(str(exc) or type(exc).__name__)
+
+    def _off(self) -> bool:
+        """Switch off for good if the board sends its own poses or is an array; True if switched off."""
+        if self._sim_poses:
+            self._state = ShadowState.OFF_SIM_POSES
+            _log.info("the board sends SimPoses: shadow plant off")
+        elif self._array:
+            self._state = ShadowState.OFF_ARRAY
+            _log.info("the board is an array (ArmsTelemetry): shadow plant off, it models one arm")
+        else:
+            return False
+        return True
 
     def _fail(self, reason: str) -> None:
         with self._lock:

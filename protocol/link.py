@@ -54,7 +54,7 @@ ID_END = HEADER_LEN + 2
 MAX_PAYLOAD = 2048
 """Largest payload accepted by :func:`encode_frame` and :class:`LinkParser`.
 
-Our largest message is ``SimPoses`` with 64 bodies (1801 bytes); a corrupted length can make the parser
+Our largest message is ``ArmPoses`` with 64 units (1803 bytes); a corrupted length can make the parser
 wait for at most this many bytes before the CRC16 rejects the frame.
 """
 CRC8_INIT = 0xFF

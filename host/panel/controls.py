@@ -10,7 +10,7 @@ import viser
 
 from host.panel.arbiter import CLI_CLIENT, ControlArbiter, ControlResult
 from host.panel.board_state import BoardState
-from host.panel.scene import CAMERA_PRESETS
+from host.panel.camera import CAMERA_PRESETS
 from host.panel.state_bar import KEY_HOOK_HTML, pilot_state, state_bar_html
 from protocol.dbus import Lever
 from protocol.messages import ArmBlocker, CommandCode, Mode, Phase, TelemetryFlags
@@ -121,7 +121,7 @@ def build_control_panel(
         arbiter: who may act, and the way to the board.
         board: the board's state (the state bar's first text).
         tension_max_n: the DIRECT sliders' ceiling.
-        set_camera: moves a tab's camera to a preset (``host.panel.scene.CAMERA_PRESETS``).
+        set_camera: moves a tab's camera to a preset (``host.panel.camera.CAMERA_PRESETS``).
     """
     cid = client.client_id
     gui = client.gui

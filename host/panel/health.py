@@ -214,7 +214,8 @@ def health_text(
         )
     else:
         flags = TelemetryFlags(t.flags)
-        motors = " ".join(f"M{i + 1} {'on' if t.motors_online >> i & 1 else '**OFF**'}" for i in range(3))
+        count = 3 if board.layout is None else board.layout[0] * board.layout[1]
+        motors = " ".join(f"M{i + 1} {'on' if t.motors_online >> i & 1 else '**OFF**'}" for i in range(count))
         rc = "ok" if flags & TelemetryFlags.RC_OK else "**lost**"
         phase = t.phase.name if t.phase == Phase.OK else f"**{t.phase.name}**"
         summary = (
@@ -226,6 +227,12 @@ def health_text(
             f"{'ok' if flags & TelemetryFlags.HOST_OK else 'silent'}"
             f"{' (required)' if flags & TelemetryFlags.HOST_REQUIRED else ''}  \n"
             f"**Pose source**: {pose_source}"
+        )
+    if board.layout is not None:
+        arms, cables = board.layout
+        summary += (
+            f"  \n**Array**: the board is an array of {arms} arms x {cables} cable(s), "
+            f"{arms * cables} motors (ArmsTelemetry); the plots show motors 1-3"
         )
     if shadow_status is not None:
         summary += f"  \n**Shadow**: {shadow_status}"

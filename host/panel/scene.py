@@ -41,7 +41,6 @@ import viser
 import viser.transforms as vtf
 
 __all__ = [
-    "CAMERA_PRESETS",
     "NOSE_AXIS",
     "ArmGeometry",
     "DronePose",
@@ -49,8 +48,8 @@ __all__ = [
     "SceneObject",
     "arm_drawing",
     "arm_frame",
+    "array_drawing",
     "build_scene",
-    "camera_view",
     "default_hanging_pose",
     "ned_to_scene",
     "quat_mul",
@@ -140,7 +139,8 @@ class ArmGeometry:
     def from_design(cls, design: Any) -> ArmGeometry:
         """The units of a ``hil.sim.spiral.SpiralDesign`` (mean width, chord), base first."""
         widths = tuple((a + b) / 2.0 for a, b in design.unit_widths_m())
-        return cls(widths, tuple(design.unit_chords_m()))
+        cables = int(getattr(design, "cables", 3))
+        return cls(widths, tuple(design.unit_chords_m()), tuple(360.0 * k / cables for k in range(cables)))
 
     @classmethod
     def default(cls) -> ArmGeometry:
@@ -253,7 +253,7 @@ class ArmDrawing:
         unit_positions: (n, 3) centres of the unit meshes.
         unit_wxyzs: (n, 4) orientations of the unit meshes (their +z along the unit).
         unit_scales: (n, 3) per-instance scales (width, width, length).
-        cable_segments: (3 * (n + 1), 2, 3) cable segments, cable after cable.
+        cable_segments: (c * (n + 1), 2, 3) segments of the c cables, cable after cable.
         tip_m: (3,) the tip end point.
     """
 
@@ -326,6 +326,48 @@ def arm_drawing(positions: FloatArray, quats: FloatArray, geom: ArmGeometry) -> 
     return ArmDrawing(centres, inst_q, scales, np.concatenate(segments, axis=0), tip)
 
 
+def array_drawing(positions: FloatArray, quats: FloatArray, geom: ArmGeometry, arms: int = 1) -> ArmDrawing:
+    """:func:`arm_drawing` of every arm of an array, joined: unit instances and cable segments arm after arm.
+
+    Args:
+        positions: (1 + arms n, 3) body positions: the drone, then each arm's units base to tip, arm after
+            arm (a ring plant's ``body_poses``, :meth:`host.panel.board_state.BoardState.bodies`).
+        quats: (1 + arms n, 4) body orientations.
+        geom: one arm's unit sizes.
+        arms: how many arms the units split into.
+
+    Returns:
+        The drawing, whose ``tip_m`` is arm 0's tip. One arm: exactly :func:`arm_drawing`'s.
+
+    Raises:
+        ValueError: the units do not split into ``arms`` arms of at least one unit.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    quats = np.asarray(quats, dtype=np.float64)
+    if arms == 1:
+        return arm_drawing(positions, quats, geom)
+    units, rest = divmod(len(positions) - 1, max(arms, 1))
+    if arms < 1 or rest or units < 1:
+        raise ValueError(f"{len(positions)} bodies are not a drone and {arms} arms of as many units")
+    drone_q = quats[0]
+    # Each arm hangs from its own mount on the ring: the drone's orientation, just above the arm's base,
+    # so its cables run up into the drone's underside there and not to the drone's centre.
+    lift = quat_rotate(drone_q, np.array([0.0, 0.0, 0.02]))
+    parts = []
+    for arm in range(arms):
+        lo = 1 + arm * units
+        p = positions[lo : lo + units]
+        q = quats[lo : lo + units]
+        parts.append(arm_drawing(np.vstack((p[0] + lift, p)), np.vstack((drone_q, q)), geom))
+    return ArmDrawing(
+        np.concatenate([d.unit_positions for d in parts]),
+        np.concatenate([d.unit_wxyzs for d in parts]),
+        np.concatenate([d.unit_scales for d in parts]),
+        np.concatenate([d.cable_segments for d in parts]),
+        parts[0].tip_m,
+    )
+
+
 def _drone_mesh() -> trimesh.Trimesh:
     parts = [trimesh.creation.box(extents=(0.12, 0.12, 0.04))]
     for k in range(4):
@@ -354,55 +396,6 @@ def _heading_mesh() -> trimesh.Trimesh:
     assert isinstance(mesh, trimesh.Trimesh)
     mesh.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, (0.0, 0.0, 1.0)))  # x -> y
     return mesh
-
-
-CAMERA_PRESETS = ("sticks", "behind", "side", "top", "tip")
-"""Camera presets: aligned with the sticks (the default), behind the drone, from the side, from above,
-following the arm's tip."""
-
-
-def camera_view(
-    preset: str, centre_m: Sequence[float], drone: DronePose, tip_m: Sequence[float]
-) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """Camera position and look-at point of a preset.
-
-    Every preset follows the yaw of the arm's frame, whose :data:`NOSE_AXIS` (+y) is stick forward and
-    the drone's nose: ``sticks`` looks forward from behind at the arm's height (stick right = screen
-    right, stick forward = away), ``behind`` from behind and above the drone, ``side`` from the drone's
-    left, ``top`` from above (stick forward = screen up; tilted back a little so the arm is not hidden
-    under the drone, and because an orbit camera cannot look along its own up axis), ``tip`` at the tip.
-
-    Args:
-        preset: one of :data:`CAMERA_PRESETS`.
-        centre_m: the point to look at (the arm's middle).
-        drone: the pose of the arm's frame (body 0, see :func:`arm_frame`).
-        tip_m: the arm's tip.
-
-    Raises:
-        ValueError: an unknown preset.
-    """
-    c = np.asarray(centre_m, dtype=np.float64)
-    q = np.asarray(drone.wxyz, dtype=np.float64)
-    nose = quat_rotate(q, np.asarray(NOSE_AXIS, dtype=np.float64))
-    nose[2] = 0.0
-    nose = _normalize(nose, NOSE_AXIS)
-    left = np.array([-nose[1], nose[0], 0.0])
-    up = np.array([0.0, 0.0, 1.0])
-    c = c - 0.05 * up  # a little below the arm's middle: the drone above and the arm's sweep below fit
-    if preset == "sticks":
-        pos, look = c - 1.1 * nose + 0.35 * up, c
-    elif preset == "behind":
-        pos, look = c - 1.3 * nose + 0.9 * up, c
-    elif preset == "side":
-        pos, look = c + 1.1 * left + 0.1 * up, c
-    elif preset == "top":
-        pos, look = c - 0.6 * nose + 1.3 * up, c
-    elif preset == "tip":
-        t = np.asarray(tip_m, dtype=np.float64)
-        pos, look = t - 0.35 * nose + 0.15 * up, t
-    else:
-        raise ValueError(f"camera preset must be one of {', '.join(CAMERA_PRESETS)}, got {preset!r}")
-    return (float(pos[0]), float(pos[1]), float(pos[2])), (float(look[0]), float(look[1]), float(look[2]))
 
 
 def _object_mesh(obj: SceneObject) -> trimesh.Trimesh:
@@ -503,28 +496,29 @@ class SceneView:
         drone_override: DronePose | None = None,
         label: str | None = None,
         trail: bool = True,
+        arms: int = 1,
     ) -> None:
-        """Pose the drone and the arm (drone first, then units base to tip) in one atomic update.
+        """Pose the drone and the arms (drone first, then units base to tip) in one atomic update.
 
         Args:
-            positions: (1 + n, 3) body positions.
-            quats: (1 + n, 4) body orientations.
+            positions: (1 + arms n, 3) body positions: the drone, then each arm's units, arm after arm.
+            quats: (1 + arms n, 4) body orientations.
             drone_override: a drone pose from another source (MAVLink, forward-left-up body axes); the
                 arm keeps its pose relative to the drone body, its frame turned by :func:`arm_frame`.
             label: text of the pose-source label (None: unchanged).
-            trail: extend the tip trail.
+            trail: extend the tip trail (of arm 0).
+            arms: the arms the units split into (an array's on its ring, :func:`array_drawing`).
         """
         positions = np.asarray(positions, dtype=np.float64)
         quats = np.asarray(quats, dtype=np.float64)
         if drone_override is not None:
             positions, quats = _reroot(positions, quats, arm_frame(drone_override))
-        drawing = arm_drawing(positions, quats, self.geom)
+        drawing = array_drawing(positions, quats, self.geom, arms)
         n = len(drawing.unit_positions)
         colors = None
         if n != self._n_units:
             self._n_units = n
-            f = np.linspace(0.0, 1.0, n)[:, None]
-            colors = (_UNIT_COLOR_BASE * (1 - f) + _UNIT_COLOR_TIP * f).astype(np.uint8)
+            colors = _unit_colors(n // arms, arms)
         if trail:
             self._trail.append(drawing.tip_m)
         p0, q0, tip = positions[0], quats[0], drawing.tip_m
@@ -543,7 +537,7 @@ class SceneView:
             h.units.batched_scales = drawing.unit_scales.astype(np.float32)
             h.cables.points = drawing.cable_segments.astype(np.float32)
             if len(drawing.cable_segments) != len(h.cables.colors):
-                h.cables.colors = _cable_colors(len(drawing.cable_segments) // 3)
+                h.cables.colors = _cable_colors(drawing, self.geom, arms)
             if len(self._trail) >= 2:
                 h.trail.points, h.trail.colors = _trail_segments(list(self._trail))
             if label is not None and label != self._label_text:
@@ -576,9 +570,22 @@ def _reroot(positions: FloatArray, quats: FloatArray, drone: DronePose) -> tuple
     return pos, quat
 
 
-def _cable_colors(per_cable: int) -> npt.NDArray[np.uint8]:
-    cols = np.concatenate([np.tile(np.asarray(c, dtype=np.uint8), (per_cable, 2, 1)) for c in _CABLE_COLORS])
-    return cols.astype(np.uint8)
+def _unit_colors(units: int, arms: int = 1) -> npt.NDArray[np.uint8]:
+    """Every arm's units shaded from base to tip (the same colours for every arm of an array)."""
+    f = np.linspace(0.0, 1.0, units)[:, None]
+    return np.tile((_UNIT_COLOR_BASE * (1 - f) + _UNIT_COLOR_TIP * f).astype(np.uint8), (arms, 1))
+
+
+def _cable_colors(drawing: ArmDrawing, geom: ArmGeometry, arms: int = 1) -> npt.NDArray[np.uint8]:
+    """Cable k of every arm in its colour (:data:`_CABLE_COLORS`), for segments arm after arm, cable after
+    cable."""
+    cables = len(geom.cable_angles_deg)
+    per_cable = len(drawing.cable_segments) // (cables * arms)
+    one_arm = [
+        np.tile(np.asarray(_CABLE_COLORS[k % len(_CABLE_COLORS)], dtype=np.uint8), (per_cable, 2, 1))
+        for k in range(cables)
+    ]
+    return np.concatenate(one_arm * arms).astype(np.uint8)
 
 
 def _trail_segments(points: list[FloatArray]) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
@@ -617,8 +624,6 @@ def build_scene(
         position=pos[0],
     )
     unit = trimesh.creation.cylinder(radius=0.5, height=1.0, sections=20)
-    n = geom.units
-    f = np.linspace(0.0, 1.0, n)[:, None]
     units_h = scene.add_batched_meshes_simple(
         "/arm/units",
         vertices=np.asarray(unit.vertices, dtype=np.float32),
@@ -626,13 +631,13 @@ def build_scene(
         batched_wxyzs=drawing.unit_wxyzs.astype(np.float32),
         batched_positions=drawing.unit_positions.astype(np.float32),
         batched_scales=drawing.unit_scales.astype(np.float32),
-        batched_colors=(_UNIT_COLOR_BASE * (1 - f) + _UNIT_COLOR_TIP * f).astype(np.uint8),
+        batched_colors=_unit_colors(geom.units),
         lod="off",
     )
     cables_h = scene.add_line_segments(
         "/arm/cables",
         points=drawing.cable_segments.astype(np.float32),
-        colors=_cable_colors(len(drawing.cable_segments) // 3),
+        colors=_cable_colors(drawing, geom),
         thickness=2.0,
         thickness_units="screen",
     )

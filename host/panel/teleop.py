@@ -48,6 +48,7 @@ import viser
 from host.panel.arbiter import ControlArbiter
 from host.panel.board_params import BoardParams
 from host.panel.board_state import BoardState, PoseSource
+from host.panel.camera import camera_view
 from host.panel.console import console_html
 from host.panel.controls import ControlHandles, build_control_panel, refresh_control
 from host.panel.guard import request_token
@@ -62,7 +63,6 @@ from host.panel.scene import (
     SceneObject,
     SceneView,
     build_scene,
-    camera_view,
     default_hanging_pose,
 )
 from host.worker import Worker
@@ -228,7 +228,7 @@ class TeleopPanel:
         self.arbiter.client_left(client.client_id)
 
     def set_camera(self, client: viser.ClientHandle, preset: str) -> None:
-        """Move one tab's camera to a preset (``host.panel.scene.CAMERA_PRESETS``)."""
+        """Move one tab's camera to a preset (``host.panel.camera.CAMERA_PRESETS``)."""
         sv = self.scene
         position, look_at = camera_view(preset, sv.centre_m, sv.drone, sv.tip_m)
         with client.atomic():
@@ -306,25 +306,24 @@ class TeleopPanel:
     def update_scene(self) -> bool:
         """Send a scene update if new poses arrived (or the drone moved); returns True if one was sent."""
         m = self.board
-        poses = m.poses
         source = m.pose_source
         drone = self._drone_override()
-        if poses is not None and len(poses.positions_m) >= 2 and source is not PoseSource.NONE:
+        bodies = m.bodies() if source is not PoseSource.NONE else None
+        if bodies is not None:
             if m.poses_count == self._last_poses and drone is None:
                 return False
             self._last_poses = m.poses_count
+            positions, quats, drawn = bodies
             # "simulation (SimPoses)" or "shadow plant (measured currents)": said in the scene and in
             # the health area, so nobody mistakes a model's shape for the measured one.
             self.pose_source = source.value
-            label = f"pose source: {source.value}"
+            arms = m.arms
+            if arms > 1:  # an array: every arm from its ArmPoses (docs/board-link.md, 0x010A)
+                self.pose_source += f" + ArmPoses: {drawn} of {arms} arms drawn"
+            label = f"pose source: {self.pose_source}"
             if drone is not None:
                 label += " · drone: MAVLink"
-            self.scene.update(
-                np.asarray(poses.positions_m),
-                np.asarray(poses.quats_wxyz),
-                drone_override=drone,
-                label=label,
-            )
+            self.scene.update(positions, quats, drone_override=drone, label=label, arms=drawn)
             if not self._framed:
                 self._framed = True
                 self._frame_camera()
@@ -337,7 +336,8 @@ class TeleopPanel:
         elif m.source_label.startswith("replay"):
             self.pose_source = f"{none} (the recording has no poses) — arm drawn hanging"
         elif self._shadow_status is not None:
-            self.pose_source = f"{none} yet (shadow plant waiting for telemetry) — arm drawn hanging"
+            # "shadow plant waiting for telemetry", or why it is off (an array board: it models one arm)
+            self.pose_source = f"{none} ({self._shadow_status()}) — arm drawn hanging"
         else:
             self.pose_source = f"{none} (hardware, shadow plant off) — arm drawn hanging"
         if self._last_poses == -2 and drone is None:

@@ -13,15 +13,15 @@ board.
 Callers import everything from here; the modules are ``enums`` (the wire enums and flags,
 ``Direction``), ``fields`` (field sizes and limits, the shared field codecs, ``truncate_utf8``),
 ``registry`` (the ``Message`` base, the ``MESSAGES`` registry, ``decode`` and ``encode``), ``board``
-(board -> host messages) and ``host`` (host -> board messages). Importing this package imports
-``board`` before ``host``, so ``MESSAGES`` is complete, in ``cmd_id`` order, before any ``decode``.
+(board -> host messages), ``arrays`` (the board -> host messages of an array of arms) and ``host``
+(host -> board messages). Importing this package imports every message module, so ``MESSAGES`` is
+complete before any ``decode``.
 """
 
 from __future__ import annotations
 
+from protocol.messages.arrays import ARMS_MOTORS_MAX, ArmPoses, ArmsTelemetry
 from protocol.messages.board import (
-    ARMS_MOTORS_MAX,
-    ArmsTelemetry,
     BoardStatus,
     CommandAck,
     Event,
@@ -95,6 +95,7 @@ __all__ = [
     "VERSION_LEN",
     "AckResult",
     "ArmBlocker",
+    "ArmPoses",
     "ArmsTelemetry",
     "BoardStatus",
     "ClockKind",

@@ -22,6 +22,7 @@ from protocol.messages.enums import (
     TelemetryFlags,
 )
 from protocol.messages.fields import (
+    _POSES,
     ACK_TEXT_MAX,
     EVENT_TEXT_MAX,
     MAX_SIM_BODIES,
@@ -35,10 +36,12 @@ from protocol.messages.fields import (
     Vec4i,
     _check_len,
     _enum,
+    _flat_poses,
     _pack_error,
     _pack_name,
     _pack_text,
     _unpack_name,
+    _unpack_poses,
     _unpack_text,
 )
 from protocol.messages.registry import Message, _register
@@ -358,8 +361,6 @@ class ParamValue(Message):
 
 
 _SIM_HEAD = struct.Struct("<QB")
-_POSE_FLOATS = 7
-_POSES = tuple(struct.Struct(f"<{_POSE_FLOATS * n}f") for n in range(MAX_SIM_BODIES + 1))
 
 
 @_register
@@ -393,17 +394,7 @@ class SimPoses(Message):
 
     def pack(self) -> bytes:
         """Encode the payload (see :meth:`Message.pack`)."""
-        n = len(self.positions_m)
-        if n != len(self.quats_wxyz):
-            raise ValueError(f"{n} positions but {len(self.quats_wxyz)} quaternions")
-        if n > MAX_SIM_BODIES:
-            raise ValueError(f"at most {MAX_SIM_BODIES} bodies, got {n}")
-        flat: list[float] = []
-        for p, q in zip(self.positions_m, self.quats_wxyz, strict=True):
-            if len(p) != 3 or len(q) != 4:
-                raise ValueError("positions are (x, y, z), quaternions (w, x, y, z)")
-            flat += p
-            flat += q
+        n, flat = _flat_poses(self.positions_m, self.quats_wxyz, "bodies")
         try:
             return _SIM_HEAD.pack(self.time_us, n) + _POSES[n].pack(*flat)
         except (struct.error, OverflowError) as exc:
@@ -418,10 +409,7 @@ class SimPoses(Message):
         if n > MAX_SIM_BODIES:
             raise DecodeError(f"SimPoses: {n} bodies, at most {MAX_SIM_BODIES}")
         _check_len(payload, _SIM_HEAD.size + _POSES[n].size, "SimPoses")
-        v = _POSES[n].unpack_from(payload, _SIM_HEAD.size)
-        positions = tuple(v[i : i + 3] for i in range(0, len(v), _POSE_FLOATS))
-        quats = tuple(v[i + 3 : i + 7] for i in range(0, len(v), _POSE_FLOATS))
-        return cls(t, positions, quats)
+        return cls(t, *_unpack_poses(payload, _SIM_HEAD.size, n))
 
 
 @dataclass(frozen=True, slots=True)
@@ -578,99 +566,3 @@ class CommandAck(Message):
         if command in CommandCode._value2member_map_:
             command = CommandCode(command)
         return cls(command, _enum(AckResult, result, "result"), request_seq, text)
-
-
-_ARMS_HEAD = struct.Struct("<QBBB")
-_ARMS_MOTOR = struct.Struct("<Hhhhfff?")
-_ARMS_FIELDS = 8
-"""Fields of one motor's entry (angle, speed, current, commanded, target, estimate, length, hold)."""
-ARMS_MOTORS_MAX = 8
-"""Motors an ``ArmsTelemetry`` carries at most (the C-board's eight C610 ids)."""
-_ARMS_MOTOR_STRUCTS = {n: struct.Struct("<" + _ARMS_MOTOR.format[1:] * n) for n in range(ARMS_MOTORS_MAX + 1)}
-
-
-@_register
-@dataclass(frozen=True, slots=True)
-class ArmsTelemetry(Message):
-    """Every motor of a board laid out as an array (with each ``Telemetry``). 11 + 21 n bytes, n <= 8.
-
-    Sent only by a board whose layout is not the one 3-cable arm (``Telemetry`` carries motors 1-3): what
-    a 3-motor board sends is unchanged. Motor ``m`` (1-based) drives cable ``(m-1) % cables_per_arm`` of
-    arm ``(m-1) // cables_per_arm``.
-
-    Attributes:
-        time_us: board time.
-        arms: arms of the layout.
-        cables_per_arm: cables of each arm (1-3).
-        motor_angle: per motor, rotor angle in counts 0..8191, as fed back.
-        motor_speed_rpm: per motor, rotor speed in rpm.
-        motor_current: per motor, measured current, raw (1000 per amp).
-        commanded_current: per motor, the current last sent, raw.
-        tension_target_n: per motor, its cable's tension target.
-        tension_est_n: per motor, its cable's tension estimated from the measured current.
-        cable_length_m: per motor, cable paid in since start.
-        hold: per motor, its cable is in length-hold.
-    """
-
-    CMD_ID: ClassVar[int] = 0x0109
-    DIRECTION: ClassVar[Direction] = Direction.BOARD_TO_HOST
-
-    time_us: int
-    arms: int
-    cables_per_arm: int
-    motor_angle: tuple[int, ...]
-    motor_speed_rpm: tuple[int, ...]
-    motor_current: tuple[int, ...]
-    commanded_current: tuple[int, ...]
-    tension_target_n: tuple[float, ...]
-    tension_est_n: tuple[float, ...]
-    cable_length_m: tuple[float, ...]
-    hold: tuple[bool, ...]
-
-    def pack(self) -> bytes:
-        """Encode the payload (see :meth:`Message.pack`)."""
-        columns = (
-            self.motor_angle,
-            self.motor_speed_rpm,
-            self.motor_current,
-            self.commanded_current,
-            self.tension_target_n,
-            self.tension_est_n,
-            self.cable_length_m,
-            self.hold,
-        )
-        n = len(self.motor_angle)
-        if any(len(c) != n for c in columns):
-            raise ValueError("ArmsTelemetry: every per-motor field needs one value per motor")
-        _check_layout(self.arms, self.cables_per_arm, n, ValueError)
-        flat = [v for row in zip(*columns, strict=True) for v in row]
-        try:
-            return _ARMS_HEAD.pack(self.time_us, self.arms, self.cables_per_arm, n) + _ARMS_MOTOR_STRUCTS[
-                n
-            ].pack(*flat)
-        except (struct.error, OverflowError) as exc:
-            raise _pack_error("ArmsTelemetry", exc) from exc
-
-    @classmethod
-    def unpack(cls, payload: bytes) -> ArmsTelemetry:
-        """Decode the payload (see :meth:`Message.unpack`)."""
-        head = _ARMS_HEAD.size
-        if len(payload) < head:
-            raise DecodeError(f"ArmsTelemetry payload is at least {head} bytes, got {len(payload)}")
-        t, arms, cables, n = _ARMS_HEAD.unpack_from(payload)
-        _check_layout(arms, cables, n, DecodeError)
-        _check_len(payload, head + _ARMS_MOTOR_STRUCTS[n].size, "ArmsTelemetry")
-        if any(b > 1 for b in payload[head + _ARMS_MOTOR.size - 1 :: _ARMS_MOTOR.size]):
-            raise DecodeError("ArmsTelemetry: hold is 0 or 1")
-        v = _ARMS_MOTOR_STRUCTS[n].unpack_from(payload, head)
-        k = _ARMS_FIELDS
-        cols = [tuple(v[j::k]) for j in range(k)]
-        return cls(t, arms, cables, *cols)  # type: ignore[arg-type]
-
-
-def _check_layout(arms: int, cables: int, n: int, error: type[Exception]) -> None:
-    if not (1 <= n <= ARMS_MOTORS_MAX and 1 <= cables <= 3 and arms * cables == n):
-        raise error(
-            f"ArmsTelemetry: {arms} arm(s) of {cables} cable(s) for {n} motors (1-{ARMS_MOTORS_MAX} motors, "
-            "1-3 cables per arm, arms x cables = motors)"
-        )

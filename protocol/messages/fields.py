@@ -6,6 +6,7 @@ The underscored helpers are the message modules' own (``protocol.messages`` does
 
 from __future__ import annotations
 
+import struct
 from enum import IntEnum
 from typing import TypeVar
 
@@ -110,3 +111,35 @@ def _unpack_name(raw: bytes, field: str) -> str:
         return name.decode("ascii")
     except UnicodeDecodeError:
         raise DecodeError(f"{field} is not ASCII") from None
+
+
+# --- poses (SimPoses, ArmPoses) -------------------------------------------------------------------
+
+_POSE_FLOATS = 7
+_POSES = tuple(struct.Struct(f"<{_POSE_FLOATS * n}f") for n in range(MAX_SIM_BODIES + 1))
+"""One pose on the wire: x, y, z then w, x, y, z (f32 each, 28 bytes); ``_POSES[n]`` packs n of them."""
+
+
+def _flat_poses(
+    positions_m: tuple[Vec3f, ...], quats_wxyz: tuple[Vec4f, ...], what: str
+) -> tuple[int, list[float]]:
+    """Count and flat floats of poses (x, y, z, w, x, y, z per body), checked for the wire."""
+    n = len(positions_m)
+    if n != len(quats_wxyz):
+        raise ValueError(f"{n} positions but {len(quats_wxyz)} quaternions")
+    if n > MAX_SIM_BODIES:
+        raise ValueError(f"at most {MAX_SIM_BODIES} {what}, got {n}")
+    flat: list[float] = []
+    for p, q in zip(positions_m, quats_wxyz, strict=True):
+        if len(p) != 3 or len(q) != 4:
+            raise ValueError("positions are (x, y, z), quaternions (w, x, y, z)")
+        flat += p
+        flat += q
+    return n, flat
+
+
+def _unpack_poses(payload: bytes, at: int, n: int) -> tuple[tuple[Vec3f, ...], tuple[Vec4f, ...]]:
+    v = _POSES[n].unpack_from(payload, at)
+    positions = tuple(v[i : i + 3] for i in range(0, len(v), _POSE_FLOATS))
+    quats = tuple(v[i + 3 : i + 7] for i in range(0, len(v), _POSE_FLOATS))
+    return positions, quats

@@ -25,6 +25,7 @@ from protocol.messages import (
     PARAM_INDEX_BY_NAME,
     AckResult,
     ArmBlocker,
+    ArmPoses,
     BoardStatus,
     Command,
     CommandAck,
@@ -325,6 +326,22 @@ def test_sim_poses_only_when_the_bus_provides_them() -> None:
     assert len(poses) == 5 and poses[0].tip_position_m == pytest.approx((0.0, 0.0, 0.9))
     tel = [m for m in msgs if isinstance(m, Telemetry)][-1]
     assert tel.flags & TelemetryFlags.SIM
+
+
+def test_an_arrays_pose_messages_are_sent_in_order() -> None:
+    """A provider's list (an array: SimPoses with arm 0, then ArmPoses of arms 1..) goes out in order."""
+    one = ((0.0, 0.0, 0.5),), ((1.0, 0.0, 0.0, 0.0),)
+    batch: list[SimPoses | ArmPoses] = [
+        SimPoses(7, ((0.0, 0.0, 1.0), *one[0]), ((1.0, 0.0, 0.0, 0.0), *one[1]))
+    ]
+    batch += [ArmPoses(7, arm, 3, *one) for arm in (1, 2)]
+    host, board = MemoryTransport.pair()
+    fw = Firmware(FirmwareConfig(), FakeMotorBus(), ScriptedRcSource(frame()), board, poses=lambda: batch)
+    for t in range(0, 20_000, 1000):
+        fw.run_due(t)
+    msgs = [decode(f) for f in LinkParser().feed(host.read())]
+    msgs = [m for m in msgs if isinstance(m, SimPoses | ArmPoses)]
+    assert msgs == batch
 
 
 def test_lockstep_runs_are_deterministic() -> None:

@@ -6,6 +6,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
 import pytest
 import serial
 
@@ -17,15 +18,19 @@ from hil.board import (
     LinkWire,
     VirtualBoard,
     VirtualBoardProcess,
+    pose_messages,
+    poses_message,
     realtime_board,
     run_realtime,
 )
 from hil.errors import HilError
 from hil.harness import ScriptedHost
 from hil.radio import RadioScript
+from hil.sim.spiral import SpiralDesign
 from protocol.dbus import Lever, RcFrame
 from protocol.link import LinkParser
 from protocol.messages import (
+    ArmPoses,
     Event,
     EventKind,
     Heartbeat,
@@ -53,6 +58,72 @@ def test_lockstep_tick_order_and_time() -> None:
     assert len(host.telemetry) == 10  # 100 Hz
     assert any(isinstance(m, SimPoses) for m in host.other)
     board.close()
+
+
+def _bodies(arms: int, units: int) -> tuple[np.ndarray, np.ndarray]:
+    """Body poses as a plant gives them: the drone, then each arm's units; arm a's unit u at z = a + u/100."""
+    z = [0.0] + [a + u / 100 for a in range(arms) for u in range(units)]
+    positions = np.array([[0.0, 0.0, v] for v in z])
+    quats = np.tile([1.0, 0.0, 0.0, 0.0], (len(z), 1))
+    return positions, quats
+
+
+def test_one_arms_poses_are_the_one_simposes_it_always_was() -> None:
+    positions, quats = _bodies(1, 21)
+    got = pose_messages(5, positions, quats)
+    assert isinstance(got, SimPoses) and got == poses_message(5, positions, quats)
+    assert got.pack() == poses_message(5, positions, quats).pack()
+
+
+@pytest.mark.parametrize(("arms", "units"), [(2, 21), (4, 21), (8, 21), (3, 1)])
+def test_an_arrays_poses_split_into_simposes_and_one_armposes_per_further_arm(arms: int, units: int) -> None:
+    """8 arms of the 21-unit prototype (169 bodies) overflow one SimPoses (64): one ArmPoses per arm."""
+    positions, quats = _bodies(arms, units)
+    got = pose_messages(9, positions, quats, arms)
+    assert isinstance(got, list)
+    first, *rest = got
+    assert isinstance(first, SimPoses) and len(first.positions_m) == 1 + units  # the drone and arm 0
+    assert first.positions_m[0] == (0.0, 0.0, 0.0)
+    assert first.tip_position_m[2] == pytest.approx((units - 1) / 100)
+    further = [m for m in rest if isinstance(m, ArmPoses)]
+    assert len(further) == len(rest)
+    assert [(m.arm, m.arms, m.time_us) for m in further] == [(a, arms, 9) for a in range(1, arms)]
+    for m in further:
+        assert [p[2] for p in m.positions_m] == pytest.approx([m.arm + u / 100 for u in range(units)])
+        m.pack()  # fits the wire
+
+
+@pytest.mark.parametrize(("bodies_of", "arms"), [((2, 4), 3), ((1, 4), 0), ((1, 4), 9), ((0, 0), 2)])
+def test_poses_that_do_not_split_into_the_arms_are_refused(bodies_of: tuple[int, int], arms: int) -> None:
+    with pytest.raises(ValueError):
+        pose_messages(0, *_bodies(*bodies_of), arms)
+
+
+def test_an_array_board_sends_every_arms_poses() -> None:
+    """4 arms of 2 cables: each pose tick brings SimPoses (drone + arm 0) and ArmPoses of arms 1-3, which
+    are the plant's own body poses arm by arm."""
+    cfg = BoardConfig(
+        design=SpiralDesign.paper_prototype().with_cables(2), firmware=FirmwareConfig().with_arms(4, 2)
+    )
+    with VirtualBoard(cfg, radio_script=RadioScript([(0, RcFrame.neutral())])) as board:
+        assert board.wire is not None
+        host = ScriptedHost(board.wire.host, board.faults)
+        for _ in range(40):
+            host.before_tick(board.now_us)
+            board.tick()
+            host.after_tick(board.now_us)
+        units = board.plant.units_per_arm
+        sims = [m for m in host.other if isinstance(m, SimPoses)]
+        arms = [m for m in host.other if isinstance(m, ArmPoses)]
+        assert len(sims) == 2 and len(arms) == 3 * len(sims)  # 50 Hz, arms 1-3 after each SimPoses
+        assert all(len(m.positions_m) == 1 + units for m in sims)
+        assert [(m.arm, m.arms, len(m.positions_m)) for m in arms[-3:]] == [(a, 4, units) for a in (1, 2, 3)]
+        assert {m.time_us for m in arms[-3:]} == {sims[-1].time_us}
+        # The last ones are the plant's poses now (nothing moved since: the arms hang at rest).
+        bodies = board.plant.body_poses().positions_m
+        for m in arms[-3:]:
+            lo = 1 + m.arm * units
+            assert np.allclose(m.positions_m, bodies[lo : lo + units], atol=1e-3)
 
 
 def test_control_period_mismatch_is_refused() -> None:
@@ -390,3 +461,15 @@ def test_after_a_late_tick_the_plant_keeps_the_wall_clocks_time(stall_us: int, l
     # The plant stepped one period ahead of the firmware's last tick, less exactly the lag it counts.
     assert board.plant.time_us == board.now_us + period - board.plant_lag_us
     board.close()
+
+
+def test_a_real_time_array_board_ends_with_zero_current_on_every_motor() -> None:
+    """The end of a real-time run sends zero current to all the board's motors (eight here, both frames)."""
+    cfg = BoardConfig(
+        design=SpiralDesign.paper_prototype().with_cables(1), firmware=FirmwareConfig().with_arms(8, 1)
+    )
+    host_end, board_end = MemoryTransport.pair()
+    with VirtualBoard(cfg, link=board_end, radio_script=RadioScript([(0, RcFrame.neutral())])) as board:
+        run_realtime(board, _StallingClock(lambda _now_us: host_end.read()), duration_us=50_000)
+        assert board.bus.motor_count == 8
+        assert board.plant.commanded_currents_raw() == (0,) * 8

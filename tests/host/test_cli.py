@@ -22,6 +22,7 @@ from host.app import HostApp
 from host.cli import main
 from host.object_spec import DEFAULT_OBJECT, ObjectSpec
 from host.options import HostOptions, build_parser
+from host.plant_model import virtual_board_config
 from protocol.dbus import Lever
 from protocol.messages import Mode, Phase
 from tests.support.link_peer import LinkPeer
@@ -106,6 +107,9 @@ def test_virtual_rc_choices() -> None:
         ["--mav-compid", "0"],
         ["--virtual-rc", "fly"],
         ["--excite", "slow"],
+        ["--arms", "0"],
+        ["--arms", "9"],
+        ["--arms", "two"],
     ],
 )
 def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
@@ -148,6 +152,8 @@ def test_bad_flags_exit_2_with_one_line(argv: list[str], capsys: pytest.CaptureF
         (["--virtual-rc", "grasp", "--excite"], "--excite runs with the right lever MIDDLE"),
         (["--preset", "authors", "--replay", "x.mcap"], "--preset is a model of the virtual board"),
         (["--preset", "authors", "--port", "loop://", "--no-shadow"], "cannot go with --no-shadow"),
+        (["--arms", "4", "--port", "loop://"], "--arms is for the virtual board, not with --port"),
+        (["--arms", "2", "--replay", "x.mcap"], "--arms is for the virtual board, not with --replay"),
     ],
 )
 def test_bad_combinations_exit_2(argv: list[str], needle: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -161,12 +167,34 @@ def test_object_flags_choose_the_virtual_boards_scene() -> None:
 
     assert objects() == (DEFAULT_OBJECT,)  # the default demo has something to grasp
     assert objects("--no-object") == ()
+    assert objects("--arms", "4") == ()  # the one arm's pole would stand inside an array's arm 0
+    assert objects("--arms", "1") == (DEFAULT_OBJECT,)
     assert objects("--port", "loop://") == ()  # a real board's scene is not ours to fill
     two = objects("--object", "cylinder:d=20mm,x=40mm,z=-110mm", "--object", "capsule:d=1cm,z=-0.2m")
     assert [(o.shape, o.diameter_m, o.z_m) for o in two] == [
         ("cylinder", 0.02, -0.11),
         ("capsule", 0.01, -0.2),
     ]
+
+
+@pytest.mark.parametrize(("arms", "cables"), [(1, 3), (2, 3), (3, 2), (4, 2), (5, 1), (8, 1)])
+def test_arms_lay_the_virtual_board_out_as_an_array(arms: int, cables: int) -> None:
+    """N arms of the most cables that fit eight motors (at most 3); the design has as many cables."""
+    options = HostOptions.from_args(build_parser().parse_args(["--arms", str(arms)]))
+    assert options.arms == arms
+    config = virtual_board_config(None, None, (), options.arms)
+    assert (config.firmware.arm_count, config.firmware.cables_per_arm, config.design.cables) == (
+        arms,
+        cables,
+        cables,
+    )
+    assert config.firmware.motor_count == arms * cables <= 8
+
+
+def test_one_arm_is_the_default_board_unchanged() -> None:
+    assert HostOptions.from_args(build_parser().parse_args([])).arms == 1
+    assert virtual_board_config(None, None, (), 1) == virtual_board_config(None, None, ())
+    assert virtual_board_config(None, None, ()).firmware.motor_count == 3
 
 
 def test_replay_of_a_file_that_is_not_a_recording_exits_2(

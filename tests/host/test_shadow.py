@@ -19,7 +19,7 @@ from host.app import HostApp
 from host.options import HostOptions
 from host.panel.board_state import BoardState, PoseSource
 from host.shadow import ShadowConfig, ShadowPlant, ShadowState, reel_in_currents
-from protocol.messages import SimPoses, Telemetry, TelemetryFlags
+from protocol.messages import ArmsTelemetry, SimPoses, Telemetry, TelemetryFlags
 from tests.support.link_peer import HardwarePeer, LinkPeer
 from tests.support.realtime_guard import wait_for
 
@@ -203,6 +203,38 @@ def test_a_simulating_board_gets_time_to_send_its_poses_before_a_plant_is_built(
         s.on_board_message(SimPoses(200_000, ((0.0, 0.0, 1.0),), ((1.0, 0.0, 0.0, 0.0),)))
         assert _wait(lambda: s.state is ShadowState.OFF_SIM_POSES)
     assert built == []
+
+
+def _arms_telemetry(time_us: int) -> ArmsTelemetry:
+    four = (0,) * 4
+    return ArmsTelemetry(
+        time_us, 4, 1, four, four, four, four, (0.0,) * 4, (0.0,) * 4, (0.0,) * 4, (False,) * 4
+    )
+
+
+@pytest.mark.parametrize("slow_build", [False, True])
+def test_an_array_board_switches_the_shadow_off_with_its_reason(slow_build: bool) -> None:
+    """Motors 1-3 of an array are cables of different arms: the one-arm shadow would draw a wrong shape.
+    ArmsTelemetry comes right after each Telemetry: a plant built meanwhile never publishes."""
+    built: list[CountingPlant] = []
+
+    def factory() -> CountingPlant:
+        if slow_build:
+            time.sleep(0.2)  # ArmsTelemetry arrives while the plant is built
+        built.append(CountingPlant())
+        return built[-1]
+
+    published = Published()
+    with ShadowPlant(published, plant_factory=factory) as s:
+        if slow_build:  # the first Telemetry starts the build before its ArmsTelemetry is in
+            s.on_board_message(telemetry(0, (500, 0, 0)))
+            time.sleep(0.05)
+        s.on_board_message(_arms_telemetry(0))
+        s.on_board_message(telemetry(FRAME_US, (500, 0, 0)))
+        assert _wait(lambda: s.state is ShadowState.OFF_ARRAY)
+        assert not s.active and published.poses == []
+        assert "array" in s.stats().describe() and "one arm" in s.stats().describe()
+    assert s.state is ShadowState.OFF_ARRAY  # stop() keeps the reason
 
 
 def test_a_plant_that_cannot_be_built_fails_in_one_line() -> None:

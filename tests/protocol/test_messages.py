@@ -26,6 +26,7 @@ from protocol.messages import (
     MESSAGES,
     AckResult,
     ArmBlocker,
+    ArmPoses,
     ArmsTelemetry,
     BoardStatus,
     ClockKind,
@@ -68,6 +69,7 @@ EXPECTED_IDS = {
     BoardStatus: 0x0107,
     CommandAck: 0x0108,
     ArmsTelemetry: 0x0109,
+    ArmPoses: 0x010A,
     Heartbeat: 0x0201,
     VirtualRc: 0x0202,
     Command: 0x0203,
@@ -168,6 +170,18 @@ STRATEGIES: dict[type[Message], st.SearchStrategy[Any]] = {
                 st.lists(e, min_size=ac[0] * ac[1], max_size=ac[0] * ac[1]).map(tuple)
                 for e in (u16, i16, i16, i16, f32, f32, f32, st.booleans())
             ],
+        )
+    ),
+    ArmPoses: st.integers(1, ARMS_MOTORS_MAX).flatmap(
+        lambda arms: st.tuples(st.integers(0, arms - 1), st.integers(0, MAX_SIM_BODIES)).flatmap(
+            lambda an: st.builds(
+                ArmPoses,
+                u64,
+                st.just(an[0]),
+                st.just(arms),
+                st.lists(v3f, min_size=an[1], max_size=an[1]).map(tuple),
+                st.lists(st.tuples(f32, f32, f32, f32), min_size=an[1], max_size=an[1]).map(tuple),
+            )
         )
     ),
     Heartbeat: st.builds(Heartbeat, u64, u32),
@@ -382,6 +396,21 @@ def test_golden_arms_telemetry() -> None:
         ).pack()
 
 
+def test_golden_arm_poses() -> None:
+    """Arm 2 of 4, two units: the head (time, arm, arms, units) then 28 bytes per unit as in SimPoses."""
+    msg = ArmPoses(7, 2, 4, ((0.0, 0.0, 1.0), (1.0, 2.0, 3.0)), ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0)))
+    assert msg.pack().hex() == (
+        "0700000000000000" "020402"
+        "00000000" "00000000" "0000803f" "0000803f" "00000000" "00000000" "00000000"
+        "0000803f" "00000040" "00004040" "00000000" "0000803f" "00000000" "00000000"
+    )  # fmt: skip
+    assert ArmPoses.unpack(msg.pack()) == msg
+    assert msg.tip_position_m == (1.0, 2.0, 3.0)
+    # The units' bytes are SimPoses' bodies' bytes: one codec for a pose on the wire.
+    simposes = SimPoses(7, msg.positions_m, msg.quats_wxyz).pack()
+    assert msg.pack()[11:] == simposes[9:]
+
+
 def test_golden_motor_frames_and_rc() -> None:
     fb = bytes.fromhex("1fff03e8ff382400")
     mf = MotorFrames(9, ((0x201, fb), (0x202, fb), (0, bytes(8))))
@@ -455,6 +484,7 @@ def _sample(cls: type[Message]) -> Message:
         BoardStatus: BoardStatus(1, "v", ClockKind.REALTIME_FIFO, (TaskStats("c", 1000),)),
         CommandAck: CommandAck(CommandCode.ARM, AckResult.ACCEPTED, 0, "ok"),
         ArmsTelemetry: ArmsTelemetry(1, 1, 1, (0,), (0,), (0,), (0,), (0.0,), (0.0,), (0.0,), (False,)),
+        ArmPoses: ArmPoses(1, 1, 2, ((0.0, 0.0, 0.0),), ((1.0, 0.0, 0.0, 0.0),)),
         Heartbeat: Heartbeat(1, 2),
         VirtualRc: VirtualRc(bytes(18)),
         Command: Command(CommandCode.ARM),
@@ -483,6 +513,11 @@ def _sample(cls: type[Message]) -> Message:
         (ArmsTelemetry, bytes(8) + bytes([2, 2, 3]) + bytes(21 * 3)),  # 2 arms x 2 cables is not 3
         (ArmsTelemetry, bytes(8) + bytes([1, 4, 4]) + bytes(21 * 4)),  # 4 cables per arm
         (ArmsTelemetry, bytes(8) + bytes([1, 1, 1]) + bytes(20) + b"\x02"),  # hold 2
+        (ArmPoses, bytes(8) + bytes([2, 2, 0])),  # arm 2 of 2 (arms count from 0)
+        (ArmPoses, bytes(8) + bytes([0, 0, 0])),  # no arms
+        (ArmPoses, bytes(8) + bytes([0, 9, 0])),  # nine arms
+        (ArmPoses, bytes(8) + bytes([1, 2, MAX_SIM_BODIES + 1]) + bytes(28 * (MAX_SIM_BODIES + 1))),
+        (ArmPoses, bytes(8) + bytes([1, 2, 2]) + bytes(28)),  # two units said, one sent
         (BoardStatus, bytes(24) + b"\x03\x00"),  # clock kind 3
         (BoardStatus, bytes(24) + b"\x00" + bytes([MAX_TASKS + 1])),
     ],
@@ -519,6 +554,11 @@ def test_unknown_cmd_id() -> None:
         MotorFrames(0, ((0, bytes(8)), (0, bytes(8)), (0, bytes(7)))),
         SimPoses(0, ((0.0, 0.0, 0.0),), ()),
         SimPoses(0, ((0.0, 0.0, 0.0),) * 65, ((1.0, 0.0, 0.0, 0.0),) * 65),
+        ArmPoses(0, 0, 2, ((0.0, 0.0, 0.0),), ()),
+        ArmPoses(0, 2, 2, (), ()),
+        ArmPoses(0, 0, ARMS_MOTORS_MAX + 1, (), ()),
+        ArmPoses(0, -1, 2, (), ()),
+        ArmPoses(0, 0, 2, ((0.0, 0.0, 0.0),) * 65, ((1.0, 0.0, 0.0, 0.0),) * 65),
         BoardStatus(0, "v" * 17, ClockKind.LOCKSTEP),
         BoardStatus(0, "v", ClockKind.LOCKSTEP, (TaskStats("x" * 13, 1),)),
         BoardStatus(0, "v", ClockKind.LOCKSTEP, (TaskStats("x", 1),) * (MAX_TASKS + 1)),
@@ -592,7 +632,7 @@ def _layout_rows(section: str) -> list[tuple[int, int, str]]:
 @pytest.mark.parametrize("cls", list(EXPECTED_IDS))
 def test_doc_layout_matches_code(cls: type[Message]) -> None:
     sections = _doc_sections()
-    title = next((t for t in sections if t.startswith(f"`{cls.CMD_ID:#06x}`")), None)
+    title = next((t for t in sections if t.lower().startswith(f"`{cls.CMD_ID:#06x}`")), None)
     assert title is not None, f"no section for {cls.__name__}"
     assert cls.__name__ in title
     section = sections[title]

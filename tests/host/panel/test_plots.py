@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from host.panel.board_state import BoardState
-from host.panel.health import health_checks, health_html
+from host.panel.health import health_checks, health_html, health_text
 from host.panel.history import PLOT_COLUMNS
 from host.panel.plots import CABLE_CHOICES, plot_frame, y_range
-from protocol.messages import Telemetry
+from protocol.messages import ArmsTelemetry, Telemetry
 
 
 def rows(n: int, dt_s: float = 0.01) -> np.ndarray:
@@ -68,3 +68,17 @@ def test_scales_pin_both_axes() -> None:
     s = fixed_scales(-1.0, 2.5, 10.0)
     assert s["x"] == {"time": False, "auto": False, "range": [-10.0, 0.0]}
     assert s["y"] == {"auto": False, "range": [-1.0, 2.5]}
+
+
+def test_health_says_the_board_is_an_array() -> None:
+    m = BoardState()
+    m.on_board_message(Telemetry(time_us=1, motors_online=0b1011_1111))
+    summary, _, _ = health_text(m, "simulation", None)
+    assert "array" not in summary and "M3 on" in summary and "M4" not in summary
+    eight = (0,) * 8
+    m.on_board_message(
+        ArmsTelemetry(1, 4, 2, eight, eight, eight, eight, (0.0,) * 8, (0.0,) * 8, (0.0,) * 8, (False,) * 8)
+    )
+    summary, _, _ = health_text(m, "simulation", None)
+    assert "the board is an array of 4 arms x 2 cable(s), 8 motors" in summary
+    assert "M7 **OFF**" in summary and "M8 on" in summary

@@ -7,7 +7,18 @@ import math
 import numpy as np
 import pytest
 
-from host.panel.scene import ArmGeometry, DronePose, arm_drawing, default_hanging_pose, quat_mul, quat_rotate
+from hil.sim.spiral import SpiralDesign
+from host.panel.scene import (
+    ArmGeometry,
+    DronePose,
+    _cable_colors,
+    _unit_colors,
+    arm_drawing,
+    array_drawing,
+    default_hanging_pose,
+    quat_mul,
+    quat_rotate,
+)
 
 
 def test_arm_drawing_of_a_hanging_arm() -> None:
@@ -36,6 +47,54 @@ def test_arm_drawing_resamples_other_unit_counts() -> None:
         arm_drawing(pos[:1], quat[:1], geom)
 
 
+def _ring(arms: int, geom: ArmGeometry, radius_m: float = 0.08) -> tuple[np.ndarray, np.ndarray]:
+    """Body poses of ``arms`` arms hanging straight down on a ring under a drone at 1 m: the drone, then
+    each arm's units, arm after arm (as a ring plant gives them)."""
+    pos, quat = default_hanging_pose(geom, DronePose((0.0, 0.0, 1.0)))
+    positions, quats = [pos[:1]], [quat[:1]]
+    for k in range(arms):
+        a = 2 * math.pi * k / arms
+        positions.append(pos[1:] + np.array([radius_m * math.cos(a), radius_m * math.sin(a), 0.0]))
+        quats.append(quat[1:])
+    return np.concatenate(positions), np.concatenate(quats)
+
+
+@pytest.mark.parametrize("arms", [2, 4, 8])
+def test_an_arrays_drawing_has_every_arm_at_its_place_on_the_ring(arms: int) -> None:
+    cables = {2: 3, 4: 2, 8: 1}[arms]
+    geom = ArmGeometry.from_design(SpiralDesign.paper_prototype().with_cables(cables))
+    assert len(geom.cable_angles_deg) == cables
+    n = geom.units
+    positions, quats = _ring(arms, geom)
+    d = array_drawing(positions, quats, geom, arms)
+    assert d.unit_positions.shape == (arms * n, 3)
+    assert d.cable_segments.shape == (arms * cables * (n + 1), 2, 3)
+    for k in range(arms):
+        a = 2 * math.pi * k / arms
+        centre = np.array([0.08 * math.cos(a), 0.08 * math.sin(a)])
+        units = d.unit_positions[k * n : (k + 1) * n, :2]
+        assert np.allclose(units, centre, atol=1e-9)  # each arm hangs straight down at its place
+        segs = d.cable_segments[k * cables * (n + 1) : (k + 1) * cables * (n + 1)]
+        anchors = segs[:: n + 1, 0]  # each cable's first point: on the drone's underside, above its arm
+        assert np.all(np.linalg.norm(anchors[:, :2] - centre, axis=1) < 0.03)
+        assert np.all(anchors[:, 2] >= positions[1 + k * n, 2] - 1e-9)  # not below its base
+    assert np.allclose(d.tip_m, arm_drawing(positions[: 1 + n], quats[: 1 + n], geom).tip_m)  # arm 0's
+    assert _unit_colors(n, arms).shape == (arms * n, 3)
+    assert _cable_colors(d, geom, arms).shape == (len(d.cable_segments), 2, 3)
+
+
+def test_one_arm_draws_as_before_and_a_bad_split_is_refused() -> None:
+    geom = ArmGeometry.default()
+    pos, quat = default_hanging_pose(geom)
+    one, before = array_drawing(pos, quat, geom), arm_drawing(pos, quat, geom)
+    assert np.array_equal(one.cable_segments, before.cable_segments)
+    assert np.array_equal(one.unit_positions, before.unit_positions)
+    with pytest.raises(ValueError):
+        array_drawing(pos, quat, geom, 4)  # 21 units are not 4 arms
+    with pytest.raises(ValueError):
+        array_drawing(pos, quat, geom, 0)
+
+
 def test_quaternion_helpers() -> None:
     q = np.array([math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)])  # 90° about z
     assert np.allclose(quat_rotate(q, np.array([1.0, 0.0, 0.0])), [0.0, 1.0, 0.0])
@@ -43,7 +102,8 @@ def test_quaternion_helpers() -> None:
 
 
 def test_camera_presets_follow_the_stick_axes() -> None:
-    from host.panel.scene import CAMERA_PRESETS, NOSE_AXIS, camera_view
+    from host.panel.camera import CAMERA_PRESETS, camera_view
+    from host.panel.scene import NOSE_AXIS
 
     assert NOSE_AXIS == (0.0, 1.0, 0.0)  # stick forward (+y) is the nose; stick right (+x) the pilot's right
     drone = DronePose((0.0, 0.0, 1.0))

@@ -28,7 +28,7 @@ import pytest
 
 from host.app import HostApp
 from host.options import HostOptions
-from host.panel.scene import CAMERA_PRESETS, camera_view
+from host.panel.camera import CAMERA_PRESETS, camera_view
 from host.panel.teleop import PanelConfig
 from protocol.dbus import Lever
 from protocol.messages import Mode, TelemetryFlags
