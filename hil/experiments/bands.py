@@ -16,8 +16,7 @@ before any grasp:
 
 Every placement clears the packed and the straight arm (both starts) by ``clearance_m``. In two set-ups:
 the 3-cable prototype hanging under gravity (the project's), and the paper's: the 2-cable 45 cm arm
-bending in a plane with gravity off, as the authors' model (:func:`~hil.trial.arm_45cm.paper_arm_45cm`,
-the prototype's model scaled to it, :func:`~hil.trial.arm_45cm.scaled_model`).
+bending in a plane on the authors' model, gravity off (:func:`setup_arm`).
 
 Each placement is grasped with the strategy off (the ramp) and on (the firmware's detector), paired. A
 grasp whose physics diverges is run again at half the step (:func:`band_grasp`); if it diverges again its
@@ -39,6 +38,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from controller.config import FirmwareConfig
 from hil.errors import PlantDivergedError
 from hil.experiments.base import Conditions, Experiment, Sizes
 from hil.experiments.common import Row, extremes_rows, pct, pyplot, save_figure, worst_extremes
@@ -47,17 +47,18 @@ from hil.experiments.parallel import parallel_map
 from hil.experiments.stats import mcnemar_exact, wilson_interval
 from hil.sim.config import ModelConfig
 from hil.sim.plant import Plant
+from hil.sim.presets import PRESETS
 from hil.sim.spiral import SpiralDesign
 from hil.sim.types import PhysicsExtremes, PlantConfig
-from hil.trial.arm_45cm import paper_arm_45cm, scaled_model, with_timestep
-from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_rig, grasp_trial
+from hil.trial.arm_45cm import paper_arm_45cm, with_timestep
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_rig, grasp_trial
 from hil.trial.scene import BASE_Z_M, MS, SUCCESS_WRAP_DEG, S
 from protocol.messages import GraspState
 
 BANDS = ("catch", "between", "beyond")
 SETUPS = ("prototype", "paper")
 """``prototype``: the 3-cable 23 cm arm hanging under gravity, on the given model; ``paper``: the 2-cable
-45 cm arm in a plane, gravity off, the given model scaled to it."""
+45 cm arm in a plane on the authors' model, gravity off (:func:`setup_arm`)."""
 
 
 @dataclass(frozen=True)
@@ -91,18 +92,33 @@ TINY = BandsParams(setups=("prototype",), bands=("catch", "between"), per_band=1
 """The smoke-test size: one placement in the prototype's catch and between bands."""
 
 
-def setup_arm(setup: str, model: ModelConfig) -> tuple[SpiralDesign, ModelConfig]:
-    """The arm and plant model of a set-up (see :data:`SETUPS`).
+def _is_force(key: str) -> bool:
+    """A firmware key in newtons (a tension, a tension rate, a force gain or limit)."""
+    return key.endswith("_n") or "_n_per_" in key
+
+
+def setup_arm(setup: str, model: ModelConfig) -> tuple[SpiralDesign, ModelConfig, FirmwareConfig]:
+    """The arm, plant model and firmware of a set-up (see :data:`SETUPS`).
+
+    ``prototype``: the prototype on ``model`` with the grasp experiments' firmware. ``paper``: the 45 cm
+    2-cable arm on the authors' model (``--preset authors``: muscles of 5 N, 0.04 N·m/rad, stiffness ∝
+    size², gravity off) at ``model``'s physics step, and the same firmware with every tension and
+    tension rate scaled by the muscle's force over the firmware's tension ceiling (5 N / 20 N): the
+    grasp's tension schedule keeps its shape within what the authors' actuator can pull (every key in
+    newtons: tensions, tension rates, the length hold's force gain and limit).
 
     Raises:
         ValueError: an unknown set-up.
     """
-    proto = SpiralDesign.paper_prototype()
+    firmware = grasp_firmware()
     if setup == "prototype":
-        return proto, model
+        return SpiralDesign.paper_prototype(), model, firmware
     if setup == "paper":
-        arm = paper_arm_45cm()
-        return arm, scaled_model(dataclasses.replace(model, mounting="gravity-off"), arm, proto)
+        authors = PRESETS["authors"].model.with_physics(model.solver.timestep_s)
+        scale = authors.muscle_force_n / firmware.mapping.tension_max_n
+        values = firmware.to_dict()
+        firmware = firmware.replaced(**{k: v * scale for k, v in values.items() if _is_force(k)})
+        return paper_arm_45cm(), authors, firmware
     raise ValueError(f"unknown set-up {setup!r} (known: {', '.join(SETUPS)})")
 
 
@@ -130,14 +146,16 @@ class Sweep:
         return float(dist.min()) - radius_m
 
 
-def ramp_sweep(design: SpiralDesign, model: ModelConfig, timeout_s: float = 8.0) -> Sweep:
+def ramp_sweep(
+    design: SpiralDesign, model: ModelConfig, firmware: FirmwareConfig | None = None, timeout_s: float = 8.0
+) -> Sweep:
     """Run the plain ramp (GRASP mode, strategy off) with no object in reach, from the straight arm to
     HOLD (and 0.3 s more) or FAILED, and keep every unit's segment every 5 ms.
 
     Raises:
         RuntimeError: the ramp never started.
     """
-    setup = GraspSetup(1.0, 0.0, 0.02, strategy_on=False, model=model)  # the object waits far away
+    setup = GraspSetup(1.0, 0.0, 0.02, strategy_on=False, model=model, firmware=firmware)  # object far away
     rig = grasp_rig(setup, design)
     snaps: list[npt.NDArray[np.complex128]] = []
     end_us = int(timeout_s * S)
@@ -183,11 +201,12 @@ class BandMap:
         return "beyond" if ratio <= p.beyond_ratio else None
 
 
-def band_map(design: SpiralDesign, model: ModelConfig) -> BandMap:
-    """Measure a set-up's bands (the ramp's sweep, the envelope, the footprint)."""
+def band_map(design: SpiralDesign, model: ModelConfig, firmware: FirmwareConfig | None = None) -> BandMap:
+    """Measure a set-up's bands (the ramp's sweep under ``firmware``, the envelope, the footprint)."""
     plant = Plant(design, PlantConfig(model=model))
     envelope = Envelope.of(plant)
-    return BandMap(ramp_sweep(design, model), envelope, ArmFootprint.of(design, model), design.length_m)
+    sweep = ramp_sweep(design, model, firmware)
+    return BandMap(sweep, envelope, ArmFootprint.of(design, model), design.length_m)
 
 
 def draw_placements(
@@ -378,10 +397,10 @@ def bands(p: BandsParams, on: Conditions) -> BandsResult:
     placements: list[tuple[str, str, float, float]] = []
     jobs: list[tuple[GraspSetup, SpiralDesign]] = []
     for s in p.setups:
-        design, model = setup_arm(s, on.model)
+        design, model, firmware = setup_arm(s, on.model)
         d = p.diameter(s)
         rng = np.random.default_rng([on.seed, SETUPS.index(s)])
-        drawn = draw_placements(band_map(design, model), p, d / 2, rng)
+        drawn = draw_placements(band_map(design, model, firmware), p, d / 2, rng)
         for band in p.bands:
             for x, z in drawn[band]:
                 placements.append((s, band, x, z))

@@ -10,8 +10,9 @@ import pytest
 
 from hil.experiments.bands import BandsParams, BandsResult, Sweep, setup_arm
 from hil.experiments.common import DEFAULT_MODEL
+from hil.sim.presets import PRESETS
 from hil.sim.types import PhysicsExtremes
-from hil.trial.grasp import GraspOutcome, GraspSetup
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware
 
 
 def test_the_sweep_clearance_is_the_gap_to_the_nearest_swept_unit() -> None:
@@ -24,13 +25,19 @@ def test_the_sweep_clearance_is_the_gap_to_the_nearest_swept_unit() -> None:
     assert sweep.clearance_m(0.0, -0.15, 0.001) < 0  # inside unit 1's first pose
 
 
-def test_the_papers_set_up_is_the_45_cm_two_cable_arm_without_gravity() -> None:
-    arm, model = setup_arm("paper", DEFAULT_MODEL)
+def test_the_papers_set_up_is_the_45_cm_two_cable_arm_on_the_authors_model() -> None:
+    arm, model, firmware = setup_arm("paper", DEFAULT_MODEL)
     assert arm.cables == 2 and arm.length_m == pytest.approx(0.467, abs=0.005)
-    assert model.mounting == "gravity-off"
-    assert model.arm.base_stiffness_nm_per_rad > DEFAULT_MODEL.arm.base_stiffness_nm_per_rad  # scaled up
-    proto, same = setup_arm("prototype", DEFAULT_MODEL)
-    assert proto.cables == 3 and same is DEFAULT_MODEL
+    assert model.mounting == "gravity-off" and model.actuator.kind == "muscle"
+    assert model == PRESETS["authors"].model.with_physics(DEFAULT_MODEL.solver.timestep_s)
+    # Every force of the firmware scaled by 5 N / 20 N, the rest kept.
+    base = grasp_firmware().to_dict()
+    scaled = firmware.to_dict()
+    assert scaled["tension_max_n"] == pytest.approx(5.0) and scaled["grasp_wrap_n"] == pytest.approx(15.0 / 4)
+    assert scaled["grasp_wrap_rate_n_per_s"] == pytest.approx(base["grasp_wrap_rate_n_per_s"] / 4)
+    assert scaled["grasp_reach_timeout_us"] == base["grasp_reach_timeout_us"]
+    proto, same, fw = setup_arm("prototype", DEFAULT_MODEL)
+    assert proto.cables == 3 and same is DEFAULT_MODEL and fw == grasp_firmware()
     with pytest.raises(ValueError, match="unknown set-up"):
         setup_arm("nope", DEFAULT_MODEL)
 
