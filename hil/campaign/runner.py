@@ -132,6 +132,7 @@ def array_setup(i: Mapping[str, Any]) -> ArrayGraspSetup:
         depth_m=i.get("array.depth_m", defaults.depth_m),
         offset_m=(offset[0], offset[1], offset[2]),
         ring_radius_m=radius,
+        tilt_rad=math.radians(i.get("array.tilt_deg", 0.0)),
         hold_s=i.get("array.hold_s", defaults.hold_s),
         firmware=build_firmware(i),
         model=model,

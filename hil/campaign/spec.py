@@ -88,13 +88,14 @@ _ARRAY_KEYS = {
     "arms": _INT,
     "object": _STR,
     "ring_radius_m": _FLOAT,
+    "tilt_deg": _FLOAT,
     "depth_m": _FLOAT,
     "jitter_m": _FLOAT,
     "hold_s": _FLOAT,
 }
 """An array run: how many arms, which of the ten objects, the ring (default: the array experiment's,
-sized to the object), the object's depth under the bases, its jitter (drawn from the run's seed) and the
-hold (:mod:`hil.trial.array_grasp`)."""
+sized to the object) and its arms' tilt outwards, the object's depth under the bases, its jitter (drawn
+from the run's seed) and the hold (:mod:`hil.trial.array_grasp`)."""
 _GRASP_CONTROLLER_KEYS = {"strategy_on": _BOOL, "contact_oracle": _BOOL}
 """Controller keys of a grasp trial itself; any other controller key is a firmware configuration name."""
 _RIG_FIRMWARE_KEYS = frozenset({"grasp_strategy_on", "grasp_direction_deg"})
@@ -543,6 +544,7 @@ def _check_array_point(point: Mapping[str, Any]) -> None:
         raise CampaignError(f"array.object: unknown {point['array.object']!r} (known: {', '.join(keys)})")
     limits = {
         "ring_radius_m": (0.0, 1.0),
+        "tilt_deg": (-90.0, 90.0),
         "depth_m": (0.0, 2.0),
         "jitter_m": (0.0, 0.1),
         "hold_s": (0.0, 60.0),

@@ -74,6 +74,7 @@ class ArrayGraspSetup:
         depth_m: the object's centre below the arms' bases, on the ring's axis.
         offset_m: the trial's jitter of that place (x, y, z) [m].
         ring_radius_m: the arms' bases from the drone's axis.
+        tilt_rad: every arm's tilt outwards from plumb.
         hold_s: how long the released object must stay.
         firmware: firmware before the array layout (None = :func:`~hil.trial.grasp.grasp_firmware`).
         model: the plant's model; the object is appended to it.
@@ -86,6 +87,7 @@ class ArrayGraspSetup:
     depth_m: float = 0.13
     offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     ring_radius_m: float = 0.06
+    tilt_rad: float = 0.0
     hold_s: float = 2.0
     firmware: FirmwareConfig | None = None
     model: ModelConfig = field(default_factory=ModelConfig)
@@ -156,7 +158,7 @@ def array_rig(setup: ArrayGraspSetup) -> Rig:
         objects=(obj,),
         seed=setup.seed,
         model=setup.model,
-        ring=RingConfig(arms=setup.arms, ring_radius_m=setup.ring_radius_m),
+        ring=RingConfig(arms=setup.arms, ring_radius_m=setup.ring_radius_m, tilt_rad=setup.tilt_rad),
     )
     rig.plant.hold_object(OBJ)
     return rig

@@ -22,12 +22,13 @@ def _raw(**array: object) -> dict[str, object]:
 
 
 def test_an_array_campaign_varies_the_ring_and_the_arm() -> None:
-    raw = _raw(ring_radius_m=[0.06, 0.09])
+    raw = _raw(ring_radius_m=[0.06, 0.09], tilt_deg=10.0)
     raw["design"] = {"physics": "board", "length_m": [0.2, 0.23], "tip_width_m": 0.007, "taper_deg": 6.5}
     runs = parse_campaign(raw).runs()
     assert len(runs) == 4
     setups = [array_setup(r.inputs) for r in runs]
     assert {s.ring_radius_m for s in setups} == {0.06, 0.09}
+    assert all(s.tilt_rad == pytest.approx(0.17453292519943295) for s in setups)
     # (a whole number of units: the realised length within a few per cent of the asked one)
     assert sorted({s.arm_design().length_m for s in setups}) == pytest.approx([0.2, 0.23], rel=0.05)
     assert all(s.arm_design().cables == 1 and s.arms == 4 for s in setups)
@@ -46,6 +47,7 @@ def test_an_array_campaign_varies_the_ring_and_the_arm() -> None:
         ({**_raw(), "design": {"cables": 2}}, "one cable each"),
         ({**_raw(), "controller": {"strategy_on": True}}, "controller.strategy_on: not a key of a array"),
         (_raw(ring_radius_m=-0.1), "array.ring_radius_m must be"),
+        (_raw(tilt_deg=95.0), "array.tilt_deg must be"),
         ({"kind": "grasp", "array": {"arms": 2}}, "array.arms: not a key of a grasp"),
     ],
 )
