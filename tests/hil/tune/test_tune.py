@@ -290,7 +290,7 @@ def test_consumers_refuse_bad_files_in_one_line(tmp_path: Path, capsys: pytest.C
     ok = write_param_file(tmp_path / "ok.toml", {"grasp_wrap_n": 5.0})
     assert main(["campaign", "--params", str(ok), "--set", "kind=scenario", "--set", "scenario.name=rc-loss",
                  "-o", str(tmp_path / "y.jsonl")]) == 2  # fmt: skip
-    assert "--params is for grasp campaigns" in capsys.readouterr().err
+    assert "--params is for grasp and array campaigns" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
