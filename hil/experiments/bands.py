@@ -155,15 +155,39 @@ def ramp_sweep(
     Raises:
         RuntimeError: the ramp never started.
     """
-    setup = GraspSetup(1.0, 0.0, 0.02, strategy_on=False, model=model, firmware=firmware)  # object far away
+    return _sweep(design, model, firmware, False, timeout_s)
+
+
+def reach_sweep(
+    design: SpiralDesign, model: ModelConfig, firmware: FirmwareConfig | None = None, timeout_s: float = 12.0
+) -> Sweep:
+    """Run the strategy's reach (GRASP mode, strategy on) with no object in reach: from the packed arm, the
+    pack and then the unroll until the reach times out (FAILED), every unit's segment every 5 ms of REACH.
+    What it sweeps is where the strategy can meet an object (the test of the bands' cause).
+
+    Raises:
+        RuntimeError: the reach never started.
+    """
+    return _sweep(design, model, firmware, True, timeout_s)
+
+
+def _sweep(
+    design: SpiralDesign,
+    model: ModelConfig,
+    firmware: FirmwareConfig | None,
+    strategy_on: bool,
+    timeout_s: float,
+) -> Sweep:
+    setup = GraspSetup(1.0, 0.0, 0.02, strategy_on=strategy_on, model=model, firmware=firmware)  # object far
     rig = grasp_rig(setup, design)
+    kept = (GraspState.REACH,) if strategy_on else (GraspState.WRAP, GraspState.HOLD)
     snaps: list[npt.NDArray[np.complex128]] = []
     end_us = int(timeout_s * S)
-    base: complex | None = None
+    base = complex(joint_points_xz(rig.plant)[0]) if strategy_on else None  # the packed start moves no base
     while rig.now_us < end_us:
         rig.step()
         state = rig.firmware.grasp_state
-        if state in (GraspState.WRAP, GraspState.HOLD) and rig.now_us % (5 * MS) == 0:
+        if state in kept and rig.now_us % (5 * MS) == 0:
             pts = joint_points_xz(rig.plant)
             base = pts[0] if base is None else base
             snaps.append(pts - base)
@@ -174,7 +198,7 @@ def ramp_sweep(
     widths = np.array([max(w0, w1) / 2 for _, w0, w1 in rig.plant.unit_dimensions_m()])
     rig.close()
     if not snaps:
-        raise RuntimeError("the ramp never started")
+        raise RuntimeError(f"the {'reach' if strategy_on else 'ramp'} never started")
     pts = np.array(snaps)
     return Sweep(pts[:, :-1], pts[:, 1:], widths)
 
@@ -254,6 +278,18 @@ class BandsResult:
     """``(set-up, band, x, z)`` of each placement, in the order of the outcomes' pairs."""
     outcomes: tuple[GraspOutcome | None, ...]
     """Per placement, the ramp's grasp then the strategy's (None: its physics diverged twice)."""
+    reach_touches: tuple[bool, ...] = ()
+    """Per placement, whether the strategy's reach with no object (:func:`reach_sweep`) passes through it:
+    where the strategy can meet an object at all."""
+
+    def reached(self, setup: str, band: str) -> tuple[int, int]:
+        """Placements of one set-up and band the reach's sweep passes through, of all."""
+        sel = [
+            t
+            for (s, b, _, _), t in zip(self.placements, self.reach_touches, strict=False)
+            if (s, b) == (setup, band)
+        ]
+        return sum(sel), len(sel)
 
     @property
     def extremes(self) -> PhysicsExtremes:
@@ -312,6 +348,7 @@ class BandsResult:
             "cells": {s: {b: self.cell(s, b) for b in p.bands} for s in p.setups},
             "verdicts": {s: self.verdict(s) for s in p.setups},
             "placements": [list(x) for x in self.placements],
+            "reach_touches": {s: {b: list(self.reached(s, b)) for b in p.bands} for s in p.setups},
             "diverged_pairs": self.diverged(),
             "finer_step_grasps": self.finer_step(),
             "extremes": self.extremes.as_dict(),
@@ -337,6 +374,8 @@ class BandsResult:
                         "strategy > ramp" if b == "between" else "",
                     )
                 )
+            reached = ", ".join(f"{b} {k}/{n}" for b in self.params.bands for k, n in [self.reached(s, b)])
+            rows.append((f"{s}: placements the strategy's reach passes through (no object)", reached, ""))
             rows.append((f"{s}: the claim in its between band", self.verdict(s), "holds (Note S4)"))
         rows.append(
             (
@@ -395,15 +434,18 @@ def bands(p: BandsParams, on: Conditions) -> BandsResult:
     """Measure each set-up's bands, draw the placements, grasp each with the ramp and the strategy (Note
     S4). The arms are the set-ups' own, not ``on.design``."""
     placements: list[tuple[str, str, float, float]] = []
+    touches: list[bool] = []
     jobs: list[tuple[GraspSetup, SpiralDesign]] = []
     for s in p.setups:
         design, model, firmware = setup_arm(s, on.model)
         d = p.diameter(s)
         rng = np.random.default_rng([on.seed, SETUPS.index(s)])
         drawn = draw_placements(band_map(design, model, firmware), p, d / 2, rng)
+        reach = reach_sweep(design, model, firmware)
         for band in p.bands:
             for x, z in drawn[band]:
                 placements.append((s, band, x, z))
+                touches.append(reach.clearance_m(x, z, d / 2) < 0.0)
                 for strategy_on in (False, True):
                     setup = GraspSetup(
                         x,
@@ -417,7 +459,7 @@ def bands(p: BandsParams, on: Conditions) -> BandsResult:
                     )
                     jobs.append((setup, design))
     outcomes = parallel_map(band_grasp, jobs, on.jobs, on.progress)
-    return BandsResult(p, on.seed, tuple(placements), tuple(outcomes))
+    return BandsResult(p, on.seed, tuple(placements), tuple(outcomes), tuple(touches))
 
 
 EXPERIMENT = Experiment(

@@ -104,3 +104,11 @@ def test_a_diverged_grasp_runs_again_at_half_the_step_then_is_left_out(
     result = _result([(True, True), (False, True)])
     result = BandsResult(result.params, 0, result.placements, (None, *result.outcomes[1:]))
     assert result.diverged() == 1 and result.cell("prototype", "between")["n"] == 1
+
+
+def test_the_reach_measure_counts_placements_per_band() -> None:
+    result = _result([(False, True), (False, False), (True, True)])
+    touched = BandsResult(result.params, 0, result.placements, result.outcomes, (True, False, False))
+    assert touched.reached("prototype", "between") == (1, 3)
+    assert touched.as_dict()["reach_touches"] == {"prototype": {"between": [1, 3]}}
+    assert any("reach passes through" in r[0] and "between 1/3" in r[1] for r in touched.table_rows())
