@@ -9,11 +9,7 @@ ring; and the panel says in words that the board is an array of four arms.
 from __future__ import annotations
 
 import contextlib
-import io
 import math
-import multiprocessing
-import shutil
-import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -24,7 +20,14 @@ import pytest
 from host.app import HostApp
 from host.options import HostOptions, build_parser
 from host.panel.teleop import PanelConfig
-from tests.support.chromium import CHROMIUM, chromium_context, page_load, page_load_ms
+from tests.support.chromium import page_load, page_load_ms
+from tests.support.panel_view import (
+    arm_blue_mask,
+    no_leaks_since_now,
+    panel_page,
+    require_chromium,
+    scene_pixels,
+)
 from tests.support.realtime_guard import timed_out, wait_for
 
 pytestmark = pytest.mark.browser
@@ -38,36 +41,13 @@ BLOB_MIN_PX = 60
 smaller ones are edges and specks."""
 GROW_PX = 5
 """Each patch grown by this much before telling them apart."""
-SCENE_BOX_JS = """() => {
-    const r = Array.from(document.querySelectorAll('canvas')).map(c => c.getBoundingClientRect())
-        .sort((a, b) => b.width * b.height - a.width * a.height)[0];
-    return {x: r.x, y: r.y, width: r.width, height: r.height};
-}"""
-"""The 3-D view's box: the largest canvas on the page."""
-
-if shutil.which(CHROMIUM) is None:
-    pytest.fail(f"{CHROMIUM} is not installed: the browser tests need it", pytrace=False)
+require_chromium()
 
 
 @pytest.fixture(autouse=True)
 def _no_leaked_threads_or_processes() -> Iterator[None]:
-    """tests/conftest.py's guard, judged against what ran before each test: the module's one host (its
-    threads, the virtual board's and the link's processes) lives across the tests by design."""
-    threads = {t.ident for t in threading.enumerate()}
-    children = {p.pid for p in multiprocessing.active_children()}
-    yield
-    new_threads = [t for t in threading.enumerate() if t.ident not in threads and t.is_alive()]
-    for t in new_threads:
-        t.join(timeout=2.0)
-    new_children = [p for p in multiprocessing.active_children() if p.pid not in children]
-    for p in new_children:
-        p.join(timeout=2.0)
-    leaked = [t.name for t in new_threads if t.is_alive() and not isinstance(t, threading._DummyThread)]
-    alive = [p for p in new_children if p.is_alive()]
-    for p in alive:
-        p.kill()
-    assert not leaked, f"test left threads running: {leaked}"
-    assert not alive, f"test left child processes running: {[p.name for p in alive]}"
+    with no_leaks_since_now():
+        yield
 
 
 @pytest.fixture(scope="module")
@@ -82,14 +62,7 @@ def app() -> Iterator[HostApp]:
 
 @pytest.fixture(scope="module")
 def page(app: HostApp, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
-    with chromium_context(tmp_path_factory.mktemp("chromium")) as ctx:
-        p = ctx.new_page()
-        p.set_viewport_size(VIEWPORT)
-        with page_load("the panel page"):
-            p.goto(app.url + ("&" if "?" in app.url else "?") + "fixedDpr=1", timeout=page_load_ms())
-            p.get_by_role("button", exact=True, name="E-STOP [Space]").wait_for(timeout=page_load_ms())
-        with contextlib.suppress(Exception):  # the software-WebGL toast covers the scene
-            p.locator(".mantine-Notification-closeButton").first.click(timeout=3_000)
+    with panel_page(app.url, tmp_path_factory.mktemp("chromium"), VIEWPORT) as p:
         yield p
 
 
@@ -99,7 +72,6 @@ def view_from_below(app: HostApp, page: Any) -> Any:
 
     A module fixture, like the host and the page: the viser server answers the camera with a worker
     thread of its own event loop that lives as long as the server (not a leak of the test's)."""
-    from PIL import Image
 
     panel = app.panel
     assert panel is not None and app.server is not None and app.board_state is not None
@@ -126,7 +98,9 @@ def view_from_below(app: HostApp, page: Any) -> Any:
     with contextlib.suppress(Exception):  # a toast shown since (software WebGL) would cover the scene
         page.locator(".mantine-Notification-closeButton").first.click(timeout=2_000)
         time.sleep(0.5)
-    return _scene_pixels(page, Image)
+    return scene_pixels(
+        page, margin_px=60
+    )  # the panel's frame and blue buttons start ~40 px left of its title
 
 
 def test_the_panel_says_the_board_is_an_array(page: Any) -> None:
@@ -140,7 +114,7 @@ def test_the_panel_says_the_board_is_an_array(page: Any) -> None:
 def test_the_panel_draws_every_arm_of_the_array_in_its_own_place(view_from_below: Any) -> None:
     from scipy import ndimage
 
-    blue = _arm_blue_mask(view_from_below)
+    blue = arm_blue_mask(view_from_below)
     # Grown by a few pixels so that the cable lines drawn over an arm do not cut it in two; the arms
     # themselves stand 50+ px apart.
     labels, n = ndimage.label(ndimage.binary_dilation(blue, iterations=GROW_PX))
@@ -158,21 +132,3 @@ def test_the_panel_draws_every_arm_of_the_array_in_its_own_place(view_from_below
 
 def _wait(cond: Callable[[], Any], timeout_s: float = 20.0) -> bool:
     return wait_for(lambda: bool(cond()), timeout_s, 0.05)
-
-
-def _scene_pixels(page: Any, image: Any) -> Any:
-    """The 3-D view's pixels left of the panel, from a screenshot of that region only (the panel's frame
-    and its blue buttons start some 40 px left of its title)."""
-    box = page.evaluate(SCENE_BOX_JS)
-    panel = page.get_by_text("SpiRob teleop").first.bounding_box()
-    right = panel["x"] - 60 if panel else box["x"] + box["width"]
-    clip = {"x": box["x"], "y": box["y"], "width": right - box["x"], "height": box["height"]}
-    return image.open(io.BytesIO(page.screenshot(clip=clip))).convert("RGB")
-
-
-def _arm_blue_mask(img: Any) -> np.ndarray:
-    """Pixels of the arms' blue (their units, base 40,110,200 to tip 120,210,255, shaded): the test of
-    ``test_view.py``."""
-    a = np.asarray(img, dtype=np.int32)
-    r, g, b = a[..., 0], a[..., 1], a[..., 2]
-    return np.asarray((b > 150) & (b > r + 60) & (g > 80))

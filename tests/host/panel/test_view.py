@@ -13,12 +13,8 @@ The page's input here is the hotkeys; the radio is driven through the arbiter on
 from __future__ import annotations
 
 import base64
-import contextlib
 import io
 import math
-import multiprocessing
-import shutil
-import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -32,7 +28,13 @@ from host.panel.camera import CAMERA_PRESETS, camera_view
 from host.panel.teleop import PanelConfig
 from protocol.dbus import Lever
 from protocol.messages import Mode, TelemetryFlags
-from tests.support.chromium import CHROMIUM, chromium_context, page_load, page_load_ms
+from tests.support.panel_view import (
+    arm_blue_mask,
+    no_leaks_since_now,
+    panel_page,
+    require_chromium,
+    scene_pixels,
+)
 from tests.support.realtime_guard import timed_out, wait_for
 
 pytestmark = pytest.mark.browser
@@ -51,36 +53,13 @@ X_SCALES_JS = (
 """Each chart's x range as uPlot holds it (viser's test point)."""
 CANVASES_JS = "() => Array.from(document.querySelectorAll('.uplot canvas')).map(c => c.toDataURL())"
 """Each chart's canvas as a PNG data URL."""
-SCENE_BOX_JS = """() => {
-    const r = Array.from(document.querySelectorAll('canvas')).map(c => c.getBoundingClientRect())
-        .sort((a, b) => b.width * b.height - a.width * a.height)[0];
-    return {x: r.x, y: r.y, width: r.width, height: r.height};
-}"""
-"""The 3-D view's box: the largest canvas on the page."""
-
-if shutil.which(CHROMIUM) is None:
-    pytest.fail(f"{CHROMIUM} is not installed: the browser tests need it", pytrace=False)
+require_chromium()
 
 
 @pytest.fixture(autouse=True)
 def _no_leaked_threads_or_processes() -> Iterator[None]:
-    """tests/conftest.py's guard, judged against what ran before each test: the module's one host (its
-    threads, the virtual board's and the link's processes) lives across the tests by design."""
-    threads = {t.ident for t in threading.enumerate()}
-    children = {p.pid for p in multiprocessing.active_children()}
-    yield
-    new_threads = [t for t in threading.enumerate() if t.ident not in threads and t.is_alive()]
-    for t in new_threads:
-        t.join(timeout=2.0)
-    new_children = [p for p in multiprocessing.active_children() if p.pid not in children]
-    for p in new_children:
-        p.join(timeout=2.0)
-    leaked = [t.name for t in new_threads if t.is_alive() and not isinstance(t, threading._DummyThread)]
-    alive = [p for p in new_children if p.is_alive()]
-    for p in alive:
-        p.kill()
-    assert not leaked, f"test left threads running: {leaked}"
-    assert not alive, f"test left child processes running: {[p.name for p in alive]}"
+    with no_leaks_since_now():
+        yield
 
 
 @pytest.fixture(scope="module")
@@ -94,14 +73,7 @@ def app() -> Iterator[HostApp]:
 
 @pytest.fixture(scope="module")
 def page(app: HostApp, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
-    with chromium_context(tmp_path_factory.mktemp("chromium")) as ctx:
-        p = ctx.new_page()
-        p.set_viewport_size(VIEWPORT)
-        with page_load("the panel page"):
-            p.goto(app.url + ("&" if "?" in app.url else "?") + "fixedDpr=1", timeout=page_load_ms())
-            p.get_by_role("button", exact=True, name="E-STOP [Space]").wait_for(timeout=page_load_ms())
-        with contextlib.suppress(Exception):  # the software-WebGL toast covers the scene
-            p.locator(".mantine-Notification-closeButton").first.click(timeout=3_000)
+    with panel_page(app.url, tmp_path_factory.mktemp("chromium"), VIEWPORT) as p:
         yield p
 
 
@@ -110,7 +82,6 @@ def test_the_tab_is_titled_spirob_teleop(page: Any) -> None:
 
 
 def test_every_camera_preset_shows_the_arm(app: HostApp, page: Any) -> None:
-    from PIL import Image
 
     panel = app.panel
     assert panel is not None
@@ -128,8 +99,8 @@ def test_every_camera_preset_shows_the_arm(app: HostApp, page: Any) -> None:
         moved = _wait(lambda w=want: math.dist(tuple(client.camera.position), w) < 0.05, 15.0)
         assert moved, f"{preset}: the camera is at {client.camera.position}, not {want}"
         time.sleep(0.5)  # let the software renderer draw the new view
-        scene = _scene_pixels(page, Image)
-        seen[preset] = _arm_blue(scene)
+        scene = scene_pixels(page)
+        seen[preset] = int(arm_blue_mask(scene).sum())
     assert all(n >= ARM_BLUE_MIN for n in seen.values()), f"arm-blue pixels per preset: {seen}"
 
 
@@ -192,22 +163,6 @@ def _flags(board: Any) -> int:
 def _history_s(board: Any) -> float:
     data = board.history.snapshot(max_points=None)
     return float(data[-1, 0] - data[0, 0]) if len(data) > 1 else 0.0
-
-
-def _scene_pixels(page: Any, image: Any) -> Any:
-    """The 3-D view's pixels left of the panel, from a screenshot of that region only."""
-    box = page.evaluate(SCENE_BOX_JS)  # the largest canvas: the 3-D view (the charts' are small)
-    panel = page.get_by_text("SpiRob teleop").first.bounding_box()
-    right = panel["x"] - 10 if panel else box["x"] + box["width"]
-    clip = {"x": box["x"], "y": box["y"], "width": right - box["x"], "height": box["height"]}
-    return image.open(io.BytesIO(page.screenshot(clip=clip))).convert("RGB")
-
-
-def _arm_blue(img: Any) -> int:
-    """Pixels of the arm's blue (its units, base 40,110,200 to tip 120,210,255, shaded)."""
-    a = np.asarray(img, dtype=np.int32)
-    r, g, b = a[..., 0], a[..., 1], a[..., 2]
-    return int(np.count_nonzero((b > 150) & (b > r + 60) & (g > 80)))
 
 
 def _drawn_fraction(img: Any) -> float:
