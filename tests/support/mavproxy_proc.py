@@ -5,17 +5,20 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 from tests.support.realtime_guard import scaled_s, timed_out
 
 MAVPROXY = Path(sys.executable).with_name("mavproxy.py")
+_ROOT = Path(__file__).resolve().parents[2]
+"""The repository: where ``python -m host.cli`` runs."""
 WAIT_S = 15.0
 """A wait on a quiet machine; every wait here grows with the load (``realtime_guard.scaled_s``) and, if it
 still times out on a starved machine, skips the test as ``starved:`` instead of failing it."""
@@ -124,3 +127,40 @@ class MavProxy:
         self._reader.join(timeout=5)
         if self.proc.stdout is not None:
             self.proc.stdout.close()
+
+
+def stop_host(host: subprocess.Popen[str]) -> None:
+    """Ctrl-C, the normal end of a run: the host closes its recording and exits (safe twice)."""
+    if host.poll() is None:
+        host.send_signal(signal.SIGINT)
+        try:
+            host.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            host.kill()
+            host.wait(timeout=10)
+
+
+@contextlib.contextmanager
+def host_under_mavproxy(
+    tmp_path: Path, extra_args: Sequence[str] = ()
+) -> Iterator[tuple[MavProxy, Path, subprocess.Popen[str]]]:
+    """A MAVProxy waiting on a free loopback port and a headless ``spirob-host --virtual-rc grasp`` sending
+    to it for up to 90 s, recording its board link: ``(proxy, recording, host)``; both stopped on exit."""
+    port = free_udp_port()
+    state = tmp_path / "mavproxy"
+    state.mkdir()
+    proxy = MavProxy(port, state, [])
+    host: subprocess.Popen[str] | None = None
+    try:
+        proxy.expect(r"Waiting for heartbeat|Connect udpin")
+        record = tmp_path / "run.mcap"
+        argv = [sys.executable, "-m", "host.cli", "--headless", *extra_args, "--virtual-rc", "grasp"]
+        argv += ["--mavlink", f"udpout:127.0.0.1:{port}", "--record", str(record), "--duration", "90"]
+        host = subprocess.Popen(argv, cwd=_ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        yield proxy, record, host
+    finally:
+        if host is not None:
+            stop_host(host)
+            if host.stdout is not None:
+                host.stdout.close()
+        proxy.close()

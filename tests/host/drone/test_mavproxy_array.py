@@ -9,9 +9,7 @@ and every motor carried current while the grasp ran.
 
 from __future__ import annotations
 
-import signal
 import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -21,63 +19,16 @@ from controller.params import PARAMS
 from hil import recording
 from protocol.messages import ArmsTelemetry, GraspState, Telemetry
 from protocol.stream import MessageStream
-from tests.support.mavproxy_proc import MavProxy, free_udp_port
+from tests.support.mavproxy_proc import MavProxy, host_under_mavproxy, stop_host
 
 pytestmark = pytest.mark.mavproxy
-ROOT = Path(__file__).resolve().parents[3]
 ARMS, CABLES = 4, 2
 
 
 @pytest.fixture
 def host_and_proxy(tmp_path: Path) -> Iterator[tuple[MavProxy, Path, subprocess.Popen[str]]]:
-    port = free_udp_port()
-    state = tmp_path / "mavproxy"
-    state.mkdir()
-    proxy = MavProxy(port, state, [])
-    host: subprocess.Popen[str] | None = None
-    try:
-        proxy.expect(r"Waiting for heartbeat|Connect udpin")
-        record = tmp_path / "run.mcap"
-        host = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "host.cli",
-                "--headless",
-                "--arms",
-                str(ARMS),
-                "--virtual-rc",
-                "grasp",
-                "--mavlink",
-                f"udpout:127.0.0.1:{port}",
-                "--record",
-                str(record),
-                "--duration",
-                "90",
-            ],
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
+    with host_under_mavproxy(tmp_path, ["--arms", str(ARMS)]) as (proxy, record, host):
         yield proxy, record, host
-    finally:
-        if host is not None:
-            _stop(host)
-            if host.stdout is not None:
-                host.stdout.close()
-        proxy.close()
-
-
-def _stop(host: subprocess.Popen[str]) -> None:
-    """Ctrl-C, the normal end of a run: the host closes its recording and exits (safe twice)."""
-    if host.poll() is None:
-        host.send_signal(signal.SIGINT)
-        try:
-            host.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            host.kill()
-            host.wait(timeout=10)
 
 
 def test_do_gripper_closes_every_arm_of_an_array(
@@ -91,7 +42,7 @@ def test_do_gripper_closes_every_arm_of_an_array(
     proxy.send("long DO_GRIPPER 25 1")
     i = proxy.expect(r"Got COMMAND_ACK: DO_GRIPPER: IN_PROGRESS", start, timeout=30)
     proxy.expect(r"Got COMMAND_ACK: DO_GRIPPER: (ACCEPTED|FAILED)", i + 1, timeout=60)
-    _stop(host)  # the recording is complete once the host has exited
+    stop_host(host)  # the recording is complete once the host has exited
     assert host.returncode == 0
 
     grasping = _arms_telemetry_while_grasping(record)

@@ -9,7 +9,6 @@ then with a final result, while the .tlog of the run is readable by pymavlink's 
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -18,55 +17,15 @@ from pathlib import Path
 import pytest
 
 from controller.params import PARAMS
-from tests.support.mavproxy_proc import MavProxy, free_udp_port
+from tests.support.mavproxy_proc import MavProxy, host_under_mavproxy
 
 pytestmark = pytest.mark.mavproxy
-ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture
 def host_and_proxy(tmp_path: Path) -> Iterator[tuple[MavProxy, Path]]:
-    port = free_udp_port()
-    state = tmp_path / "mavproxy"
-    state.mkdir()
-    proxy = MavProxy(port, state, [])
-    host: subprocess.Popen[str] | None = None
-    try:
-        proxy.expect(r"Waiting for heartbeat|Connect udpin")
-        record = tmp_path / "run.mcap"
-        host = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "host.cli",
-                "--headless",
-                "--virtual-rc",
-                "grasp",
-                "--mavlink",
-                f"udpout:127.0.0.1:{port}",
-                "--record",
-                str(record),
-                "--duration",
-                "90",
-            ],
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-        )
+    with host_under_mavproxy(tmp_path) as (proxy, record, _host):
         yield proxy, record
-    finally:
-        if host is not None:
-            if host.poll() is None:
-                host.send_signal(signal.SIGINT)
-                try:
-                    host.wait(timeout=20)
-                except subprocess.TimeoutExpired:
-                    host.kill()
-                    host.wait(timeout=10)
-            if host.stdout is not None:
-                host.stdout.close()
-        proxy.close()
 
 
 def test_mavproxy_commands_the_arm_through_spirob_host(host_and_proxy: tuple[MavProxy, Path]) -> None:
