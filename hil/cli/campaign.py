@@ -38,7 +38,9 @@ from hil.campaign.spec import Campaign, Run, load_campaign
 __all__ = ["CAMPAIGN_HELP", "configure_campaign", "run_campaign_command"]
 
 PROG = "spirob-hil campaign"
-CAMPAIGN_HELP = "run a grid or random sample of grasp trials or scenarios, resumable, locally or on Ray"
+CAMPAIGN_HELP = (
+    "run a grid or random sample of grasp trials, array grasps or scenarios, resumable, locally or on Ray"
+)
 """The one-line help of ``spirob-hil campaign``."""
 
 MAX_JOBS_N = 64
