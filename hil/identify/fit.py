@@ -213,6 +213,9 @@ class _Win:
     sample_t_s: FloatArray
     measured: FloatArray
     """(m, 12): the sensors' columns: length from the first sample, speed, tip (NaN where not measured)."""
+    stale: NDArray[np.bool_]
+    """(m, 3): a motor's judged sample that the board read a period late (:attr:`MotorData.stale`): it is
+    compared with the rollout a period earlier."""
 
     @property
     def seconds(self) -> float:
@@ -225,8 +228,12 @@ def _prepare(rec: MotorData, end: int, period_s: float) -> _Win:
     n = max(2, round((float(t[end - 1]) - t0) / 1e-3))
     grid = t0 + np.arange(n) * 1e-3
     if rec.source == "can":
-        # One sample per control period: the command in force from each sample to the next.
-        idx = np.clip(np.searchsorted(t, grid + 1e-7, side="right") - 1, 0, len(t) - 1)
+        # One sample per control period: the command in force from each sample to the next. A tick may
+        # start late (a real-time loop's jitter, a fraction of the period), and its stamp with it: the
+        # period a sample belongs to is its time rounded to the period. Floored, a late tick's command
+        # would act a period late in the rollout, and the fit would shorten the delay to make up for it.
+        tick = np.rint((t - t0) / 1e-3).astype(np.int64)
+        idx = np.clip(np.searchsorted(tick, np.arange(n), side="right") - 1, 0, len(t) - 1)
         currents = rec.current_cmd_a[idx]
     else:
         currents = np.stack([np.interp(grid, t, rec.current_cmd_a[:, k]) for k in range(3)], axis=1)
@@ -240,9 +247,29 @@ def _prepare(rec: MotorData, end: int, period_s: float) -> _Win:
     meas = np.full((len(idx_s), _CH), np.nan)
     meas[:, _LEN] = rec.length_m[idx_s] - rec.length_m[0]
     meas[:, _VEL] = rec.speed_m_s[idx_s]
+    # The frames right after a late one may be late too without showing it (each repeats its
+    # predecessor's measurement, not its content; runs of three happen at 5 % a frame): a motor's sample
+    # within three frames after one seen late is not judged.
+    after_late = np.zeros_like(rec.stale)
+    for lag in (1, 2, 3):
+        after_late[lag:] |= rec.stale[:-lag]
+    doubt = after_late[idx_s]
+    meas[:, _LEN][doubt] = np.nan
+    meas[:, _VEL][doubt] = np.nan
     if rec.tip_m is not None:
         meas[:, _TIP] = rec.tip_m[idx_s]
-    return _Win(rec, end, currents, t0, rows, t_s, meas)
+    return _Win(rec, end, currents, t0, rows, t_s, meas, rec.stale[idx_s] & (rows >= 1)[:, None])
+
+
+def _at_samples(w: _Win, out: FloatArray) -> FloatArray:
+    """A rollout's rows as the board measured them at the judged samples: a late frame holds the motor's
+    state a period before its sample's time."""
+    sim = out[w.sample_rows].copy()
+    if w.stale.any():
+        earlier = out[w.sample_rows - 1]
+        for cols in (_LEN, _VEL):
+            sim[:, cols] = np.where(w.stale, earlier[:, cols], sim[:, cols])
+    return sim
 
 
 def _spans(recordings: Sequence[MotorData], options: FitOptions) -> list[tuple[MotorData, int]]:
@@ -400,7 +427,7 @@ class _Problem:
         self, params: Any, pred: Any, measured: Any, model: Any, return_pred_all: bool, **_: Any
     ) -> Any:
         w = self._by_measured[id(measured)]
-        sim = pred.data[w.sample_rows].copy()
+        sim = _at_samples(w, pred.data)
         r = (sim - w.measured) * self.weights
         r[~np.isfinite(w.measured)] = 0.0
         r[~np.isfinite(r)] = 1e6  # a diverged rollout: a huge residual, never NaN
@@ -595,8 +622,8 @@ def _traces(
                 w.sample_t_s,
                 idx >= end,
                 w.measured[:, _LEN],
-                outs[i][w.sample_rows, _LEN],
-                outs[n + i][w.sample_rows, _LEN],
+                _at_samples(w, outs[i])[:, _LEN],
+                _at_samples(w, outs[n + i])[:, _LEN],
             )
         )
     return tuple(traces)

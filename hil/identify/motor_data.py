@@ -75,6 +75,9 @@ class MotorData:
         speed_m_s: (n, 3) cable speed [m/s] (rotor speed).
         current_a: (n, 3) currents the ESCs measured [A].
         tip_m: (n, 3) tracked tip position in the drone's frame [m], or None.
+        stale: (n, 3) True where a moving motor's feedback frame repeats the previous sample's bit for bit:
+            a frame that missed its tick (CAN arbitration, an ESC late), so what it holds was measured a
+            period earlier (``can`` recordings; all False for ``telemetry``).
         profile: the excitation, or None when the recording does not say.
         profile_start_s: when it began (``t_s`` scale), or None.
         design: the arm's design, from the recording's metadata (None: not recorded).
@@ -90,6 +93,7 @@ class MotorData:
     speed_m_s: FloatArray
     current_a: FloatArray
     tip_m: FloatArray | None
+    stale: NDArray[np.bool_]
     profile: Profile | None
     profile_start_s: float | None
     design: SpiralDesign | None
@@ -162,6 +166,8 @@ def _load(p: Path) -> MotorData:
     if can[0]:
         source = "can"
         t_us, cmd, fb_angle, fb_speed, fb_cur = _from_can(can, p)
+        # A rotor at rest repeats its frame for real: only a moving one's repeat is a late frame.
+        stale = _repeats(fb_angle, fb_speed, fb_cur) & (fb_speed != 0)
         length = _unwrap_counts(fb_angle) * (2.0 * math.pi / (ANGLE_COUNTS * gear)) * spool_r
         speed = fb_speed * (2.0 * math.pi / 60.0 / gear * spool_r)
     elif tel:
@@ -173,6 +179,7 @@ def _load(p: Path) -> MotorData:
         )
         fb_cur = np.array([m.motor_current for m in tel], dtype=float)
         length = np.array([m.cable_length_m for m in tel], dtype=float)
+        stale = np.zeros((len(t_us), CABLES), dtype=bool)
     else:
         raise IdentifyDataError(f"{p}: holds neither the board's CAN frames nor its telemetry")
     if len(t_us) < 10:
@@ -193,6 +200,7 @@ def _load(p: Path) -> MotorData:
         speed_m_s=speed,
         current_a=fb_cur / RAW_PER_AMP * sign,
         tip_m=tip,
+        stale=stale,
         profile=profile,
         profile_start_s=None if start_us is None else (start_us - t0) / 1e6,
         design=design,
@@ -307,6 +315,18 @@ def _from_can(
     speed = np.array([[f.speed_rpm for f in fs] for fs in frames], dtype=np.float64)
     cur = np.array([[f.current for f in fs] for fs in frames], dtype=np.float64)
     return t_us, cmd, angle, speed, cur
+
+
+def _repeats(*fields: FloatArray) -> NDArray[np.bool_]:
+    """(n, 3): True where every field of a motor's frame equals the previous sample's. A moving rotor's
+    angle, speed and measured current never all repeat from one millisecond to the next; a frame that
+    missed its tick does, and the firmware read the previous one again."""
+    out = np.zeros(fields[0].shape, dtype=bool)
+    same = np.ones((len(fields[0]) - 1, fields[0].shape[1]), dtype=bool)
+    for f in fields:
+        same &= f[1:] == f[:-1]
+    out[1:] = same
+    return out
 
 
 def _unwrap_counts(angle: FloatArray) -> FloatArray:
