@@ -478,6 +478,9 @@ class SolverConfig:
         ls_iterations: line-search iterations.
         tolerance: solver tolerance.
         cone: friction cone, ``pyramidal`` or ``elliptic``.
+        jacobian: the constraint Jacobian's storage, ``dense``, ``sparse`` or ``auto`` (MuJoCo's default:
+            sparse from 60 degrees of freedom, which the prototype's 63 just pass). Dense is the same
+            physics to rounding and faster at this size (docs/plant.md).
     """
 
     timestep_s: float = 0.001
@@ -487,6 +490,7 @@ class SolverConfig:
     ls_iterations: int = 10
     tolerance: float = 1e-8
     cone: str = "pyramidal"
+    jacobian: str = "dense"
 
     def validate(self) -> None:
         """Raise ``ValueError`` if a value is out of range."""
@@ -503,6 +507,7 @@ class SolverConfig:
         _check(self.iterations >= 1 and self.ls_iterations >= 1, "iterations must be >= 1")
         _finite("tolerance", self.tolerance, allow_equal=True)
         _check(self.cone in ("pyramidal", "elliptic"), f"unknown cone {self.cone!r}")
+        _check(self.jacobian in ("dense", "sparse", "auto"), f"unknown jacobian {self.jacobian!r}")
 
 
 @dataclass(frozen=True)
