@@ -21,7 +21,7 @@ Prints the figures and their intervals (Wilson for rates, bootstrap for medians)
 bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
 
 Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]
-[--known-torque]``
+[--known-torque] [--shard J/K] [--resume] [--summary-only]``
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ def _fit(
     opts = FitOptions(
         params=params, budget_s=fit_s, min_span_s=fit_s, max_iters=args.max_iters, jobs=args.jobs
     )
-    return fit(data, apply(ModelConfig(), known), opts)
+    return fit(data, apply(ModelConfig(), known), opts, progress=_say)
 
 
 def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[str, Any]:
@@ -172,7 +172,8 @@ def fit_time_row(args: argparse.Namespace, work: Path) -> dict[str, Any]:
 
 
 def _say(stage: str, fraction: float) -> None:
-    print(f"    fit: {100 * fraction:3.0f}%  {stage}", file=sys.stderr, flush=True)
+    now = time.strftime("%H:%M:%S")
+    print(f"    fit: {100 * fraction:3.0f}%  {stage}  ({now})", file=sys.stderr, flush=True)
 
 
 def summarise(rows: list[dict[str, Any]]) -> None:
@@ -265,7 +266,21 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--out", type=Path, default=Path("runs/bench-identify.jsonl"))
     ap.add_argument("--resume", action="store_true", help="keep the rows already in --out")
+    ap.add_argument(
+        "--shard",
+        default="0/1",
+        metavar="J/K",
+        help="run only the draws whose seed is J modulo K (K processes, each --jobs 1, share a machine's "
+        "cores better than one fit's pool: a fit's line search runs one rollout at a time)",
+    )
+    ap.add_argument("--summary-only", action="store_true", help="print the figures of --out; run nothing")
     args = ap.parse_args(argv)
+    try:
+        shard, shards = (int(v) for v in args.shard.split("/"))
+        if not 0 <= shard < shards:
+            raise ValueError
+    except ValueError:
+        ap.error(f"--shard {args.shard!r}: J/K with 0 <= J < K")
     if args.quick:
         args.draws, args.profile, args.fit_s = 3, "quick", 12.0
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -273,16 +288,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.resume and args.out.exists():
         rows = [json.loads(line) for line in args.out.read_text().splitlines() if line.strip()]
     done = {(r["kind"], r.get("seed"), r.get("name")) for r in rows}
+    if args.summary_only:
+        summarise(rows)
+        return 0
     print(
         f"identification benchmark: {args.draws} draws of '{args.profile}', fit on {args.fit_s:g} s",
         flush=True,
     )
     with tempfile.TemporaryDirectory(prefix="bench-identify-") as tmp, open(args.out, "a") as out:
         work = Path(tmp)
-        jobs: list[tuple[str, Any]] = [("truth", s) for s in range(args.draws)]
-        if args.mismatch:
+        jobs: list[tuple[str, Any]] = [("truth", s) for s in range(args.draws) if s % shards == shard]
+        if args.mismatch and shard == 0:
             jobs += [("mismatch", name) for name in MISMATCHES]
-        if args.fit_time:
+        if args.fit_time and shard == 0:
             jobs.append(("fit-time", None))
         for kind, key in jobs:
             tag = (kind, key if kind == "truth" else None, key if kind == "mismatch" else None)
