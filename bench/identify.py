@@ -221,7 +221,7 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             med = float(np.median(values))
             lo, hi = bootstrap_interval(list(values), statistic="median", seed=0)
             print(
-                f"cable length RMS, {label}: median {med:.3f} mm [{lo:.3f}, {hi:.3f}], max {values.max():.3f}"
+                f"cable length RMS, {label}: median {med:.3g} mm [{lo:.3g}, {hi:.3g}], max {values.max():.3g}"
             )
         med = float(np.median(nominal_))
         print(f"the preset on the same held-out samples: median {med:.3f} mm (goal for the fit: <= 0.3 mm)")
@@ -285,10 +285,13 @@ def main(argv: list[str] | None = None) -> int:
         args.draws, args.profile, args.fit_s = 3, "quick", 12.0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
-    if args.resume and args.out.exists():
+    if (args.resume or args.summary_only) and args.out.exists():
         rows = [json.loads(line) for line in args.out.read_text().splitlines() if line.strip()]
     done = {(r["kind"], r.get("seed"), r.get("name")) for r in rows}
     if args.summary_only:
+        if not rows:
+            print(f"{args.out}: no rows", file=sys.stderr)
+            return 1
         summarise(rows)
         return 0
     print(
