@@ -1,10 +1,9 @@
-"""Grasp trials per minute at the fine physics (0.25 ms steps), before and after the plant's dense
-constraint Jacobian, in one run (issue 24, item 5).
+"""Grasp trials per minute at the fine physics (0.25 ms steps): MuJoCo's ``auto`` constraint Jacobian (the
+plant's default; sparse for the prototype's 63 degrees of freedom) against ``dense``, in one run (issue 24,
+item 5).
 
-"Before" is MuJoCo's ``auto`` Jacobian, which goes sparse for the prototype's 63 degrees of freedom (what
-the plant used until ``SolverConfig.jacobian``); "after" is the plant's default, ``dense``. Both run the
-same placements in this process, interleaved trial by trial (so a busy machine slows both alike), and the
-figures are trials per minute of this process's CPU time (wall time beside it).
+Both run the same placements in this process, interleaved trial by trial (so a busy machine slows both
+alike), and the figures are trials per minute of this process's CPU time (wall time beside it).
 
 It also says whether the physics is the same: the paired outcomes (success rates with Wilson intervals,
 the exact McNemar p of the discordant pairs), the largest penetration of each, and the free arm's drift
@@ -36,7 +35,7 @@ from hil.sim.spiral import SpiralDesign  # noqa: E402
 from hil.sim.types import PlantConfig  # noqa: E402
 from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_trial  # noqa: E402
 
-CONFIGS = (("before: auto (sparse here)", "auto"), ("after: dense", "dense"))
+CONFIGS = (("auto (the default; sparse here)", "auto"), ("dense", "dense"))
 GOAL_SPEEDUP = 2.0
 
 
@@ -125,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     speedup = rate[CONFIGS[1][1]] / rate[CONFIGS[0][1]]
     print(
         f"speed-up {speedup:.2f}x (goal >= {GOAL_SPEEDUP:g}x); outcomes differ in {only_a + only_b} of "
-        f"{len(a)} pairs ({only_a} only before, {only_b} only after), "
+        f"{len(a)} pairs ({only_a} only with auto, {only_b} only with dense), "
         f"McNemar p = {mcnemar_exact(only_a, only_b):.2f}"
     )
     print(

@@ -21,7 +21,7 @@ Prints the figures and their intervals (Wilson for rates, bootstrap for medians)
 bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
 
 Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]
-[--known-torque] [--shard J/K] [--resume] [--summary-only]``
+[--known-torque] [--jacobian dense] [--shard J/K] [--resume] [--summary-only]``
 """
 
 from __future__ import annotations
@@ -52,13 +52,18 @@ from hil.identify.synthetic import (  # noqa: E402
     record_truth,
     relative_error,
 )
-from hil.sim.config import ModelConfig  # noqa: E402
+from hil.sim.config import ModelConfig, SolverConfig  # noqa: E402
 from hil.sim.uncertain import ID_PARAMS, apply, by_name  # noqa: E402
 
 GOAL_WITHIN = 0.10
 GOAL_DRAWS = 18 / 20
 GOAL_COVERAGE = 0.90
 GOAL_HELD_OUT_M = 0.3e-3
+
+
+def _base(args: argparse.Namespace) -> ModelConfig:
+    """The prototype, with ``--jacobian``'s constraint Jacobian for the truths and the fits alike."""
+    return ModelConfig(solver=SolverConfig(jacobian=args.jacobian))
 
 
 def _fit(
@@ -71,7 +76,7 @@ def _fit(
     opts = FitOptions(
         params=params, budget_s=fit_s, min_span_s=fit_s, max_iters=args.max_iters, jobs=args.jobs
     )
-    return fit(data, apply(ModelConfig(), known), opts, progress=_say)
+    return fit(data, apply(_base(args), known), opts, progress=_say)
 
 
 def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[str, Any]:
@@ -81,7 +86,9 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
     t0 = time.monotonic()
     limits = SensorLimits(can_late_rate=0.0, loop_jitter_us=0) if args.no_timing_noise else None
     for k, p in enumerate(paths):
-        record_truth(p, truth, seed=1000 * seed + k, profile_name=args.profile, limits=limits)
+        record_truth(
+            p, truth, seed=1000 * seed + k, profile_name=args.profile, limits=limits, preset=_base(args)
+        )
     record_s = time.monotonic() - t0
     # Both recordings go in; the fit's budget (``--fit-s``, at least ``min_span_s`` per recording) is spent
     # on the first one's start, so the second is held out whole and simulated for the traces.
@@ -113,6 +120,7 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
         "seed": seed,
         "known": known,
         "timing_noise": not args.no_timing_noise,
+        "jacobian": args.jacobian,
         "params": params,
         "held_out_rms_m": result.rms_m(True),
         "held_out_rms_nominal_m": result.rms_m(True, "nominal"),
@@ -137,7 +145,7 @@ def mismatch_row(name: str, args: argparse.Namespace, work: Path) -> dict[str, A
     truth = draw_truth(np.random.default_rng(99))
     paths = [work / f"{name}-{k}.mcap" for k in range(2)]
     for k, p in enumerate(paths):
-        record_truth(p, truth, seed=500 + k, profile_name=args.profile, mismatch=name)
+        record_truth(p, truth, seed=500 + k, profile_name=args.profile, mismatch=name, preset=_base(args))
     result = _fit(paths, args, args.fit_s)  # the second held out whole
     return {
         "kind": "mismatch",
@@ -154,10 +162,10 @@ def fit_time_row(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     truth = draw_truth(np.random.default_rng(2026))
     paths = [work / f"five-{k}.mcap" for k in range(5)]
     for k, p in enumerate(paths):
-        record_truth(p, truth, seed=700 + k, profile_name="standard")
+        record_truth(p, truth, seed=700 + k, profile_name="standard", preset=_base(args))
     t0 = time.monotonic()
     data = [load_motor_data(p) for p in paths]
-    result = fit(data, ModelConfig(), FitOptions(jobs=args.jobs), progress=_say)
+    result = fit(data, _base(args), FitOptions(jobs=args.jobs), progress=_say)
     return {
         "kind": "fit-time",
         "recordings": len(paths),
@@ -272,6 +280,13 @@ def main(argv: list[str] | None = None) -> int:
         metavar="J/K",
         help="run only the draws whose seed is J modulo K (K processes, each --jobs 1, share a machine's "
         "cores better than one fit's pool: a fit's line search runs one rollout at a time)",
+    )
+    ap.add_argument(
+        "--jacobian",
+        choices=("auto", "dense"),
+        default="auto",
+        help="the plant's constraint Jacobian, truths and fits alike (dense: the same physics to rounding, "
+        "about 1.4x faster here; docs/plant.md)",
     )
     ap.add_argument("--summary-only", action="store_true", help="print the figures of --out; run nothing")
     args = ap.parse_args(argv)

@@ -74,6 +74,15 @@ _TEN, _LEN, _VEL, _TIP = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
 _CH: Final = 12
 
 
+_SOLVER_TUNING: dict[str, Any] = {"mu_factor": 10.0, "x_scale": "jac"}
+"""How MuJoCo's Levenberg-Marquardt (``mujoco.minimize.least_squares``) moves its regularizer. Its
+defaults raise it by 10^0.1 after a failed step, from 1e-6, against a Hessian in the residual's own units:
+near the optimum, where the sensors' noise fails most steps, one iteration tried dozens of candidates, each
+a serial rollout. Scaled by the Jacobian's columns (the Hessian's diagonal then near 1) and raised tenfold,
+a fit of four parameters on a ``tiny`` recording ran 62 rollouts instead of 146 for the same 11 iterations,
+the same values and objective."""
+
+
 class FitError(HilError):
     """A fit cannot start (one line: why)."""
 
@@ -514,6 +523,7 @@ def fit(
             verbose=False,
             max_iters=opts.max_iters,
             eps=opts.fd_step,
+            **_SOLVER_TUNING,
             iter_callback=on_iter,
             output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
         )

@@ -351,7 +351,8 @@ def build_mjcf(
     add(
         f'  <option timestep="{_f(sol.timestep_s)}" integrator="{sol.integrator}" solver="{sol.solver}" '
         f'iterations="{sol.iterations}" ls_iterations="{sol.ls_iterations}" tolerance="{_f(sol.tolerance)}" '
-        f'cone="{sol.cone}" jacobian="{sol.jacobian}" gravity="0 0 {0.0 if cfg.mounting == "gravity-off" else -GRAVITY_M_S2:g}"/>'
+        f'cone="{sol.cone}" jacobian="{sol.jacobian}" '
+        f'gravity="0 0 {0.0 if cfg.mounting == "gravity-off" else -GRAVITY_M_S2:g}"/>'
     )
     add("  <custom>")
     custom = {
