@@ -10,7 +10,6 @@ leave the radio the master: with the right lever at MIDDLE a grab is refused.
 
 from __future__ import annotations
 
-import signal
 import subprocess
 import sys
 import threading
@@ -24,7 +23,7 @@ from pymavlink import mavutil
 
 from protocol import mavlink as mav
 from protocol import messages as bm
-from tests.support.mavproxy_proc import free_udp_port
+from tests.support.mavproxy_proc import free_udp_port, stop_host
 from tests.support.realtime_guard import scaled_s, timed_out
 
 pytestmark = pytest.mark.slow  # two `spirob-host` runs with the MuJoCo virtual board
@@ -143,13 +142,7 @@ def run_host() -> Iterator[Callable[[str], Autopilot]]:
     for pilot in pilots:
         pilot.close()
     for proc in procs:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=10)
+        stop_host(proc)
 
 
 def ready(pilot: Autopilot, mode: bm.Mode) -> None:
