@@ -156,13 +156,17 @@ def estimates(
     naive_x: FloatArray,
     corr: FloatArray,
     unconverged_after: int | None = None,
+    unexplained: str | None = None,
 ) -> tuple[ParamEstimate, ...]:
     """The fitted values and intervals in SI, from the optimizer's coordinates.
 
     A parameter is identified only when its interval is within its row's threshold, it is not at a bound,
     it does not trade against another one (|correlation| above :data:`TRADES_AGAINST`: a narrow interval
     along a valley says how flat the valley's floor is, not where on it the truth is) and the fit
-    converged (``unconverged_after`` None): an interval at a point still moving is no interval.
+    converged (``unconverged_after`` None): an interval at a point still moving is no interval. Nor is any
+    parameter identified when the model does not explain the data (``unexplained``: why, from the fit's
+    error): every interval is conditional on the model being right, and a wrong model's best compromise is
+    not the arm's value, however narrow its interval.
     """
     out = []
     half_x = np.maximum(half_x, NUMERICAL_FLOOR_X)
@@ -187,6 +191,8 @@ def estimates(
             reasons.append("at its bound")
         if unconverged_after is not None:
             reasons.append(f"the fit had not converged after {unconverged_after} iterations")
+        if unexplained is not None:
+            reasons.append(unexplained)
         out.append(
             ParamEstimate(
                 p.name, p.unit, v0, value, interval, naive, not reasons, "; ".join(reasons), at_bound
