@@ -107,6 +107,9 @@ class FitOptions:
         sigma_tip_m: the tracked tip's unit (when recorded).
         use_speed: count the spools' speeds.
         use_tip: count the tracked tip when an recording has it.
+        coarse_iters: with more than one fitted window, first fit on the first window alone for at most
+            this many iterations (0: never). Each of its evaluations costs that window's share of an
+            evaluation of all, and the fit on every window starts near the optimum.
         explained_within_m: the largest RMS error of the fitted cable lengths (over the samples the fit
             saw) at which the model still explains the data. Above it no parameter is called identified:
             the intervals assume the model is right, and a model that leaves this much unexplained is
@@ -135,6 +138,7 @@ class FitOptions:
     use_tip: bool = True
     explained_within_m: float = 3e-4
     jacobian: str | None = "dense"
+    coarse_iters: int = 6
 
 
 @dataclass(frozen=True, slots=True)
@@ -476,6 +480,63 @@ ProgressFn = Callable[[str, float], None]
 """Called with a stage and the fraction of the fit done (0..1, estimated)."""
 
 
+@dataclass
+class _Solved:
+    """One run of the solver: its optimum, its result, the residual it minimized, its trace."""
+
+    params: Any
+    result: Any
+    residual_fn: Any
+    measured: Any
+    objective: list[float]
+    steps: list[FloatArray]
+
+
+def _solve(
+    problem: _Problem,
+    start: Any,
+    max_iters: int,
+    fd_step: float,
+    say: ProgressFn,
+    span: tuple[float, float],
+    stage: str,
+) -> _Solved:
+    """MuJoCo's Levenberg-Marquardt on ``problem``'s windows from ``start``; progress within ``span``."""
+    measured = problem.measured()
+    residual_fn = sysid.build_residual_fn(
+        models_sequences=[measured],
+        build_model=problem.build_model,
+        custom_rollout=problem.rollout,
+        modify_residual=problem.residual,
+        n_threads=1,
+        resample_true=False,
+    )
+    objective: list[float] = []
+    steps: list[FloatArray] = []
+    lo, hi = span
+    label = f" ({stage})" if stage else ""
+
+    def on_iter(trace: list[Any]) -> None:
+        objective.append(float(trace[-1].objective))
+        if trace[-1].step is not None:
+            steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
+        done = min(1.0, len(trace) / (max_iters + 1))
+        say(f"iteration {len(trace)} of at most {max_iters}{label}", lo + (hi - lo) * done)
+
+    opt_params, result = sysid.optimize(
+        start,
+        residual_fn,
+        optimizer="mujoco",
+        verbose=False,
+        max_iters=max_iters,
+        eps=fd_step,
+        **_SOLVER_TUNING,
+        iter_callback=on_iter,
+        output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
+    )
+    return _Solved(opt_params, result, residual_fn, measured, objective, steps)
+
+
 def fit(
     recordings: Sequence[MotorData],
     preset: ModelConfig,
@@ -517,41 +578,31 @@ def fit(
         problem = _Problem(design, preset, rows, chosen, opts, pool)
         # A parameter whose preset sits on a bound (no joint friction, no delay) starts a little inside:
         # Levenberg-Marquardt can stall in a corner of the box.
-        params = problem.params().move_off_bounds()
-        measured = problem.measured()
-        residual_fn = sysid.build_residual_fn(
-            models_sequences=[measured],
-            build_model=problem.build_model,
-            custom_rollout=problem.rollout,
-            modify_residual=problem.residual,
-            n_threads=1,
-            resample_true=False,
+        initial = problem.params().move_off_bounds()
+        params = initial
+        fine_from = 0.0
+        if opts.coarse_iters > 0 and len(chosen) > 1:
+            # The first window alone, first: each of its evaluations costs a share of the whole's, and
+            # the fit on every window then starts near the optimum, where it needs few iterations.
+            share = chosen[0].seconds / sum(w.seconds for w in chosen)
+            fine_from = share * opts.coarse_iters / (share * opts.coarse_iters + opts.max_iters)
+            coarse = _Problem(design, preset, rows, chosen[:1], opts, pool)
+            say("first evaluation (the first window alone)", 0.0)
+            params = _solve(
+                coarse, params, opts.coarse_iters, opts.fd_step, say, (0.0, fine_from), "first window"
+            ).params
+        say("first evaluation", fine_from)
+        solved = _solve(problem, params, opts.max_iters, opts.fd_step, say, (fine_from, 0.9), "")
+        opt_params, result, residual_fn, measured = (
+            solved.params,
+            solved.result,
+            solved.residual_fn,
+            solved.measured,
         )
-        objective: list[float] = []
+        objective, steps = solved.objective, solved.steps
         # The solver's own decision to stop (its gradient or step fell under tolerance) or ours:
         # an iteration that still lowered the objective by more than this means it had not converged.
         converged_below = 1e-3
-
-        steps: list[FloatArray] = []
-
-        def on_iter(trace: list[Any]) -> None:
-            objective.append(float(trace[-1].objective))
-            if trace[-1].step is not None:
-                steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
-            say(f"iteration {len(trace)} of at most {opts.max_iters}", len(trace) / (opts.max_iters + 2))
-
-        say("first evaluation", 0.0)
-        opt_params, result = sysid.optimize(
-            params,
-            residual_fn,
-            optimizer="mujoco",
-            verbose=False,
-            max_iters=opts.max_iters,
-            eps=opts.fd_step,
-            **_SOLVER_TUNING,
-            iter_callback=on_iter,
-            output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
-        )
         jac = np.asarray(result.jac, dtype=np.float64)
         x = opt_params.as_vector()
         res_list, _, _ = residual_fn(x, opt_params)
@@ -580,7 +631,7 @@ def fit(
         )
         if sysid_report is not None:
             say("MuJoCo's report", 0.9)
-            _sysid_report(sysid_report, problem, measured, params, opt_params, residual_fn, result)
+            _sysid_report(sysid_report, problem, measured, initial, opt_params, residual_fn, result)
         say("measured against simulated", 0.95)
         traces = _traces(
             problem, recordings, {w.recording.name: w.end for w in chosen}, fitted_model, preset, pool
