@@ -110,6 +110,14 @@ def configure_identify(p: argparse.ArgumentParser) -> None:
         help=f"solver iterations at most (default {FitOptions().max_iters}; unconverged: nothing identified)",
     )
     p.add_argument(
+        "--explained-within-mm",
+        type=finite_float,
+        default=FitOptions().explained_within_m * 1e3,
+        metavar="MM",
+        help="the fitted cable lengths' RMS error above which the model does not explain the arm and no "
+        f"parameter is called identified (default {FitOptions().explained_within_m * 1e3:g})",
+    )
+    p.add_argument(
         "--jobs", type=int, metavar="N", help="worker processes for the rollouts (default: one per core)"
     )
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
@@ -123,6 +131,10 @@ def run_identify_command(args: argparse.Namespace) -> int:
         raise UsageError(f"--jobs must be 1..{MAX_JOBS_N}, got {args.jobs}")
     if not 1.0 <= args.budget_s <= 3600.0:
         raise UsageError(f"--budget-s must be 1..3600 s, got {args.budget_s:g}")
+    if not 0.0 < args.explained_within_mm <= 1000.0:
+        raise UsageError(
+            f"--explained-within-mm must be above 0 and at most 1000, got {args.explained_within_mm:g}"
+        )
     writable_file(args.output, "the model file")
     if args.report is not None:
         writable_dir(args.report, "the report")
@@ -150,6 +162,7 @@ def run_identify_command(args: argparse.Namespace) -> int:
         budget_s=args.budget_s,
         max_iters=args.max_iters,
         jobs=args.jobs,
+        explained_within_m=args.explained_within_mm * 1e-3,
     )
     designs = {d.design for d in data if d.design is not None}
     design = next(iter(designs)) if len(designs) == 1 else chosen.spiral()

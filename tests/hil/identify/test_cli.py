@@ -25,6 +25,8 @@ from hil.sim.uncertain import by_name
         (["--known", "torque_scale=1", "--known", "torque_scale=1.1"], "gives a parameter twice"),
         (["--known", "torque_scale=1", "--params", "torque_scale,delay"], "both name torque_scale"),
         (["--known", "torque_scale=-3"], "--known: "),
+        (["--explained-within-mm", "0"], "--explained-within-mm must be above 0"),
+        (["--explained-within-mm", "inf"], "must be a finite number"),
     ],
 )
 def test_known_mistakes_are_one_line_and_status_2(
