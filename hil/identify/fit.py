@@ -107,9 +107,6 @@ class FitOptions:
         sigma_tip_m: the tracked tip's unit (when recorded).
         use_speed: count the spools' speeds.
         use_tip: count the tracked tip when an recording has it.
-        coarse_iters: with more than one fitted window, first fit on the first window alone for at most
-            this many iterations (0: never). Each of its evaluations costs that window's share of an
-            evaluation of all, and the fit on every window starts near the optimum.
         explained_within_m: the largest RMS error of the fitted cable lengths (over the samples the fit
             saw) at which the model still explains the data. Above it no parameter is called identified:
             the intervals assume the model is right, and a model that leaves this much unexplained is
@@ -117,7 +114,7 @@ class FitOptions:
             default is the twin's accuracy target (issue 23: held-out cable lengths within 0.3 mm RMS);
             a model that reproduces its own data (the hidden-truth draws) leaves micrometres.
         jacobian: the rollouts' constraint Jacobian (:attr:`~hil.sim.config.SolverConfig.jacobian`), or
-            None to keep the preset's. ``dense`` runs the prototype's rollouts about 1.4x faster than
+            None to keep the preset's. ``dense`` runs the prototype's rollouts about 1.5x faster than
             MuJoCo's ``auto``, which goes sparse at 60 degrees of freedom. The physics is the same to
             rounding (the free arm's units within 1e-10 m over 1 s), which a fit of real data cannot see;
             a fit of a synthetic recording made on ``auto`` can: it resolves 0.01 %, and the damping moved
@@ -138,7 +135,6 @@ class FitOptions:
     use_tip: bool = True
     explained_within_m: float = 3e-4
     jacobian: str | None = "dense"
-    coarse_iters: int = 6
 
 
 @dataclass(frozen=True, slots=True)
@@ -498,10 +494,8 @@ def _solve(
     max_iters: int,
     fd_step: float,
     say: ProgressFn,
-    span: tuple[float, float],
-    stage: str,
 ) -> _Solved:
-    """MuJoCo's Levenberg-Marquardt on ``problem``'s windows from ``start``; progress within ``span``."""
+    """MuJoCo's Levenberg-Marquardt on ``problem``'s windows from ``start``."""
     measured = problem.measured()
     residual_fn = sysid.build_residual_fn(
         models_sequences=[measured],
@@ -513,15 +507,12 @@ def _solve(
     )
     objective: list[float] = []
     steps: list[FloatArray] = []
-    lo, hi = span
-    label = f" ({stage})" if stage else ""
 
     def on_iter(trace: list[Any]) -> None:
         objective.append(float(trace[-1].objective))
         if trace[-1].step is not None:
             steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
-        done = min(1.0, len(trace) / (max_iters + 1))
-        say(f"iteration {len(trace)} of at most {max_iters}{label}", lo + (hi - lo) * done)
+        say(f"iteration {len(trace)} of at most {max_iters}", len(trace) / (max_iters + 2))
 
     opt_params, result = sysid.optimize(
         start,
@@ -579,20 +570,8 @@ def fit(
         # A parameter whose preset sits on a bound (no joint friction, no delay) starts a little inside:
         # Levenberg-Marquardt can stall in a corner of the box.
         initial = problem.params().move_off_bounds()
-        params = initial
-        fine_from = 0.0
-        if opts.coarse_iters > 0 and len(chosen) > 1:
-            # The first window alone, first: each of its evaluations costs a share of the whole's, and
-            # the fit on every window then starts near the optimum, where it needs few iterations.
-            share = chosen[0].seconds / sum(w.seconds for w in chosen)
-            fine_from = share * opts.coarse_iters / (share * opts.coarse_iters + opts.max_iters)
-            coarse = _Problem(design, preset, rows, chosen[:1], opts, pool)
-            say("first evaluation (the first window alone)", 0.0)
-            params = _solve(
-                coarse, params, opts.coarse_iters, opts.fd_step, say, (0.0, fine_from), "first window"
-            ).params
-        say("first evaluation", fine_from)
-        solved = _solve(problem, params, opts.max_iters, opts.fd_step, say, (fine_from, 0.9), "")
+        say("first evaluation", 0.0)
+        solved = _solve(problem, initial, opts.max_iters, opts.fd_step, say)
         opt_params, result, residual_fn, measured = (
             solved.params,
             solved.result,

@@ -70,29 +70,6 @@ def test_a_fit_through_noisy_timing_converges_without_wasted_rollouts(tmp_path: 
     assert result.rollouts <= 1 + (len(TRUTH) + 3) * (result.iterations + 1), result.rollouts
 
 
-def test_several_recordings_are_fitted_on_the_first_window_first(
-    truth_recording: Path, tmp_path: Path
-) -> None:
-    """Two recordings: the solver first runs on the first one's window alone (its evaluations cost half),
-    then on both from there, and the values are the truth's."""
-    second = tmp_path / "second.mcap"
-    record_truth(second, TRUTH, seed=5, profile_name="tiny", limits=SensorLimits(20.0, 0.0, 0))
-    stages: list[str] = []
-    opts = dataclasses.replace(FAST, budget_s=8.0, coarse_iters=3)
-    result = fit(
-        [load_motor_data(truth_recording), load_motor_data(second)],
-        ModelConfig(),
-        opts,
-        progress=lambda stage, frac: stages.append(stage),
-    )
-    assert any("first window" in s for s in stages), stages
-    assert stages.index("first evaluation") > 0
-    assert not any(t.held_out.all() for t in result.traces)  # both were fitted
-    for e in result.estimates:
-        assert e.value == pytest.approx(TRUTH[e.name], rel=0.05), e.name
-        assert e.identifiable, (e.name, e.why)
-
-
 def test_a_model_that_cannot_follow_the_arm_identifies_nothing(tmp_path: Path) -> None:
     """Capsule units fitted with wedges: the fitted value is still reported (the best compromise, and the
     model file keeps it), but no parameter is called identified, and the reason says by how much the model
