@@ -19,11 +19,9 @@ Prints the figures and their intervals (Wilson for rates, bootstrap for medians)
 ``--no-timing-noise`` records without late feedback frames and tick jitter (the current noise stays).
 ``--known-torque`` gives each draw's true torque constant to the fit (as a lab gives the datasheet's, or a
 bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
-``--rejudge``, with the flags of the run that wrote ``--out``, judges the draws fitted before the fit's
-convergence test existed by it (one Jacobian at each stored optimum) and rewrites ``--out``.
 
 Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]
-[--known-torque] [--jacobian dense] [--shard J/K] [--resume] [--summary-only] [--rejudge]``
+[--known-torque] [--jacobian dense] [--shard J/K] [--resume] [--summary-only]``
 """
 
 from __future__ import annotations
@@ -46,7 +44,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 import numpy as np  # noqa: E402
 
 from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E402
-from hil.identify.fit import CONVERGED_WITHIN, FitOptions, FitResult, fit, offset_at  # noqa: E402
+from hil.identify.fit import FitOptions, FitResult, fit  # noqa: E402
 from hil.identify.motor_data import load_motor_data  # noqa: E402
 from hil.identify.synthetic import (  # noqa: E402
     MISMATCHES,
@@ -142,7 +140,6 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
         "record_wall_s": record_s,
         "iterations": result.iterations,
         "converged": result.converged,
-        "offset": result.offset[0],
         "condition_number": result.condition_number,
     }
 
@@ -240,31 +237,6 @@ def _correlation_rule(truths: list[dict[str, Any]]) -> None:
     )
 
 
-def rejudge(row: dict[str, Any], args: argparse.Namespace, work: Path) -> dict[str, Any]:
-    """A draw fitted before the convergence test (a Gauss-Newton step at the optimum within half an
-    interval, ``hil.identify.fit.CONVERGED_WITHIN``) existed, judged by it: its first recording made again
-    (the same seeds make the same bytes), the step computed at the stored values. An unconverged fit
-    calls nothing identified, as the fit now does."""
-    seed = row["seed"]
-    truth = draw_truth(np.random.default_rng(seed))
-    path = work / f"rejudge{seed}.mcap"
-    limits = SensorLimits(can_late_rate=0.0, loop_jitter_us=0) if not row["timing_noise"] else None
-    record_truth(path, truth, seed=1000 * seed, profile_name=args.profile, limits=limits, preset=_base(args))
-    known = dict(row["known"])
-    fitted = {x["name"]: x["value"] for x in row["params"]}
-    opts = FitOptions(
-        params=tuple(fitted), budget_s=args.fit_s, min_span_s=args.fit_s, jobs=args.jobs, jacobian=None
-    )
-    intervals = {x["name"]: (x["interval"][0], x["interval"][1]) for x in row["params"]}
-    share, name = offset_at([load_motor_data(path)], apply(_base(args), known), opts, fitted, intervals)
-    out = dict(row, offset=share, offset_param=name, converged_before=row["converged"])
-    out["converged"] = share <= CONVERGED_WITHIN
-    if not out["converged"]:
-        out["params"] = [dict(x, identifiable=False) for x in row["params"]]
-    print(f"  rejudged draw {seed}: one more step moves {name} by {share:.2g} of its interval", flush=True)
-    return out
-
-
 def _say(stage: str, fraction: float) -> None:
     now = time.strftime("%H:%M:%S")
     print(f"    fit: {100 * fraction:3.0f}%  {stage}  ({now})", file=sys.stderr, flush=True)
@@ -312,14 +284,6 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             f"95 % intervals covering the truth: {c}/{len(all_cov)} = {c / len(all_cov):.0%} "
             f"[{lo:.2f}, {hi:.2f}] (goal >= {GOAL_COVERAGE:.0%})"
         )
-        conv = [bool(x["covered"]) for r in truths if r["converged"] for x in r["params"]]
-        if conv and len(conv) < len(all_cov):
-            c = sum(conv)
-            lo, hi = wilson_interval(c, len(conv))
-            print(
-                f"... of the fits that converged: {c}/{len(conv)} = {c / len(conv):.0%} [{lo:.2f}, {hi:.2f}] "
-                "(an unconverged fit says its intervals do not hold)"
-            )
         fitted = np.array([r["second_recording_rms_m"] for r in truths]) * 1e3
         held = np.array([r["held_out_rms_m"] for r in truths]) * 1e3
         nominal_ = np.array([r["held_out_rms_nominal_m"] for r in truths]) * 1e3
@@ -389,12 +353,6 @@ def main(argv: list[str] | None = None) -> int:
         "about 1.4x faster here; docs/plant.md)",
     )
     ap.add_argument("--summary-only", action="store_true", help="print the figures of --out; run nothing")
-    ap.add_argument(
-        "--rejudge",
-        action="store_true",
-        help="judge the draws in --out fitted before the convergence test by it (rewrites --out), then "
-        "print the figures",
-    )
     args = ap.parse_args(argv)
     try:
         shard, shards = (int(v) for v in args.shard.split("/"))
@@ -406,16 +364,10 @@ def main(argv: list[str] | None = None) -> int:
         args.draws, args.profile, args.fit_s = 3, "quick", 12.0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
-    if (args.resume or args.summary_only or args.rejudge) and args.out.exists():
+    if (args.resume or args.summary_only) and args.out.exists():
         rows = [json.loads(line) for line in args.out.read_text().splitlines() if line.strip()]
     done = {(r["kind"], r.get("seed"), r.get("name")) for r in rows}
-    if args.rejudge:
-        with tempfile.TemporaryDirectory(prefix="bench-identify-") as tmp:
-            rows = [
-                rejudge(r, args, Path(tmp)) if r["kind"] == "truth" and "offset" not in r else r for r in rows
-            ]
-        args.out.write_text("".join(json.dumps(r) + "\n" for r in rows))
-    if args.summary_only or args.rejudge:
+    if args.summary_only:
         if not rows:
             print(f"{args.out}: no rows", file=sys.stderr)
             return 1

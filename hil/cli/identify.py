@@ -16,7 +16,7 @@ from rich.table import Table
 
 from controller.cli_kit import EXIT_OK, UsageError, finite_float, writable_dir, writable_file
 from hil.cli.design import preset_arg
-from hil.identify.fit import CONVERGED_WITHIN, FitError, FitOptions, FitResult, fit
+from hil.identify.fit import FitError, FitOptions, FitResult, fit
 from hil.identify.motor_data import IdentifyDataError, load_motor_data
 from hil.identify.report import write_report
 from hil.recording import package_version
@@ -271,9 +271,9 @@ def _print(result: FitResult, output: Path, page: Path | None, known: dict[str, 
     )
     if not result.converged:
         console.print(
-            f"[yellow]the fit had not converged: one more step would move {result.offset[1]} by "
-            f"{result.offset[0]:.2g} of its interval (converged: at most {CONVERGED_WITHIN:g}); nothing is "
-            "called identified (more --max-iters, or fewer --params)"
+            f"[yellow]the fit had not converged: its last iteration still lowered the error by "
+            f"{100 * result.last_reduction:.1f} %; the intervals are local "
+            "(more --max-iters, or fewer --params)"
         )
     console.print(f"wrote {output}" + (f"; report {page}" if page is not None else ""))
 

@@ -130,7 +130,7 @@ def _page(result: FitResult, title: str, has_sysid: bool) -> str:
             "converged",
             "yes"
             if result.converged
-            else f"no: one more step would move {result.offset[1]} by {result.offset[0]:.2g} of its interval",
+            else f"no: the last iteration still gained {100 * result.last_reduction:.1f} %",
         ),
         ("rollouts / simulated seconds", f"{result.rollouts} / {result.simulated_s:.0f} s"),
         ("wall time", _fmt(result.wall_s, "s")),

@@ -11,16 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.identify.fit import (
-    CONVERGED_WITHIN,
-    FitError,
-    FitOptions,
-    _at_samples,
-    _offset,
-    _prepare,
-    fit,
-    offset_at,
-)
+from hil.identify.fit import FitError, FitOptions, _at_samples, _prepare, fit
 from hil.identify.intervals import _acf, _bandwidth, hac_covariance
 from hil.identify.motor_data import load_motor_data
 from hil.identify.rollout import RolloutJob, simulate
@@ -120,42 +111,6 @@ def test_the_sandwich_widens_intervals_for_correlated_residuals() -> None:
             assert cov[0, 0] == pytest.approx(naive, rel=0.5) and n_eff > n / 3
     assert _acf(white[:, None], 3)[0] == pytest.approx(1.0)
     assert _bandwidth(walk[:, None]) > _bandwidth(white[:, None])
-
-
-def test_converged_means_one_more_step_stays_within_half_an_interval() -> None:
-    """A straight line's least squares: at its optimum the next Gauss-Newton step is nothing; two
-    half-widths off, it is two half-widths; a step out of the search box counts only up to the bound."""
-    rng = np.random.default_rng(2)
-    t = np.linspace(0.0, 1.0, 200)
-    jac = np.stack([np.ones_like(t), t], axis=1)
-    data = 1.0 + 2.0 * t + rng.normal(scale=0.01, size=t.size)
-    best = np.linalg.lstsq(jac, data, rcond=None)[0]
-    half = np.array([0.01, 0.02])
-    wide = [(-10.0, 10.0)] * 2
-    assert _offset(jac, jac @ best - data, best, half, wide)[0] < 1e-9
-    off = best + np.array([0.0, 2 * half[1]])
-    share, worst = _offset(jac, jac @ off - data, off, half, wide)
-    assert share == pytest.approx(2.0, rel=1e-6) and worst == 1
-    # The optimum lies below a bound the fit sits on: the step counts only to the bound, where the fit
-    # already is (the offset's own step is nothing: it is at its best for any slope here).
-    boxed = [(-10.0, 10.0), (best[1] + 2 * half[1], 10.0)]
-    on_bound = np.array([best[0], best[1] + 2 * half[1]])
-    share, _ = _offset(jac, jac @ on_bound - data, on_bound, half, boxed)
-    assert share < 1e-9 < CONVERGED_WITHIN
-    assert not math.isfinite(_offset(jac, np.full(t.size, np.nan), best, half, wide)[0])
-
-
-def test_offset_at_tells_a_finished_fit_from_a_stalled_one(truth_recording: Path) -> None:
-    """Recomputed from the recording (as ``bench/identify.py --rejudge`` does): at the truth one more
-    Gauss-Newton step stays well within a ±2 % interval; with the damping 10 % off it would move it by more
-    than the fit counts as converged."""
-    data = [load_motor_data(truth_recording)]
-    intervals = {k: (0.98 * v, 1.02 * v) for k, v in TRUTH.items()}
-    share, _ = offset_at(data, ModelConfig(), FAST, dict(TRUTH), intervals)
-    assert share < 0.1 * CONVERGED_WITHIN
-    off = dict(TRUTH, damping_ratio=1.1 * TRUTH["damping_ratio"])
-    share, name = offset_at(data, ModelConfig(), FAST, off, intervals)
-    assert share > CONVERGED_WITHIN and name == "damping_ratio"
 
 
 def test_late_ticks_and_late_frames_are_modelled(tmp_path: Path) -> None:
