@@ -21,7 +21,7 @@ Prints the figures and their intervals (Wilson for rates, bootstrap for medians)
 bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
 
 Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]
-[--known-torque] [--jacobian dense] [--shard J/K] [--resume] [--summary-only]``
+[--known-torque] [--jacobian dense] [--shard J/K] [--seeds A,B] [--resume] [--summary-only]``
 """
 
 from __future__ import annotations
@@ -237,6 +237,10 @@ def _correlation_rule(truths: list[dict[str, Any]]) -> None:
     )
 
 
+def _seeds(text: str) -> list[int]:
+    return [int(v) for v in text.split(",")]
+
+
 def _say(stage: str, fraction: float) -> None:
     now = time.strftime("%H:%M:%S")
     print(f"    fit: {100 * fraction:3.0f}%  {stage}  ({now})", file=sys.stderr, flush=True)
@@ -353,6 +357,7 @@ def main(argv: list[str] | None = None) -> int:
         "about 1.4x faster here; docs/plant.md)",
     )
     ap.add_argument("--summary-only", action="store_true", help="print the figures of --out; run nothing")
+    ap.add_argument("--seeds", help="these draws' seeds (A,B,...) instead of the first --draws")
     args = ap.parse_args(argv)
     try:
         shard, shards = (int(v) for v in args.shard.split("/"))
@@ -360,6 +365,11 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError
     except ValueError:
         ap.error(f"--shard {args.shard!r}: J/K with 0 <= J < K")
+    if args.seeds:
+        try:
+            _seeds(args.seeds)
+        except ValueError:
+            ap.error(f"--seeds {args.seeds!r}: whole numbers A,B,...")
     if args.quick:
         args.draws, args.profile, args.fit_s = 3, "quick", 12.0
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -379,7 +389,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     with tempfile.TemporaryDirectory(prefix="bench-identify-") as tmp, open(args.out, "a") as out:
         work = Path(tmp)
-        jobs: list[tuple[str, Any]] = [("truth", s) for s in range(args.draws) if s % shards == shard]
+        seeds = _seeds(args.seeds) if args.seeds else range(args.draws)
+        jobs: list[tuple[str, Any]] = [("truth", s) for s in seeds if s % shards == shard]
         if args.mismatch and shard == 0:
             jobs += [("mismatch", name) for name in MISMATCHES]
         if args.fit_time and shard == 0:

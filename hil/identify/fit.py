@@ -83,6 +83,13 @@ a fit of four parameters on a ``tiny`` recording ran 62 rollouts instead of 146 
 the same values and objective."""
 
 
+START_OFF_BOUND: Final = {"delay": 0.002}
+"""Where the search starts for a parameter whose preset sits on a search bound (the prototype has no
+delay): two control periods, the command's way to the ESC and the ESC's own loop. Started just above 0,
+the other parameters made up for a delay (joint friction, damping, capstan friction) and pressed it to 0
+(docs/identify.md section 6)."""
+
+
 class FitError(HilError):
     """A fit cannot start (one line: why)."""
 
@@ -374,7 +381,10 @@ class _Problem:
             if p.relative and not v0 > 0:
                 raise FitError(f"{p.name}: the preset's value {v0} cannot scale a relative search")
             lo, hi = p.x_bounds(v0)
-            pd.add(sysid.Parameter(p.name, p.to_x(v0, v0), lo, hi))
+            x0 = p.to_x(v0, v0)
+            if p.name in START_OFF_BOUND and x0 in (lo, hi):
+                x0 = p.to_x(START_OFF_BOUND[p.name], v0)
+            pd.add(sysid.Parameter(p.name, x0, lo, hi))
         return pd
 
     def si_values(self, pd: Any) -> dict[str, float]:
