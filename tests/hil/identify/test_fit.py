@@ -11,14 +11,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.identify.fit import FitError, FitOptions, _at_samples, _prepare, fit
+from hil.identify.fit import START_OFF_BOUND, FitError, FitOptions, _at_samples, _prepare, _Problem, fit
 from hil.identify.intervals import _acf, _bandwidth, hac_covariance
 from hil.identify.motor_data import load_motor_data
-from hil.identify.rollout import RolloutJob, simulate
+from hil.identify.rollout import RolloutJob, RolloutPool, simulate
 from hil.identify.synthetic import SensorLimits, record_truth
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
-from hil.sim.uncertain import apply
+from hil.sim.uncertain import apply, by_name
 from tests.hil.identify.conftest import TRUTH
 
 EXPLAINED_WITHIN_M = 5e-6
@@ -111,6 +111,21 @@ def test_the_sandwich_widens_intervals_for_correlated_residuals() -> None:
             assert cov[0, 0] == pytest.approx(naive, rel=0.5) and n_eff > n / 3
     assert _acf(white[:, None], 3)[0] == pytest.approx(1.0)
     assert _bandwidth(walk[:, None]) > _bandwidth(white[:, None])
+
+
+def test_a_delay_preset_at_zero_starts_the_search_inside() -> None:
+    """The prototype has no delay: the search starts at START_OFF_BOUND, not pressed against 0; a preset that
+    gives one starts there."""
+    rows = [by_name("delay"), by_name("damping_ratio")]
+    design = SpiralDesign.paper_prototype()
+    with RolloutPool(1) as pool:
+        for preset, start in (
+            (ModelConfig(), START_OFF_BOUND["delay"]),
+            (apply(ModelConfig(), {"delay": 0.003}), 0.003),
+        ):
+            pd = _Problem(design, preset, rows, [], FitOptions(), pool).params()
+            assert by_name("delay").from_x(float(pd["delay"].value[0]), 0.0) == pytest.approx(start)
+            assert float(pd["damping_ratio"].value[0]) == 0.0  # a relative row starts at its preset
 
 
 def test_late_ticks_and_late_frames_are_modelled(tmp_path: Path) -> None:
