@@ -486,58 +486,6 @@ ProgressFn = Callable[[str, float], None]
 """Called with a stage and the fraction of the fit done (0..1, estimated)."""
 
 
-@dataclass
-class _Solved:
-    """One run of the solver: its optimum, its result, the residual it minimized, its trace."""
-
-    params: Any
-    result: Any
-    residual_fn: Any
-    measured: Any
-    objective: list[float]
-    steps: list[FloatArray]
-
-
-def _solve(
-    problem: _Problem,
-    start: Any,
-    max_iters: int,
-    fd_step: float,
-    say: ProgressFn,
-) -> _Solved:
-    """MuJoCo's Levenberg-Marquardt on ``problem``'s windows from ``start``."""
-    measured = problem.measured()
-    residual_fn = sysid.build_residual_fn(
-        models_sequences=[measured],
-        build_model=problem.build_model,
-        custom_rollout=problem.rollout,
-        modify_residual=problem.residual,
-        n_threads=1,
-        resample_true=False,
-    )
-    objective: list[float] = []
-    steps: list[FloatArray] = []
-
-    def on_iter(trace: list[Any]) -> None:
-        objective.append(float(trace[-1].objective))
-        if trace[-1].step is not None:
-            steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
-        say(f"iteration {len(trace)} of at most {max_iters}", len(trace) / (max_iters + 2))
-
-    opt_params, result = sysid.optimize(
-        start,
-        residual_fn,
-        optimizer="mujoco",
-        verbose=False,
-        max_iters=max_iters,
-        eps=fd_step,
-        **_SOLVER_TUNING,
-        iter_callback=on_iter,
-        output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
-    )
-    return _Solved(opt_params, result, residual_fn, measured, objective, steps)
-
-
 def fit(
     recordings: Sequence[MotorData],
     preset: ModelConfig,
@@ -577,18 +525,39 @@ def fit(
     say = progress or (lambda stage, frac: None)
     with RolloutPool(opts.jobs) as pool:
         problem = _Problem(design, preset, rows, chosen, opts, pool)
-        # A parameter whose preset sits on a bound (no joint friction, no delay) starts a little inside:
+        # A parameter whose preset sits on a bound (no joint friction) starts a little inside:
         # Levenberg-Marquardt can stall in a corner of the box.
         initial = problem.params().move_off_bounds()
-        say("first evaluation", 0.0)
-        solved = _solve(problem, initial, opts.max_iters, opts.fd_step, say)
-        opt_params, result, residual_fn, measured = (
-            solved.params,
-            solved.result,
-            solved.residual_fn,
-            solved.measured,
+        measured = problem.measured()
+        residual_fn = sysid.build_residual_fn(
+            models_sequences=[measured],
+            build_model=problem.build_model,
+            custom_rollout=problem.rollout,
+            modify_residual=problem.residual,
+            n_threads=1,
+            resample_true=False,
         )
-        objective, steps = solved.objective, solved.steps
+        objective: list[float] = []
+        steps: list[FloatArray] = []
+
+        def on_iter(trace: list[Any]) -> None:
+            objective.append(float(trace[-1].objective))
+            if trace[-1].step is not None:
+                steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
+            say(f"iteration {len(trace)} of at most {opts.max_iters}", len(trace) / (opts.max_iters + 2))
+
+        say("first evaluation", 0.0)
+        opt_params, result = sysid.optimize(
+            initial,
+            residual_fn,
+            optimizer="mujoco",
+            verbose=False,
+            max_iters=opts.max_iters,
+            eps=opts.fd_step,
+            **_SOLVER_TUNING,
+            iter_callback=on_iter,
+            output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
+        )
         # The solver's own decision to stop (its gradient or step fell under tolerance) or ours:
         # an iteration that still lowered the objective by more than this means it had not converged.
         converged_below = 1e-3
