@@ -48,6 +48,7 @@ from controller.transport import Transport
 from protocol.c610 import MotorFeedback
 from protocol.dbus import Lever, RcFrame
 from protocol.messages import ClockKind, Heartbeat, VirtualRc, encode
+from tests.support import bare_loop
 from tests.support.c610_rigs import C610SetServer, SlcanAdapterProcess
 from tests.support.realtime_guard import skip_if_others_were_busy
 
@@ -612,11 +613,15 @@ def test_cli_a_good_rig_passes() -> None:
     heartbeats are threads of this process writing to two more ptys.
 
     Timing: a check that timing decides failing while others were busy skips the run as starved; on an
-    idle machine it fails, with one exception. A lateness failure of a few isolated late ticks in a loop
-    that kept up with its p99 within bound is what a VM does to a bare sleep loop too (see
-    ``_ISOLATED_MISSES_MAX``): the run is repeated, and only a machine that did it on every run skips the
-    test (not as starved). Any other failure fails it: a loop that fell behind, a p99 above its bound,
-    more misses, or any other check."""
+    idle machine it fails, with two exceptions, after which the run is repeated and only a machine that
+    did one of them on every run skips the test (not as starved):
+    - the lateness check alone failed and a bare loop (``tests.support.bare_loop``: the same clock, period
+      and judgement, no work), run at once in a process of its own, fails it too: the machine cannot keep
+      the bound in that minute (CI's VM once gave the firmware p99 439 us and 5 late ticks, every one
+      woken late; this machine's quiet bare loop misses 3-5 deadlines per 2 s on some days);
+    - a few isolated late ticks in a loop that kept up with its p99 within bound (``_ISOLATED_MISSES_MAX``).
+    Any other failure fails it: a loop that fell behind, a lateness failure that a bare loop on the same
+    machine does not share, or any other check."""
     woken_late: list[str] = []
     for _ in range(_GOOD_RIG_RUNS):
         since = time.monotonic()
@@ -635,15 +640,19 @@ def test_cli_a_good_rig_passes() -> None:
             for n in ("lateness", "rc", "link", "motor 1 (0x201)", "motor 2 (0x202)", "motor 3 (0x203)")
         ]
         failed = [t for t in timing if t.startswith("FAIL")]
-        if failed == [lines["lateness"]] and _isolated_misses(failed[0]):
-            woken_late.append(failed[0].split(" -> ")[0])
-            continue  # a few isolated misses in a loop that kept up, p99 within bound: run again
+        if failed == [lines["lateness"]] and "fell behind" not in failed[0]:
+            # The machine's own timing, in the same minute: a loop that does nothing, run as the firmware is.
+            bare = bare_loop.measure_in_process_of_its_own(fifo=fifo)
+            if not bare["passed"] or _isolated_misses(failed[0]):
+                why = "a bare loop failed too: " if not bare["passed"] else "isolated misses: "
+                woken_late.append(why + failed[0].split(" -> ")[0] + " | bare loop: " + str(bare["line"]))
+                continue  # the machine's doing, or a few isolated misses in a loop that kept up: run again
         if failed:
             skip_if_others_were_busy(since, "a check that timing decides failed: " + " | ".join(failed))
         assert all(line.startswith("PASS ") for line in lines.values()), "\n".join(lines.values())
         assert code == 0
         return
-    pytest.skip(f"not real-time: a few isolated deadlines missed on every run: {woken_late}")
+    pytest.skip(f"not real-time: this machine missed deadlines on every run: {woken_late}")
 
 
 _ISOLATED_MISSES_MAX = 5
