@@ -84,6 +84,7 @@ def _fit(
         max_iters=args.max_iters,
         jobs=args.jobs,
         jacobian=None,
+        restarts=args.restarts,
     )
     return fit(data, apply(_base(args), known), opts, progress=_say)
 
@@ -135,6 +136,7 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
         "held_out_rms_m": result.rms_m(True),
         "held_out_rms_nominal_m": result.rms_m(True, "nominal"),
         "fitted_rms_m": result.rms_m(False),
+        "starts": [list(s) for s in result.starts],
         "second_recording_rms_m": second,
         "fit_wall_s": result.wall_s,
         "record_wall_s": record_s,
@@ -326,6 +328,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", default="standard", help="excitation profile of the recordings")
     ap.add_argument("--fit-s", type=float, default=30.0, help="seconds of the first recording the fit sees")
     ap.add_argument("--max-iters", type=int, default=FitOptions().max_iters)
+    ap.add_argument(
+        "--restarts", type=int, default=FitOptions().restarts, help="restarts of a fit that has not settled"
+    )
     ap.add_argument("--jobs", type=int, default=None)
     ap.add_argument("--mismatch", action="store_true", help="also the model-mismatch plants")
     ap.add_argument("--fit-time", action="store_true", help="also five 60 s recordings, timed")

@@ -30,6 +30,8 @@ IDENTIFY_HELP = (
     "fit the plant's uncertain parameters to recordings of an arm; write a model file --preset takes"
 )
 MAX_JOBS_N = 64
+MAX_RESTARTS_N = 16
+"""Restarts at most (each costs about one fit)."""
 
 
 def _param_list(text: str) -> tuple[str, ...]:
@@ -118,6 +120,15 @@ def configure_identify(p: argparse.ArgumentParser) -> None:
         f"parameter is called identified (default {FitOptions().explained_within_m * 1e3:g})",
     )
     p.add_argument(
+        "--restarts",
+        type=int,
+        default=FitOptions().restarts,
+        metavar="N",
+        help="start the fit again from up to N more points while it leaves more of the cable lengths "
+        "unexplained than the encoders' own noise; the best start is kept, each costs about one fit "
+        f"(default {FitOptions().restarts})",
+    )
+    p.add_argument(
         "--jobs", type=int, metavar="N", help="worker processes for the rollouts (default: one per core)"
     )
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
@@ -127,6 +138,8 @@ def run_identify_command(args: argparse.Namespace) -> int:
     """``spirob-hil identify``: check everything a user can get wrong first, then fit, then write."""
     if not 1 <= args.max_iters <= 1000:
         raise UsageError(f"--max-iters must be 1..1000, got {args.max_iters}")
+    if not 0 <= args.restarts <= MAX_RESTARTS_N:
+        raise UsageError(f"--restarts must be 0..{MAX_RESTARTS_N}, got {args.restarts}")
     if args.jobs is not None and not 1 <= args.jobs <= MAX_JOBS_N:
         raise UsageError(f"--jobs must be 1..{MAX_JOBS_N}, got {args.jobs}")
     if not 1.0 <= args.budget_s <= 3600.0:
@@ -163,6 +176,7 @@ def run_identify_command(args: argparse.Namespace) -> int:
         max_iters=args.max_iters,
         jobs=args.jobs,
         explained_within_m=args.explained_within_mm * 1e-3,
+        restarts=args.restarts,
     )
     designs = {d.design for d in data if d.design is not None}
     design = next(iter(designs)) if len(designs) == 1 else chosen.spiral()
@@ -269,6 +283,9 @@ def _print(result: FitResult, output: Path, page: Path | None, known: dict[str, 
         f"(the preset: {_mm(result.rms_m(False, 'nominal'))} mm, {_mm(result.rms_m(True, 'nominal'))} mm); "
         f"{result.iterations} iterations, {result.rollouts} rollouts, {result.wall_s:.0f} s"
     )
+    if len(result.starts) > 1:
+        each = "; ".join(f"{obj:.4g} ({_mm(rms)} mm)" for obj, rms in result.starts)
+        console.print(f"{len(result.starts)} starts, objective (fitted length error): {each}; the least kept")
     if not result.converged:
         console.print(
             f"[yellow]the fit had not converged: its last iteration still lowered the error by "
@@ -303,6 +320,7 @@ def _as_dict(result: FitResult, output: Path, page: Path | None) -> dict[str, An
         "condition_number": result.condition_number,
         "iterations": result.iterations,
         "converged": result.converged,
+        "starts": [{"objective": obj, "fitted_length_rms_m": rms} for obj, rms in result.starts],
         "rollouts": result.rollouts,
         "simulated_s": result.simulated_s,
         "wall_s": result.wall_s,

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import logging
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -42,9 +41,11 @@ from mujoco import sysid
 from numpy.typing import NDArray
 
 from hil.errors import HilError
-from hil.identify.intervals import ParamEstimate, estimates, hac_covariance
+from hil.identify.intervals import ParamEstimate, estimates, hac_covariance, unexplained
 from hil.identify.motor_data import MotorData
 from hil.identify.rollout import RolloutJob, RolloutPool
+from hil.identify.starts import restart_points, settled_m
+from hil.identify.sysid_report import write_sysid_report
 from hil.sim.config import ModelConfig
 from hil.sim.mjcf import build_mjcf
 from hil.sim.spiral import SpiralDesign
@@ -53,8 +54,6 @@ from hil.sim.uncertain import ID_PARAMS, IdParam, apply, nominal
 __all__ = ["FitError", "FitOptions", "FitResult", "Trace", "fit"]
 
 FloatArray = NDArray[np.float64]
-
-_log = logging.getLogger(__name__)
 
 SENSORS: Final = (
     "tension_0",
@@ -126,6 +125,10 @@ class FitOptions:
             rounding (the free arm's units within 1e-10 m over 1 s), which a fit of real data cannot see;
             a fit of a synthetic recording made on ``auto`` can: it resolves 0.01 %, and the damping moved
             by 0.03 %. Such a fit keeps the preset's (None). The fitted model keeps the preset's.
+        restarts: starts after the first, at most (:mod:`hil.identify.starts`), each a whole fit from a
+            point around the first start; taken only while the best fit so far leaves more of the fitted
+            cable lengths unexplained than the sensors' own noise (:func:`~hil.identify.starts.settled_m`),
+            and the fit with the lowest objective is kept. Each costs about one more fit.
     """
 
     params: tuple[str, ...] = tuple(p.name for p in ID_PARAMS)
@@ -142,6 +145,7 @@ class FitOptions:
     use_tip: bool = True
     explained_within_m: float = 3e-4
     jacobian: str | None = "dense"
+    restarts: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,6 +193,10 @@ class FitResult:
         simulated_s: seconds simulated in all.
         wall_s: the fit's wall time.
         recordings: (name, sha256, duration) of each recording used.
+        objective: the kept start's objective after each of its iterations.
+        converged: the kept start had converged.
+        starts: per start run, its final objective and its fitted cable lengths' RMS error [m] (the first
+            start first; the kept one has the lowest objective).
     """
 
     estimates: tuple[ParamEstimate, ...]
@@ -204,6 +212,7 @@ class FitResult:
     recordings: tuple[tuple[str, str, float], ...]
     objective: tuple[float, ...] = field(default=())
     converged: bool = True
+    starts: tuple[tuple[float, float], ...] = field(default=())
 
     @property
     def last_reduction(self) -> float:
@@ -486,6 +495,51 @@ ProgressFn = Callable[[str, float], None]
 """Called with a stage and the fraction of the fit done (0..1, estimated)."""
 
 
+@dataclass(order=True)
+class _Run:
+    """One start's fit (ordered by its final objective: the least is kept)."""
+
+    final: float
+    params: Any = field(compare=False)
+    result: Any = field(compare=False)
+    objective: list[float] = field(compare=False)
+    steps: list[FloatArray] = field(compare=False)
+    res: list[Any] = field(compare=False)
+    length_rms_m: float = field(compare=False)
+
+
+def _solve(start: Any, residual_fn: Any, opts: FitOptions, say: ProgressFn, k: int) -> _Run:
+    """MuJoCo's Levenberg-Marquardt from ``start`` (the ``k``-th restart, 0 the first start)."""
+    objective: list[float] = []
+    steps: list[FloatArray] = []
+    label = f"start {k + 1} of at most {opts.restarts + 1}: " if k else ""
+
+    def on_iter(trace: list[Any]) -> None:
+        objective.append(float(trace[-1].objective))
+        if trace[-1].step is not None:
+            steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
+        frac = (k + len(trace) / (opts.max_iters + 2)) / (opts.restarts + 1)
+        say(f"{label}iteration {len(trace)} of at most {opts.max_iters}", frac)
+
+    say(f"{label}first evaluation", k / (opts.restarts + 1))
+    params, result = sysid.optimize(
+        start,
+        residual_fn,
+        optimizer="mujoco",
+        verbose=False,
+        max_iters=opts.max_iters,
+        eps=opts.fd_step,
+        **_SOLVER_TUNING,
+        iter_callback=on_iter,
+        output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
+    )
+    res = residual_fn(params.as_vector(), params)[0]
+    lengths = np.concatenate([r.reshape(-1, _CH)[:, _LEN].ravel() for r in res])
+    rms = float(np.sqrt(np.mean(lengths**2))) * opts.sigma_length_m if lengths.size else math.nan
+    final = objective[-1] if objective else math.inf
+    return _Run(final, params, result, objective, steps, res, rms)
+
+
 def fit(
     recordings: Sequence[MotorData],
     preset: ModelConfig,
@@ -537,41 +591,26 @@ def fit(
             n_threads=1,
             resample_true=False,
         )
-        objective: list[float] = []
-        steps: list[FloatArray] = []
-
-        def on_iter(trace: list[Any]) -> None:
-            objective.append(float(trace[-1].objective))
-            if trace[-1].step is not None:
-                steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
-            say(f"iteration {len(trace)} of at most {opts.max_iters}", len(trace) / (opts.max_iters + 2))
-
-        say("first evaluation", 0.0)
-        opt_params, result = sysid.optimize(
-            initial,
-            residual_fn,
-            optimizer="mujoco",
-            verbose=False,
-            max_iters=opts.max_iters,
-            eps=opts.fd_step,
-            **_SOLVER_TUNING,
-            iter_callback=on_iter,
-            output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
-        )
+        runs = [_solve(initial, residual_fn, opts, say, 0)]
+        settled = settled_m(recordings)
+        lower, upper = initial.get_bounds()
+        for k, x in enumerate(restart_points(initial.as_vector(), lower, upper, opts.restarts), start=1):
+            if not min(runs).length_rms_m > settled:  # explained to the sensors' noise, or unknown
+                break
+            start = initial.copy()
+            start.update_from_vector(x)
+            runs.append(_solve(start, residual_fn, opts, say, k))
+        best = min(runs)
+        opt_params, result, objective, steps = best.params, best.result, best.objective, best.steps
         # The solver's own decision to stop (its gradient or step fell under tolerance) or ours:
         # an iteration that still lowered the objective by more than this means it had not converged.
         converged_below = 1e-3
         jac = np.asarray(result.jac, dtype=np.float64)
         x = opt_params.as_vector()
-        res_list, _, _ = residual_fn(x, opt_params)
-        res = np.concatenate(res_list)
-        _, naive = sysid.calculate_intervals(res_list, jac)
-        blocks = []
-        first = 0
-        for _w, r in zip(problem.wins, res_list, strict=True):
-            blocks.append((first, len(r), _CH))
-            first += len(r)
-        cov, n_eff = hac_covariance(jac, res, blocks)
+        _, naive = sysid.calculate_intervals(best.res, jac)
+        firsts = np.cumsum([0] + [len(r) for r in best.res])
+        blocks = [(int(a), len(r), _CH) for a, r in zip(firsts, best.res, strict=False)]
+        cov, n_eff = hac_covariance(jac, np.concatenate(best.res), blocks)
         dof = max(1.0, n_eff - len(rows))
         quant = float(scipy.stats.t.ppf(0.975, dof))
         half = quant * np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -589,7 +628,9 @@ def fit(
         )
         if sysid_report is not None:
             say("MuJoCo's report", 0.9)
-            _sysid_report(sysid_report, problem, measured, initial, opt_params, residual_fn, result)
+            write_sysid_report(
+                sysid_report, problem.build_model, measured, initial, opt_params, residual_fn, result
+            )
         say("measured against simulated", 0.95)
         traces = _traces(
             problem, recordings, {w.recording.name: w.end for w in chosen}, fitted_model, preset, pool
@@ -602,7 +643,7 @@ def fit(
             np.asarray(naive, dtype=float),
             corr,
             None if converged else len(objective),
-            _unexplained(_rms_m(traces, False, "fitted"), opts.explained_within_m),
+            unexplained(_rms_m(traces, False, "fitted"), opts.explained_within_m),
         )
         return FitResult(
             estimates=fitted_estimates,
@@ -618,41 +659,8 @@ def fit(
             recordings=tuple((rec.name, rec.sha256, rec.duration_s) for rec in recordings),
             objective=tuple(objective),
             converged=converged,
+            starts=tuple((r.final, r.length_rms_m) for r in runs),
         )
-
-
-def _unexplained(rms_m: float, within_m: float) -> str | None:
-    """Why the model does not explain the data the fit saw, or None when it does."""
-    if not math.isfinite(rms_m):
-        return "the fitted model's cable lengths could not be compared with the recording"
-    if rms_m <= within_m:
-        return None
-    return (
-        f"the model leaves {rms_m * 1e3:.3g} mm RMS of the fitted cable lengths unexplained (more than "
-        f"{within_m * 1e3:.3g} mm): the value is a compromise of a model that cannot follow this arm"
-    )
-
-
-def _sysid_report(
-    out: Path, problem: _Problem, measured: Any, initial: Any, fitted: Any, residual_fn: Any, result: Any
-) -> None:
-    """MuJoCo's own report (parameters, signals, its covariance); a failure of it is said, never fatal."""
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        builder = sysid.default_report(
-            [measured],
-            initial,
-            fitted,
-            residual_fn,
-            result,
-            title="SpiRob identification (mujoco.sysid)",
-            save_path=str(out),
-            build_model=problem.build_model,
-            generate_videos=False,
-        )
-        builder.save(str(out / "report.html"))
-    except Exception as exc:  # the report is a view of the fit, which stands without it
-        _log.warning("MuJoCo's own report failed: %s: %s", type(exc).__name__, exc)
 
 
 def _traces(

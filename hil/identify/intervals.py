@@ -26,6 +26,7 @@ __all__ = [
     "estimates",
     "hac_covariance",
     "si_interval",
+    "unexplained",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -206,3 +207,15 @@ def si_interval(p: IdParam, v0: float, x: float, half: float) -> tuple[float, fl
         return (math.nan, math.nan)
     lo, hi = p.from_x(x - half, v0), p.from_x(x + half, v0)
     return (min(lo, hi), max(lo, hi))
+
+
+def unexplained(rms_m: float, within_m: float) -> str | None:
+    """Why the model does not explain the data the fit saw, or None when it does."""
+    if not math.isfinite(rms_m):
+        return "the fitted model's cable lengths could not be compared with the recording"
+    if rms_m <= within_m:
+        return None
+    return (
+        f"the model leaves {rms_m * 1e3:.3g} mm RMS of the fitted cable lengths unexplained (more than "
+        f"{within_m * 1e3:.3g} mm): the value is a compromise of a model that cannot follow this arm"
+    )

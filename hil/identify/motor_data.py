@@ -82,6 +82,8 @@ class MotorData:
         profile_start_s: when it began (``t_s`` scale), or None.
         design: the arm's design, from the recording's metadata (None: not recorded).
         spool_radius_m: the firmware's spool radius (its lengths are angles times this).
+        length_quantum_m: one encoder count as cable length (a rotor turn's 8192 counts, through the gear,
+            on the spool); NaN when unknown.
     """
 
     name: str
@@ -98,6 +100,7 @@ class MotorData:
     profile_start_s: float | None
     design: SpiralDesign | None
     spool_radius_m: float
+    length_quantum_m: float = math.nan
 
     @property
     def duration_s(self) -> float:
@@ -205,6 +208,7 @@ def _load(p: Path) -> MotorData:
         profile_start_s=None if start_us is None else (start_us - t0) / 1e6,
         design=design,
         spool_radius_m=spool_r,
+        length_quantum_m=2.0 * math.pi / (ANGLE_COUNTS * gear) * spool_r,
     )
 
 

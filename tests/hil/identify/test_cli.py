@@ -27,6 +27,8 @@ from hil.sim.uncertain import by_name
         (["--known", "torque_scale=-3"], "--known: "),
         (["--explained-within-mm", "0"], "--explained-within-mm must be above 0"),
         (["--explained-within-mm", "inf"], "must be a finite number"),
+        (["--restarts", "-1"], "--restarts must be 0..16"),
+        (["--restarts", "17"], "--restarts must be 0..16"),
     ],
 )
 def test_known_mistakes_are_one_line_and_status_2(

@@ -1,0 +1,62 @@
+"""hil.identify.starts: the restarts' points lie in the half of the box around the first start, the same
+for the same seed; the length error a fit may leave is the encoders' quantization, derived, not picked."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from hil.identify.motor_data import load_motor_data
+from hil.identify.starts import SETTLED_FACTOR, restart_points, settled_m
+
+
+@given(
+    st.lists(st.tuples(st.floats(-5, 5), st.floats(0.01, 5), st.floats(0, 1)), min_size=1, max_size=9),
+    st.integers(0, 9),
+)
+def test_restart_points_lie_in_the_half_box_around_the_start(
+    rows: list[tuple[float, float, float]], n: int
+) -> None:
+    lower = np.array([a for a, _, _ in rows])
+    upper = lower + np.array([w for _, w, _ in rows])
+    x0 = lower + np.array([f for _, _, f in rows]) * (upper - lower)
+    points = restart_points(x0, lower, upper, n, seed=1)
+    assert len(points) == n
+    for p in points:
+        assert np.all(p >= x0 - 0.5 * (x0 - lower) - 1e-12) and np.all(p <= x0 + 0.5 * (upper - x0) + 1e-12)
+    again = restart_points(x0, lower, upper, n, seed=1)
+    assert all(np.array_equal(a, b) for a, b in zip(points, again, strict=True))
+
+
+def test_restart_points_spread_over_each_parameter() -> None:
+    points = np.array(restart_points(np.zeros(3), -np.ones(3), np.ones(3), 8, seed=0))
+    assert points.shape == (8, 3)
+    # A Sobol sequence of 8 puts one point in each eighth of every coordinate's range.
+    for col in points.T:
+        assert sorted(np.floor((col + 0.5) * 8).astype(int).tolist()) == list(range(8))
+
+
+def test_restart_points_refuse_what_cannot_be_a_box() -> None:
+    with pytest.raises(ValueError, match="outside"):
+        restart_points(np.array([2.0]), np.array([0.0]), np.array([1.0]), 1)
+    with pytest.raises(ValueError, match="same length"):
+        restart_points(np.zeros(2), np.zeros(1), np.ones(1), 1)
+    with pytest.raises(ValueError, match="n must be"):
+        restart_points(np.zeros(1), -np.ones(1), np.ones(1), -1)
+    assert restart_points(np.zeros(1), -np.ones(1), np.ones(1), 0) == []
+
+
+def test_the_settled_error_is_the_encoders_quantization(preset_recording: Path) -> None:
+    data = load_motor_data(preset_recording)
+    quantum = 2 * math.pi / (8192 * 36) * 0.010  # one rotor count, through the P36 gear, on a 10 mm spool
+    assert data.length_quantum_m == pytest.approx(quantum)
+    assert settled_m([data]) == pytest.approx(quantum / math.sqrt(12) * SETTLED_FACTOR)
+    # The recording's lengths are whole counts.
+    counts = data.length_m / quantum
+    assert np.allclose(counts, np.round(counts), atol=1e-6)
+    assert math.isnan(settled_m([]))
