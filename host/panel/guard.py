@@ -315,11 +315,15 @@ def start_guarded_server(guard: PanelGuard, **viser_kwargs: Any) -> Any:
         The running ``viser.ViserServer``.
 
     Raises:
-        HostError: the check could not be installed (then no server is left running).
+        HostError: the check could not be installed (then no server is left running), or viser's
+            message buffer is not the one :mod:`host.panel.wakeups` repairs.
     """
     import viser
     import websockets.asyncio.server as ws_server
 
+    from host.panel import wakeups
+
+    wakeups.install()  # before the server's buffers exist: a sender woken from our threads never freezes
     installed: list[bool] = []
     original = ws_server.serve
 
