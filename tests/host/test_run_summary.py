@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import logging
+import time
 
 import pytest
 
@@ -15,7 +16,7 @@ from host.run_summary import RunSummary
 from protocol.dbus import Lever
 from protocol.messages import ArmsTelemetry, Event, EventKind, Mode, Phase, Telemetry
 from tests.support.link_peer import LinkPeer
-from tests.support.realtime_guard import wait_for
+from tests.support.realtime_guard import skip_if_others_were_busy, wait_for
 
 
 def feed(summary: RunSummary, script: list[tuple[int, Mode, Phase]], step_us: int = 10_000) -> None:
@@ -93,10 +94,18 @@ def test_a_virtual_rc_run_that_ends_latched_exits_1(capsys: pytest.CaptureFixtur
     assert "ended in mode SAFE, phase ESTOP (latched: re-arm through SAFE)" in captured.out
 
 
+@pytest.mark.realtime
 def test_a_clean_virtual_rc_run_exits_0_with_a_summary(capsys: pytest.CaptureFixture[str]) -> None:
+    """The host's virtual RC keeps the board's RC alive; on a machine others starve, its frames can be late
+    enough for the board's RC_LOST (seen once with two fits running on both cores): that run is skipped as
+    starved, never passed, and on an idle machine it fails."""
+    since = time.monotonic()
     with LinkPeer("pty") as peer:
-        assert main(["--port", peer.url, "--headless", "--duration", "1.5", "--virtual-rc", "manual"]) == 0
+        code = main(["--port", peer.url, "--headless", "--duration", "1.5", "--virtual-rc", "manual"])
     out = capsys.readouterr().out
+    if code != 0 and "failsafes: RC_LOST" in out:
+        skip_if_others_were_busy(since, "the virtual RC's frames came too late: RC_LOST")
+    assert code == 0, out
     assert "spirob-host: summary:" in out and "MANUAL" in out and "failsafes: none; faults: none" in out
 
 
