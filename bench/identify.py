@@ -303,6 +303,15 @@ def summarise(rows: list[dict[str, Any]]) -> None:
         print(f"the preset on the same held-out samples: median {med:.3f} mm (goal for the fit: <= 0.3 mm)")
         walls = np.array([r["fit_wall_s"] for r in truths])
         print(f"fit wall time per draw: median {np.median(walls):.0f} s, max {walls.max():.0f} s")
+        for r in truths:
+            starts = r.get("starts") or []
+            if len(starts) > 1:
+                kept = min(range(len(starts)), key=lambda i: starts[i][0])
+                each = ", ".join(f"{obj:.4g} ({rms * 1e3:.2g} mm)" for obj, rms in starts)
+                print(
+                    f"draw {r['seed']}: {len(starts)} starts, objective (fitted length error) {each}; "
+                    f"kept {kept + 1}"
+                )
     for r in rows:
         if r["kind"] == "mismatch":
             ratio = r["held_out_rms_m"] / r["held_out_rms_nominal_m"]
