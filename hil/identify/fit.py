@@ -609,7 +609,7 @@ def fit(
         x = opt_params.as_vector()
         _, naive = sysid.calculate_intervals(best.res, jac)
         firsts = np.cumsum([0] + [len(r) for r in best.res])
-        blocks = [(int(a), len(r), _CH) for a, r in zip(firsts, best.res, strict=False)]
+        blocks = [(int(a), len(r), _CH) for a, r in zip(firsts[:-1], best.res, strict=True)]
         cov, n_eff = hac_covariance(jac, np.concatenate(best.res), blocks)
         dof = max(1.0, n_eff - len(rows))
         quant = float(scipy.stats.t.ppf(0.975, dof))

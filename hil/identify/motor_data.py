@@ -159,6 +159,7 @@ def _load(p: Path) -> MotorData:
     firmware = _json(meta.get("firmware"), p, "firmware")
     spool_r = float(firmware.get("spool_radius_m", 0.010)) if firmware else 0.010
     gear = float(firmware.get("gear_ratio", 36.0)) if firmware else 36.0
+    quantum = 2.0 * math.pi / (ANGLE_COUNTS * gear) * spool_r  # one encoder count as cable length
     signs = [int(s) for s in firmware.get("motor_signs", [1, 1, 1])] if firmware else [1, 1, 1]
     design_d = _json(meta.get("design"), p, "design")
     design = _design(design_d, p) if design_d else None
@@ -171,7 +172,7 @@ def _load(p: Path) -> MotorData:
         t_us, cmd, fb_angle, fb_speed, fb_cur = _from_can(can, p)
         # A rotor at rest repeats its frame for real: only a moving one's repeat is a late frame.
         stale = _repeats(fb_angle, fb_speed, fb_cur) & (fb_speed != 0)
-        length = _unwrap_counts(fb_angle) * (2.0 * math.pi / (ANGLE_COUNTS * gear)) * spool_r
+        length = _unwrap_counts(fb_angle) * quantum
         speed = fb_speed * (2.0 * math.pi / 60.0 / gear * spool_r)
     elif tel:
         source = "telemetry"
@@ -208,7 +209,7 @@ def _load(p: Path) -> MotorData:
         profile_start_s=None if start_us is None else (start_us - t0) / 1e6,
         design=design,
         spool_radius_m=spool_r,
-        length_quantum_m=2.0 * math.pi / (ANGLE_COUNTS * gear) * spool_r,
+        length_quantum_m=quantum,
     )
 
 
