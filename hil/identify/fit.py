@@ -397,7 +397,7 @@ class _Problem:
         return pd
 
     def si_values(self, pd: Any) -> dict[str, float]:
-        return {p.name: p.from_x(float(pd[p.name].value[0]), self.preset_values[p.name]) for p in self.rows}
+        return {p.name: p.value_at(float(pd[p.name].value[0]), self.preset_values[p.name]) for p in self.rows}
 
     def model_for(self, pd: Any) -> ModelConfig:
         return self.for_rollout(apply(self.preset, self.si_values(pd)))

@@ -173,7 +173,7 @@ def estimates(
     half_x = np.maximum(half_x, NUMERICAL_FLOOR_X)
     for i, p in enumerate(rows):
         v0 = preset_values[p.name]
-        value = p.from_x(float(x[i]), v0)
+        value = p.value_at(float(x[i]), v0)
         interval = si_interval(p, v0, float(x[i]), float(half_x[i]))
         naive = si_interval(p, v0, float(x[i]), float(naive_x[i]) if i < len(naive_x) else math.nan)
         half = 0.5 * (interval[1] - interval[0])

@@ -66,6 +66,15 @@ class IdParam:
         """The inverse of :meth:`to_x`."""
         return preset_value * math.exp(x) if self.relative else x * self.scale
 
+    def value_at(self, x: float, preset_value: float) -> float:
+        """:meth:`from_x` kept within :meth:`bounds`.
+
+        The optimizer keeps ``x`` in :meth:`x_bounds`, but its steps and finite differences can land a
+        rounding error past a bound (a delay of -7e-21 s, seen in a fit), which the model rightly refuses.
+        """
+        lo, hi = self.bounds(preset_value)
+        return min(hi, max(lo, self.from_x(x, preset_value)))
+
     def x_bounds(self, preset_value: float) -> tuple[float, float]:
         """The search bounds in the optimizer's coordinate."""
         lo, hi = self.bounds(preset_value)

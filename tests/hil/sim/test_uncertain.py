@@ -45,3 +45,19 @@ def test_bounds_hold_the_preset_and_relative_rows_scale_with_it() -> None:
 def test_bad_values_are_refused(values: dict[str, float], why: str) -> None:
     with pytest.raises(ValueError, match=why):
         apply(ModelConfig(), values)
+
+
+def test_a_value_a_rounding_error_past_its_bound_is_kept_at_the_bound() -> None:
+    """A fit's step landed the delay at -7e-21 s; the model refuses that, so the value is kept at 0."""
+    model = ModelConfig()
+    values = nominal(model)
+    for p in ID_PARAMS:
+        v0 = values[p.name]
+        lo, hi = p.bounds(v0)
+        xlo, xhi = p.x_bounds(v0)
+        below, above = p.value_at(xlo - 1e-12, v0), p.value_at(xhi + 1e-12, v0)
+        assert below == lo and above == hi, p.name
+        assert p.value_at(0.5 * (xlo + xhi), v0) == pytest.approx(p.from_x(0.5 * (xlo + xhi), v0))
+        apply(model, {p.name: below})
+    delay = by_name("delay")
+    assert delay.value_at(-6.938893903907229e-21 / delay.scale, values["delay"]) == 0.0
