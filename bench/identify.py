@@ -45,6 +45,7 @@ import numpy as np  # noqa: E402
 
 from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E402
 from hil.identify.fit import FitOptions, FitResult, fit  # noqa: E402
+from hil.identify.intervals import IDENTIFIED_WITHIN  # noqa: E402
 from hil.identify.motor_data import load_motor_data  # noqa: E402
 from hil.identify.synthetic import (  # noqa: E402
     MISMATCHES,
@@ -54,9 +55,8 @@ from hil.identify.synthetic import (  # noqa: E402
     relative_error,
 )
 from hil.sim.config import ModelConfig, SolverConfig  # noqa: E402
-from hil.sim.uncertain import ID_PARAMS, apply, by_name, nominal  # noqa: E402
+from hil.sim.uncertain import ID_PARAMS, apply, by_name  # noqa: E402
 
-_PRESET = nominal(ModelConfig())
 GOAL_WITHIN = 0.10
 GOAL_DRAWS = 18 / 20
 GOAL_COVERAGE = 0.90
@@ -195,28 +195,35 @@ def fit_time_row(args: argparse.Namespace, work: Path) -> dict[str, Any]:
     }
 
 
-def _declined_for_correlation(r: dict[str, Any], x: dict[str, Any]) -> bool:
-    """A parameter the fit declined only because it trades against another (|correlation| above 0.95):
-    said so in its reason, or (rows written before the reason was kept) its interval within its row's
-    threshold, off its bounds, in a fit that converged and explains its data."""
+_WIDTH_REASON = "95 % interval"
+
+
+def rejudged(x: dict[str, Any]) -> dict[str, Any]:
+    """A stored parameter row judged by today's width rule (:data:`IDENTIFIED_WITHIN` of its value) from its
+    stored interval; its other reasons (a bound, a correlation, an unconverged or unexplained fit) stay.
+
+    Rows written under the earlier per-parameter thresholds (8-40 %, or an absolute width) so count as
+    the fit would call them now: the rule reads only the interval and the value, which the rows keep.
+    """
+    others = [part for part in x.get("why", "").split("; ") if part and not part.startswith(_WIDTH_REASON)]
+    half = 0.5 * (x["interval"][1] - x["interval"][0])
+    limit = IDENTIFIED_WITHIN * abs(x["value"])
+    reasons = list(others)
+    if not (math.isfinite(half) and half <= limit):
+        reasons.insert(0, f"{_WIDTH_REASON} ±{half:.3g} is wider than ±{limit:.3g}")
+    return {**x, "identifiable": not reasons, "why": "; ".join(reasons)}
+
+
+def _declined_for_correlation(x: dict[str, Any]) -> bool:
+    """A parameter the fit declined only because it trades against another (|correlation| above 0.95)."""
     if x["identifiable"]:
         return False
-    if "why" in x:
-        return all(part.startswith("trades against") for part in x["why"].split("; "))
-    row = by_name(x["name"])
-    half = 0.5 * (x["interval"][1] - x["interval"][0])
-    limit = row.identifiable_within * (abs(x["value"]) if row.relative else 1.0)
-    lo, hi = row.bounds(_PRESET[x["name"]])
-    off_bounds = not (
-        math.isclose(x["value"], lo, rel_tol=1e-5) or math.isclose(x["value"], hi, rel_tol=1e-5)
-    )
-    explained = r.get("fitted_rms_m", r["held_out_rms_m"]) <= FitOptions().explained_within_m
-    return bool(r["converged"]) and half <= limit and off_bounds and explained
+    return all(part.startswith("trades against") for part in x["why"].split("; "))
 
 
 def _correlation_rule(truths: list[dict[str, Any]]) -> None:
     """What the correlation rule declines that the intervals alone would accept, and whether it was right."""
-    declined = [(r, x) for r in truths for x in r["params"] if _declined_for_correlation(r, x)]
+    declined = [(r, x) for r in truths for x in r["params"] if _declined_for_correlation(x)]
     if not declined:
         print("the correlation rule (|corr| > 0.95) declined nothing the intervals alone accept")
         return
@@ -228,7 +235,7 @@ def _correlation_rule(truths: list[dict[str, Any]]) -> None:
         all(
             x["rel_error"] <= GOAL_WITHIN
             for x in r["params"]
-            if x["identifiable"] or _declined_for_correlation(r, x)
+            if x["identifiable"] or _declined_for_correlation(x)
         )
         for r in truths
     )
@@ -250,7 +257,7 @@ def _say(stage: str, fraction: float) -> None:
 
 def summarise(rows: list[dict[str, Any]]) -> None:
     """Print the goals' figures from every row there is."""
-    truths = [r for r in rows if r["kind"] == "truth"]
+    truths = [{**r, "params": [rejudged(x) for x in r["params"]]} for r in rows if r["kind"] == "truth"]
     if truths:
         n = len(truths)
         print(f"\nhidden truth: {n} draws, fit on the first {truths[0].get('fit_s', '?')} s of one recording")

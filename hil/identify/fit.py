@@ -20,7 +20,8 @@ a simulated arm's errors are smooth in time, so its intervals are far too narrow
 toolbox's, and a heteroskedasticity-and-autocorrelation-consistent one (Newey-West sandwich around the same
 Jacobian, with each window's bandwidth read from its residual's autocorrelation, and Student's t on the
 effective number of samples). The second is the one reported and the one that decides whether a parameter
-is identifiable from the data (its half-width within :attr:`~hil.sim.uncertain.IdParam.identifiable_within`).
+is identifiable from the data (its half-width within 10 % of its value:
+:data:`~hil.identify.intervals.IDENTIFIED_WITHIN`).
 """
 
 from __future__ import annotations

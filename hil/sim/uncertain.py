@@ -35,8 +35,6 @@ class IdParam:
             row is optimized as the logarithm of its factor on the preset's value: a stiffness, an
             inertia or a friction that can only be positive, and whose effects scale together (all forces
             times a factor is a straight line in these coordinates, which the solver follows at once).
-        identifiable_within: an interval half-width above this (relative to the value for ``relative``
-            rows, absolute otherwise) means the data do not pin it down.
         shown_by: what in a recording shows it (the docs and the report say so).
         description: one line.
     """
@@ -48,7 +46,6 @@ class IdParam:
     lo: float
     hi: float
     scale: float
-    identifiable_within: float
     shown_by: str
     description: str
 
@@ -95,7 +92,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         1 / 3,
         3.0,
         1.0,
-        0.15,
         "the slow ramps: cable length against tension, and gravity's sag",
         "bending stiffness of the joint next to the base",
     ),
@@ -107,7 +103,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         1.5,
         4.0,
         1.0,
-        0.3,
         "the ramps' knees: the order and tension at which the joints close",
         "p in stiffness ∝ (unit size)^p along the arm",
     ),
@@ -119,7 +114,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         0.25,
         4.0,
         1.0,
-        0.3,
         "the rings after each step and the multisine's resonances",
         "damping ratio of every arm joint",
     ),
@@ -131,7 +125,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         0.0,
         0.01,
         0.001,
-        0.002,
         "hysteresis that does not grow with the tension",
         "dry friction of the base joint (scaling with the joints' stiffness)",
     ),
@@ -143,7 +136,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         0.0,
         1.0,
         1.0,
-        0.1,
         "hysteresis that grows with the tension; the base-first uncurling",
         "capstan friction coefficient of the cables in the unit holes",
     ),
@@ -155,7 +147,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         1 / 3,
         3.0,
         1.0,
-        0.25,
         "how fast the spools answer a current step",
         "rotor inertia of each M2006 (reflected to the cable through 36:1 and the spool)",
     ),
@@ -167,7 +158,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         0.05,
         5.0,
         1.0,
-        0.4,
         "the current needed before a spool moves; hysteresis at the spool",
         "dry friction of gearbox and bearings at the output shaft",
     ),
@@ -179,7 +169,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         0.5,
         1.6,
         1.0,
-        0.08,
         "tension per amp against gravity's known weight and the arm's known mass",
         "the motors' true torque constant over the configured one",
     ),
@@ -190,7 +179,6 @@ ID_PARAMS: Final[tuple[IdParam, ...]] = (
         False,
         0.0,
         0.01,
-        0.001,
         0.001,
         "the phase of the response to the multisine and the start of each step",
         "from a current command leaving the firmware to the motor acting on it (loop and CAN)",
