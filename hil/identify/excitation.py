@@ -32,7 +32,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final
 
-__all__ = ["PROFILES", "SEGMENT_KINDS", "Profile", "Segment", "profile"]
+__all__ = ["OPENING_S", "PROFILES", "SEGMENT_KINDS", "Profile", "Segment", "profile"]
 
 SEGMENT_KINDS: Final = ("rest", "ramp", "steps", "multisine")
 CABLES: Final = 3
@@ -199,27 +199,35 @@ def _chain(pieces: Sequence[tuple[str, float, tuple[int, ...]]]) -> tuple[Segmen
     return tuple(out)
 
 
+_OPENING: Final[tuple[tuple[str, float, tuple[int, ...]], ...]] = (
+    ("rest", 1.0, ()),
+    ("ramp", 4.0, (0,)),
+    ("rest", 1.0, ()),
+    ("steps", 2.5, (1,)),
+    ("rest", 1.0, ()),
+    ("multisine", 4.0, (0, 1, 2)),
+    ("rest", 1.0, ()),
+)
+"""One segment of each kind (14.5 s): the ``quick`` profile, and the opening of ``standard``. A fit's
+rollout starts at a recording's first sample, so what it can afford to simulate of each recording is its
+start: the opening puts every kind of motion there (``hil.identify.fit.FitOptions.min_span_s``)."""
+
+OPENING_S: Final = sum(d for _, d, _ in _OPENING)
+"""How long the opening of ``standard`` and ``quick`` lasts [s]."""
+
+
 def _standard() -> Profile:
     rest = 1.5
-    pieces: list[tuple[str, float, tuple[int, ...]]] = [("rest", 2.0, ())]
-    for c in range(CABLES):
+    pieces: list[tuple[str, float, tuple[int, ...]]] = list(_OPENING)
+    for c in (1, 2, 0):
         pieces += [("ramp", 8.0, (c,)), ("rest", rest, ())]
-    pieces += [("steps", 5.0, (0,)), ("rest", rest, ()), ("steps", 5.0, (1, 2)), ("rest", rest, ())]
-    pieces += [("multisine", 15.0, (0, 1, 2)), ("rest", 1.5, ())]
+    pieces += [("steps", 5.0, (0, 2)), ("rest", rest, ())]
+    pieces += [("multisine", 9.0, (0, 1, 2)), ("rest", 1.5, ())]
     return Profile("standard", _chain(pieces))
 
 
 def _quick() -> Profile:
-    pieces: list[tuple[str, float, tuple[int, ...]]] = [
-        ("rest", 1.0, ()),
-        ("ramp", 4.0, (0,)),
-        ("rest", 1.0, ()),
-        ("steps", 2.5, (1,)),
-        ("rest", 1.0, ()),
-        ("multisine", 4.0, (0, 1, 2)),
-        ("rest", 1.0, ()),
-    ]
-    return Profile("quick", _chain(pieces))
+    return Profile("quick", _chain(_OPENING))
 
 
 def _tiny() -> Profile:
@@ -234,8 +242,9 @@ def _tiny() -> Profile:
 
 
 PROFILES: Final[dict[str, Profile]] = {p.name: p for p in (_standard(), _quick(), _tiny())}
-"""The named profiles: ``standard`` (60 s, every segment kind on every cable; what a lab records, five
-times with the arm re-hung in between if it can), ``quick`` (14.5 s, one of each kind) and ``tiny`` (5.3 s,
+"""The named profiles: ``standard`` (60 s, every segment kind on every cable, opening with one of each
+kind; what a lab records, five times with the arm re-hung in between if it can), ``quick`` (14.5 s, one of
+each kind: the opening alone) and ``tiny`` (5.3 s,
 a ramp and steps: the test suite's)."""
 
 

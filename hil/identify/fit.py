@@ -42,6 +42,7 @@ from mujoco import sysid
 from numpy.typing import NDArray
 
 from hil.errors import HilError
+from hil.identify.excitation import OPENING_S
 from hil.identify.intervals import ParamEstimate, estimates, hac_covariance, unexplained
 from hil.identify.motor_data import MotorData
 from hil.identify.rollout import RolloutJob, RolloutPool
@@ -102,10 +103,12 @@ class FitOptions:
         params: the parameters to fit (names of :data:`~hil.sim.uncertain.ID_PARAMS`); the others
             keep the preset's values.
         budget_s: simulated seconds per evaluation of the residual, shared among the recordings (each
-            fitted from its start up to its share, at least ``min_span_s``).
+            fitted from its start up to its share, at least ``min_span_s``). Default: two recordings'
+            openings, which two cores simulate side by side.
         min_span_s: the shortest stretch of a recording worth fitting (a recording that would get less is
-            held out whole).
-        max_iters: Levenberg-Marquardt iterations at most.
+            held out whole). Default: the excitation's opening, one segment of each kind (``OPENING_S``).
+        max_iters: Levenberg-Marquardt iterations at most (the hidden-truth fits of one opening converge
+            in 11-24, docs/identify.md section 6).
         fd_step: finite-difference step, in each parameter's own units (1 % of its size).
         jobs: worker processes for the rollouts (None: one per core).
         residual_period_s: the residual's sample period (the data are decimated to it).
@@ -133,9 +136,9 @@ class FitOptions:
     """
 
     params: tuple[str, ...] = tuple(p.name for p in ID_PARAMS)
-    budget_s: float = 40.0
-    min_span_s: float = 10.0
-    max_iters: int = 8
+    budget_s: float = 2.0 * OPENING_S
+    min_span_s: float = OPENING_S
+    max_iters: int = 24
     fd_step: float = 0.01
     jobs: int | None = None
     residual_period_s: float = 0.005

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
 from typing import Final
 
 import numpy as np
@@ -25,7 +26,7 @@ from hil.run_record import Check, RunRecord
 from hil.scenarios.base import MS, Plan, S
 from hil.scenarios.grasp import CAN, HALF_WRAP_DEG, HELD_US, Grasp
 from hil.sim.drone_motion import AccelSegment, DroneMotion, accelerate_and_brake
-from hil.sim.objects import contact_units, contact_wrap_deg
+from hil.sim.objects import contact_angles, contact_units, wrap_deg
 
 LEVELS_M_S2: Final = (2.0, 4.0, 8.0)
 """Horizontal accelerations tried in turn; the first is the required one."""
@@ -39,6 +40,12 @@ FIRST_US: Final = Grasp.duration_us
 """The manoeuvres start when the grasp scenario's run would end: its hold judgement is over by then."""
 MIN_UNITS: Final = 4
 """Units touching a held can: the grasp scenario's own bound, 1 s after its support went."""
+CHATTER_US: Final = 10 * MS
+"""The wrap and the units touching are measured over the contacts of the last 10 ms, not of one tick. A held
+can's contacts come and go as it rattles in the wrap: on a run whose can moved 1.6 mm in the 2 m/s² level,
+one tick saw its 4 contacts in 3 units and within 28° of each other (the tick before and after: more than
+180°), and 16 ticks saw 3 units. A can let go falls 0.5 mm in 10 ms under g, so the window hides chatter,
+not a drop (the shift bound catches that)."""
 MAX_SHIFT_MM: Final = 40.0
 """How far a held can may move in the drone's frame during a level: the grasp scenario's allowance for the
 can's swing with the settling wrap; a dropped can leaves at ``g − a``, metres in a second."""
@@ -61,8 +68,8 @@ class DroneManoeuvre(Grasp):
     """The ``grasp`` scenario, then horizontal pushes of 2, 4 and 8 m/s² (1 s each way) on the held can.
 
     Per level, from its start to the end of its settle, measured every tick: the smallest wrap around the
-    can, the fewest arm units touching it, and how far the can moved (in the drone's frame) from where it
-    was when the level began.
+    can and the fewest arm units touching it (each over the contacts of the last :data:`CHATTER_US`), and
+    how far the can moved (in the drone's frame) from where it was when the level began.
     """
 
     name = "drone-manoeuvre"
@@ -77,6 +84,7 @@ class DroneManoeuvre(Grasp):
         self.min_units = np.full(n, math.nan)
         self.max_shift_mm = np.full(n, math.nan)
         self._level_pos_m = np.zeros(3)
+        self._recent: deque[tuple[int, list[float], set[str]]] = deque()
 
     def plan(self) -> Plan:
         return dataclasses.replace(super().plan(), drone=manoeuvre())
@@ -99,8 +107,13 @@ class DroneManoeuvre(Grasp):
             self._level_pos_m[:] = pos
             self.min_wrap_deg[i] = self.min_units[i] = math.inf
             self.max_shift_mm[i] = 0.0
-        self.min_wrap_deg[i] = min(self.min_wrap_deg[i], contact_wrap_deg(plant, CAN.name))
-        self.min_units[i] = min(self.min_units[i], len(contact_units(plant, CAN.name)))
+        recent = self._recent
+        recent.append((now_us, contact_angles(plant, CAN.name), contact_units(plant, CAN.name)))
+        while recent[0][0] <= now_us - CHATTER_US:
+            recent.popleft()
+        wrap = wrap_deg(a for _, angles, _ in recent for a in angles)
+        self.min_wrap_deg[i] = min(self.min_wrap_deg[i], wrap)
+        self.min_units[i] = min(self.min_units[i], len(set().union(*(units for _, _, units in recent))))
         shift_mm = float(np.linalg.norm(pos - self._level_pos_m)) * 1000
         self.max_shift_mm[i] = max(self.max_shift_mm[i], shift_mm)
 

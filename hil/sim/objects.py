@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any, Protocol
 
 import mujoco
@@ -16,7 +16,7 @@ import mujoco
 from hil.sim.config import ObjectConfig
 from hil.sim.types import Contact, Pose, finite_vector, unit_quat
 
-__all__ = ["SceneObjects", "contact_units", "contact_wrap_deg"]
+__all__ = ["SceneObjects", "contact_angles", "contact_units", "contact_wrap_deg", "wrap_deg"]
 
 
 class SceneObjects:
@@ -199,12 +199,19 @@ def contact_wrap_deg(plant: ContactView, name: str) -> float:
 
     The largest gap between contact directions is the part not wrapped; 360° minus it is the wrap.
     """
+    return wrap_deg(contact_angles(plant, name))
+
+
+def contact_angles(plant: ContactView, name: str) -> list[float]:
+    """Directions of the arm's contacts on the object ``name``, around its axis (y), in radians."""
     centre = plant.object_pose(name).pos_m
-    angles = sorted(
-        math.atan2(c.pos_m[2] - centre[2], c.pos_m[0] - centre[0])
-        for c in plant.contacts()
-        if c.other == name
-    )
+    mine = [c.pos_m for c in plant.contacts() if c.other == name]
+    return [math.atan2(p[2] - centre[2], p[0] - centre[0]) for p in mine]
+
+
+def wrap_deg(angles_rad: Iterable[float]) -> float:
+    """360° minus the largest gap between contact directions (radians); 0 with fewer than two."""
+    angles = sorted(angles_rad)
     if len(angles) < 2:
         return 0.0
     gaps = [b - a for a, b in itertools.pairwise(angles)] + [angles[0] + 2 * math.pi - angles[-1]]

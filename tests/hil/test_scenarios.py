@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from controller.config import FirmwareConfig
@@ -14,6 +17,7 @@ from hil.faults import Fault, FaultKind
 from hil.recording import read_metadata
 from hil.run_record import Check, ScenarioResult
 from hil.scenarios import SCENARIOS, DroneManoeuvre, Grasp, RcLoss, drone_manoeuvre, run_scenario
+from hil.sim.types import Contact, Pose
 
 
 def _assert_passed(result: ScenarioResult) -> None:
@@ -130,3 +134,44 @@ def test_excitation_plays_its_profile_in_direct_mode_and_records_where_it_began(
     assert described["name"] == "tiny" and described["start_us"] == 600_000
     with pytest.raises(ValueError, match="unknown excitation profile"):
         run_scenario("excitation", options={"profile_name": "nope"})
+
+
+class _ContactsOverTime:
+    """A plant whose can sits at the origin with the contacts the test gives it, tick by tick."""
+
+    def __init__(self) -> None:
+        self.time_us = 0
+        self.now: list[tuple[str, float]] = []  # (unit, direction in degrees)
+
+    def contacts(self) -> list[Contact]:
+        return [
+            Contact(u, "can", (0.01 * math.cos(math.radians(a)), 0.0, 0.01 * math.sin(math.radians(a))), 1.0)
+            for u, a in self.now
+        ]
+
+    def object_pose(self, name: str) -> Pose:
+        return Pose(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]))
+
+
+def test_one_tick_of_contact_chatter_is_not_a_drop_but_a_lasting_loss_is() -> None:
+    """A held can's contacts come and go as it rattles: the wrap and the units are measured over the last
+    10 ms of contacts (drone_manoeuvre.CHATTER_US), so one tick that sees its contacts bunched is not a
+    drop; contacts gone for longer are."""
+    plant = _ContactsOverTime()
+    env = SimpleNamespace(board=SimpleNamespace(plant=plant, firmware=SimpleNamespace(grasp_state=None)))
+    s = DroneManoeuvre()
+    s.placed_us, s.hold_us = 1, 1  # the grasp scenario's own judgement is over
+    wrapped = [(f"unit_{k:02d}", a) for k, a in enumerate((0.0, 90.0, 180.0, 270.0))]
+    bunched = [("unit_00", 0.0), ("unit_01", 10.0), ("unit_01", 20.0)]
+    first = drone_manoeuvre.FIRST_US
+    for t, contacts in [(0, wrapped), (1, bunched), (2, wrapped)]:
+        plant.time_us = env.now_us = first + t * 1000
+        plant.now = contacts
+        s.after_tick(env)  # type: ignore[arg-type]
+    assert s.min_wrap_deg[0] == pytest.approx(270.0) and s.min_units[0] == 4
+    for t in range(3, 3 + drone_manoeuvre.CHATTER_US // 1000 + 1):
+        plant.time_us = env.now_us = first + t * 1000
+        plant.now = bunched
+        s.after_tick(env)  # type: ignore[arg-type]
+    assert s.min_wrap_deg[0] == pytest.approx(20.0) and s.min_units[0] == 2
+    assert not s.held(0)
