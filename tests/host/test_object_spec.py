@@ -119,8 +119,10 @@ def test_the_default_object_is_grasped_from_the_default_start() -> None:
             if hold_us is None and state == GraspState.HOLD:
                 hold_us = rig.now_us
         assert hold_us is not None, "HOLD never reached"
-        # Measured 5 units and 179.5° around the pole, 1.5 s into HOLD.
+        # Measured 1.5 s into HOLD: 5 units and 179.5° around the pole on one machine; on another (an AMD
+        # EPYC, the same code and packages) 5 units and 170° at 1.2 s, then a unit slid off: 4 units, 143°.
+        # The wrap of this one grasp moves with the machine's rounding; the units holding it do not.
         assert len(contact_units(rig.plant, obj.name)) >= 4
-        assert contact_wrap_deg(rig.plant, obj.name) >= 170.0
+        assert contact_wrap_deg(rig.plant, obj.name) > 90.0  # around the pole, not resting against it
     finally:
         rig.close()

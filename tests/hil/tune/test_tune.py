@@ -193,8 +193,15 @@ def test_a_search_resumes_without_running_finished_trials_again(
     assert main([*argv, "--trials", "3", "--resume"]) == 0
     trials = _journal_trials(storage)
     assert len([t for t in trials if t.state in (TrialState.COMPLETE, TrialState.PRUNED)]) == 3
-    new_rows = (d / "t-rows.jsonl").read_text().count("\n") - rows_before
-    assert 1 <= new_rows <= 2  # the new trial's grasp (and the held-out grasp of a new best)
+    rows = (d / "t-rows.jsonl").read_text()
+    new_rows = rows.count("\n") - rows_before
+    # Only the new trial grasped: its training grasp (none when a trial before it already won the one
+    # placement: it cannot beat that and is pruned at once) and the held-out grasp of a new best. Which of
+    # the two earlier trials won depends on grasps that flip with the machine's rounding.
+    third = max(trials, key=lambda t: t.number)
+    done = int(third.user_attrs["done"])
+    assert done in (0, 1) and (done == 1 or third.state == TrialState.PRUNED)
+    assert done <= new_rows <= done + 1, (done, new_rows)
 
 
 def test_ctrl_c_keeps_the_finished_trials_and_says_the_best(tmp_path: Path) -> None:
