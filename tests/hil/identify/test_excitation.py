@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from hil.identify.excitation import PROFILES, Profile, Segment, profile
+from hil.identify.excitation import OPENING_S, PROFILES, SEGMENT_KINDS, Profile, Segment, profile
+from hil.identify.fit import FitOptions
 
 
 @pytest.mark.parametrize("name", sorted(PROFILES))
@@ -25,6 +26,16 @@ def test_standard_profile_lasts_a_minute_and_moves_every_cable() -> None:
     assert p.duration_s == pytest.approx(60.0)
     moved = {c for s in p.moving_segments() for c in s.cables}
     assert moved == {0, 1, 2}
+
+
+def test_standard_opens_with_one_segment_of_each_kind_which_the_fit_spends_its_budget_on() -> None:
+    """A fit simulates each recording from its start, as far as its budget allows: the opening it sees
+    holds every kind of motion (the quick profile), and the default budget is two such openings."""
+    standard, quick = PROFILES["standard"], PROFILES["quick"]
+    opening = [s for s in standard.segments if s.end_s <= OPENING_S + 1e-9]
+    assert opening == list(quick.segments) and quick.duration_s == OPENING_S
+    assert {s.kind for s in opening} == set(SEGMENT_KINDS)
+    assert FitOptions().min_span_s == OPENING_S and FitOptions().budget_s == 2 * OPENING_S
 
 
 def test_multisine_cables_are_not_copies_of_each_other() -> None:
