@@ -35,10 +35,11 @@ def write_sysid_report(
             residual_fn,
             result,
             title="SpiRob identification (mujoco.sysid)",
-            save_path=str(out),
+            save_path=out,  # it saves ``save_path / "report.html"`` itself: a Path, not a str
             build_model=build_model,
             generate_videos=False,
         )
-        builder.save(str(out / "report.html"))
+        if not (out / "report.html").exists():
+            builder.save(str(out / "report.html"))
     except Exception as exc:  # the report is a view of the fit, which stands without it
         _log.warning("MuJoCo's own report failed: %s: %s", type(exc).__name__, exc)
