@@ -36,8 +36,10 @@ def test_do_gripper_closes_every_arm_of_an_array(
 ) -> None:
     proxy, record, host = host_and_proxy
     proxy.expect(r"Detected vehicle 1:25", timeout=60)
-    # The parameters fetched: the host is up and its virtual radio has had time to reach GRASP mode.
     proxy.expect(rf"Received {len(PARAMS)} parameters", timeout=60)
+    # The board's own word that its virtual radio put it in GRASP mode: fetching the parameters took
+    # less time than that once (CI: DO_GRIPPER DENIED "mode SAFE, lever not UP").
+    proxy.expect(r"AP: mode GRASP", timeout=60)
     start = len(proxy.lines())
     proxy.send("long DO_GRIPPER 25 1")
     i = proxy.expect(r"Got COMMAND_ACK: DO_GRIPPER: IN_PROGRESS", start, timeout=30)

@@ -39,6 +39,7 @@ def test_mavproxy_commands_the_arm_through_spirob_host(host_and_proxy: tuple[Mav
     proxy.send("param fetch PRETENSION_N")
     proxy.expect(r"PRETENSION_N = 0\.80000", i + 1, timeout=30)
 
+    proxy.expect(r"AP: mode GRASP", timeout=60)  # the virtual radio's lever is UP: a grab may be taken
     start = len(proxy.lines())
     proxy.send("long DO_GRIPPER 25 1")
     i = proxy.expect(r"Got COMMAND_ACK: DO_GRIPPER: IN_PROGRESS", start, timeout=30)
