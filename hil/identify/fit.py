@@ -46,7 +46,7 @@ from hil.identify.excitation import OPENING_S
 from hil.identify.intervals import ParamEstimate, estimates, hac_covariance, unexplained
 from hil.identify.motor_data import MotorData
 from hil.identify.rollout import RolloutJob, RolloutPool
-from hil.identify.starts import restart_points, settled_m
+from hil.identify.starts import DELAY_CELLS_S, restarts, settled_m
 from hil.identify.sysid_report import write_sysid_report
 from hil.sim.config import ModelConfig
 from hil.sim.mjcf import build_mjcf
@@ -126,7 +126,8 @@ class FitOptions:
         jacobian: the rollouts' constraint Jacobian (:attr:`~hil.sim.config.SolverConfig.jacobian`), or
             None to keep the preset's (a fit of a synthetic recording made on ``auto`` resolves the
             rounding between them). ``dense`` is about 1.5x faster here (docs/identify.md section 2).
-        restarts: starts after the first, at most (:mod:`hil.identify.starts`), each a whole fit, taken
+        restarts: starts after the first, at most (:mod:`hil.identify.starts`: the delay in its other
+            cells first, then scattered in the box), each a whole fit, taken
             while the best so far leaves more than the sensors' own noise (``settled_m``); the lowest
             objective is kept. The preset itself is one more start when it beats them all.
     """
@@ -586,7 +587,12 @@ def fit(
         runs = [_solve(initial, residual_fn, opts, say, 0)]
         settled = settled_m(recordings)
         lower, upper = initial.get_bounds()
-        for k, x in enumerate(restart_points(initial.as_vector(), lower, upper, opts.restarts), start=1):
+        names = [r.name for r in rows]
+        d = names.index("delay") if "delay" in names else -1  # the delay's other cells first (starts.py)
+        cells = (
+            None if d < 0 else (d, [rows[d].to_x(v, problem.preset_values["delay"]) for v in DELAY_CELLS_S])
+        )
+        for k, x in enumerate(restarts(initial.as_vector(), lower, upper, opts.restarts, cells), start=1):
             if not min(runs).length_rms_m > settled:  # explained to the sensors' noise, or unknown
                 break
             start = initial.copy()

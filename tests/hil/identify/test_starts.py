@@ -1,5 +1,6 @@
 """hil.identify.starts: the restarts' points lie in the half of the box around the first start, the same
-for the same seed; the length error a fit may leave is the encoders' quantization, derived, not picked."""
+for the same seed; the delay's other cells come first; the length error a fit may leave is the encoders'
+quantization, derived, not picked."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hil.identify.motor_data import load_motor_data
-from hil.identify.starts import SETTLED_FACTOR, restart_points, settled_m
+from hil.identify.starts import SETTLED_FACTOR, cell_starts, restart_points, restarts, settled_m
 
 
 @given(
@@ -60,3 +61,30 @@ def test_the_settled_error_is_the_encoders_quantization(preset_recording: Path) 
     counts = data.length_m / quantum
     assert np.allclose(counts, np.round(counts), atol=1e-6)
     assert math.isnan(settled_m([]))
+
+
+def test_cell_starts_move_one_coordinate_to_each_cell_in_turn() -> None:
+    x0 = np.array([0.1, 2.0, -0.3])
+    starts = cell_starts(x0, 1, [0.5, 2.0, 3.5], 5)
+    # The cell the first start is in is not started again; every other coordinate stays where it was.
+    assert [s.tolist() for s in starts] == [[0.1, 0.5, -0.3], [0.1, 3.5, -0.3]]
+    assert [s.tolist() for s in cell_starts(x0, 1, [0.5, 3.5], 1)] == [[0.1, 0.5, -0.3]]
+    assert x0.tolist() == [0.1, 2.0, -0.3]  # the first start itself is left alone
+    with pytest.raises(ValueError, match="outside"):
+        cell_starts(x0, 3, [0.5], 1)
+    with pytest.raises(ValueError, match="n must be"):
+        cell_starts(x0, 0, [0.5], -1)
+
+
+def test_restarts_take_the_cells_first_clipped_to_the_box_then_sobol() -> None:
+    x0, lower, upper = np.array([0.0, 2.0]), np.array([-1.0, 0.0]), np.array([1.0, 10.0])
+    points = restarts(x0, lower, upper, 4, (1, [0.5, 3.5]))
+    assert len(points) == 4
+    assert [p.tolist() for p in points[:2]] == [[0.0, 0.5], [0.0, 3.5]]
+    assert all(
+        np.array_equal(a, b) for a, b in zip(points[2:], restart_points(x0, lower, upper, 2), strict=True)
+    )
+    # A cell beyond the box starts on its bound; fewer restarts than cells take the first cells only.
+    assert [p.tolist() for p in restarts(x0, lower, upper, 1, (1, [12.0, 3.5]))] == [[0.0, 10.0]]
+    # No cells: the Sobol points alone.
+    assert len(restarts(x0, lower, upper, 3)) == 3
