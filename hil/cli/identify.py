@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from hil.cli.design import preset_arg
 from hil.identify.fit import FitError, FitOptions, FitResult, fit
 from hil.identify.motor_data import IdentifyDataError, load_motor_data
 from hil.identify.report import write_report
+from hil.identify.starts import DELAY_CELLS_S, settled_m
 from hil.recording import package_version
 from hil.sim.model_file import FittedParameter, ModelFile, read_model_file, write_model_file
 from hil.sim.presets import is_model_file, resolve
@@ -197,6 +199,9 @@ def run_identify_command(args: argparse.Namespace) -> int:
         print(json.dumps(_finite(_as_dict(result, args.output, page) | {"known": known}), allow_nan=False))
     else:
         _print(result, args.output, page, known)
+        hint = local_minimum_hint(result.starts, settled_m(data), args.restarts)
+        if hint:
+            Console().print(f"[yellow]{hint}", highlight=False)
     return EXIT_OK
 
 
@@ -337,3 +342,31 @@ def _finite(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [_finite(v) for v in value]
     return value
+
+
+def local_minimum_hint(starts: Sequence[tuple[float, float]], settled: float, restarts: int) -> str | None:
+    """What to do when the best start left more than the encoders' noise (``settled``, m), or None.
+
+    ``starts`` are the fit's ``(objective, fitted length RMS in m)``, one per start. In the hidden-truth
+    draws every wrong fit left more than that, and no fit that left less was wrong (docs/identify.md section
+    6); a real arm's fit always leaves more, so the hint says what it can and cannot mean.
+    """
+    if not starts or not math.isfinite(settled):
+        return None
+    rms = min(starts)[1]
+    if not rms > settled:
+        return None
+    left = (
+        f"the fit left {_mm(rms)} mm on its samples, over ten times the encoders' noise ({_mm(settled)} mm)"
+    )
+    if restarts == 0:
+        cells = " and ".join(f"{1e3 * v:g}" for v in DELAY_CELLS_S)
+        return (
+            f"{left}: a model that follows its arm gets there, so it may have stopped in a local minimum; "
+            f"--restarts 2 starts again with the delay at {cells} ms (about one fit's time each). "
+            "No model follows a real arm to its encoders' noise: there this only says the model misses."
+        )
+    return (
+        f"{left} after {len(starts)} starts: either the model cannot follow this arm (compare the report's "
+        "traces) or every start stopped in a local minimum"
+    )

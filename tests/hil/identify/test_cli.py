@@ -4,11 +4,12 @@ mistakes in one line each, and the model file that carries the given value."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
 
-from hil.cli.identify import KNOWN_NOTE
+from hil.cli.identify import KNOWN_NOTE, local_minimum_hint
 from hil.cli.main import main
 from hil.sim.model_file import read_model_file
 from hil.sim.presets import PRESETS, resolve
@@ -81,3 +82,18 @@ def test_the_report_draws_the_fit_and_holds_mujocos_own_report(
             assert len(set(im.convert("RGB").getdata())) > 20, png
     assert (report / "sysid" / "report.html").stat().st_size > 0
     assert "sysid/report.html" in page
+
+
+def test_a_fit_that_left_more_than_the_encoders_noise_says_what_to_do() -> None:
+    settled = 0.6e-6
+    assert local_minimum_hint([(0.01, 0.06e-6)], settled, 0) is None  # at the encoders' noise
+    assert local_minimum_hint([(1e3, 50e-6), (0.01, 0.06e-6)], settled, 2) is None  # the best start counts
+    assert local_minimum_hint([], settled, 0) is None
+    assert local_minimum_hint([(1.0, 1e-3)], math.nan, 0) is None  # no recording says its quantum
+    hint = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0)
+    assert hint is not None
+    assert "0.19 mm" in hint and "0.0006 mm" in hint and "--restarts 2" in hint and "0.5 and 3.5 ms" in hint
+    assert "real arm" in hint  # it does not claim a local minimum where no model could do better
+    after = local_minimum_hint([(14424.0, 0.19e-3), (2925.0, 0.086e-3)], settled, 2)
+    assert after is not None and "0.086 mm" in after and "after 2 starts" in after
+    assert "--restarts" not in after
