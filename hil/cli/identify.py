@@ -199,7 +199,8 @@ def run_identify_command(args: argparse.Namespace) -> int:
         print(json.dumps(_finite(_as_dict(result, args.output, page) | {"known": known}), allow_nan=False))
     else:
         _print(result, args.output, page, known)
-        hint = local_minimum_hint(result.starts, settled_m(data), args.restarts)
+        delay_fitted = any(e.name == "delay" for e in result.estimates)
+        hint = local_minimum_hint(result.starts, settled_m(data), args.restarts, delay_fitted)
         if hint:
             Console().print(f"[yellow]{hint}", highlight=False)
     return EXIT_OK
@@ -344,7 +345,9 @@ def _finite(value: Any) -> Any:
     return value
 
 
-def local_minimum_hint(starts: Sequence[tuple[float, float]], settled: float, restarts: int) -> str | None:
+def local_minimum_hint(
+    starts: Sequence[tuple[float, float]], settled: float, restarts: int, delay_fitted: bool = True
+) -> str | None:
     """What to do when the best start left more than the encoders' noise (``settled``, m), or None.
 
     ``starts`` are the fit's ``(objective, fitted length RMS in m)``, one per start. In the hidden-truth
@@ -361,9 +364,10 @@ def local_minimum_hint(starts: Sequence[tuple[float, float]], settled: float, re
     )
     if restarts == 0:
         cells = " and ".join(f"{1e3 * v:g}" for v in DELAY_CELLS_S)
+        where = f"with the delay at {cells} ms" if delay_fitted else "from points around the first start"
         return (
             f"{left}: a model that follows its arm gets there, so it may have stopped in a local minimum; "
-            f"--restarts 2 starts again with the delay at {cells} ms (about one fit's time each). "
+            f"--restarts 2 starts again {where} (about one fit's time each). "
             "No model follows a real arm to its encoders' noise: there this only says the model misses."
         )
     return (

@@ -94,6 +94,9 @@ def test_a_fit_that_left_more_than_the_encoders_noise_says_what_to_do() -> None:
     assert hint is not None
     assert "0.19 mm" in hint and "0.0006 mm" in hint and "--restarts 2" in hint and "0.5 and 3.5 ms" in hint
     assert "real arm" in hint  # it does not claim a local minimum where no model could do better
+    # A fit without the delay (--params) restarts from scattered points only: the hint does not promise cells.
+    other = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0, delay_fitted=False)
+    assert other is not None and "--restarts 2" in other and "delay" not in other
     after = local_minimum_hint([(14424.0, 0.19e-3), (2925.0, 0.086e-3)], settled, 2)
     assert after is not None and "0.086 mm" in after and "after 2 starts" in after
     assert "--restarts" not in after
