@@ -127,8 +127,10 @@ def configure_identify(p: argparse.ArgumentParser) -> None:
         default=FitOptions().restarts,
         metavar="N",
         help="start the fit again from up to N more points while it leaves more of the cable lengths "
-        "unexplained than the encoders' own noise; the best start is kept, each costs about one fit "
-        f"(default {FitOptions().restarts})",
+        "unexplained than the encoders' own noise (the delay at "
+        + " and ".join(f"{1e3 * v:g}" for v in DELAY_CELLS_S)
+        + " ms first, then points around the first start); the best start is kept, each costs about "
+        f"one fit (default {FitOptions().restarts})",
     )
     p.add_argument(
         "--jobs", type=int, metavar="N", help="worker processes for the rollouts (default: one per core)"
