@@ -315,6 +315,7 @@ def _as_dict(result: FitResult, output: Path, page: Path | None) -> dict[str, An
                 "value": e.value,
                 "interval": list(e.interval),
                 "naive_interval": list(e.naive_interval),
+                "hac_interval": list(e.hac_interval),
                 "identifiable": e.identifiable,
                 "why": e.why,
                 "at_bound": e.at_bound,

@@ -19,9 +19,9 @@ whole from its start.
 a simulated arm's errors are smooth in time, so its intervals are far too narrow. Both are computed: the
 toolbox's, and a heteroskedasticity-and-autocorrelation-consistent one (Newey-West sandwich around the same
 Jacobian, with each window's bandwidth read from its residual's autocorrelation, and Student's t on the
-effective number of samples). The second is the one reported and the one that decides whether a parameter
-is identifiable from the data (its half-width within 10 % of its value:
-:data:`~hil.identify.intervals.IDENTIFIED_WITHIN`).
+effective number of samples), widened by how far the fit stopped from its minimum (a Gauss-Newton step:
+:func:`~hil.identify.intervals.remaining_step`). The second is reported and decides whether a parameter is
+identifiable (its half-width within 10 % of its value: :data:`~hil.identify.intervals.IDENTIFIED_WITHIN`).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 
 from hil.errors import HilError
 from hil.identify.excitation import OPENING_S
-from hil.identify.intervals import ParamEstimate, estimates, hac_covariance, unexplained
+from hil.identify.intervals import ParamEstimate, estimates, hac_covariance, remaining_step, unexplained
 from hil.identify.motor_data import MotorData
 from hil.identify.rollout import RolloutJob, RolloutPool
 from hil.identify.starts import DELAY_CELLS_S, restarts, settled_m
@@ -598,27 +598,26 @@ def fit(
             start = initial.copy()
             start.update_from_vector(x)
             runs.append(_solve(start, residual_fn, opts, say, k))
-        # The preset itself, where the search started off a bound (no delay, no joint friction): on an arm
-        # that is the preset (the virtual board) the search did not come back to it (docs/identify.md 6).
+        # The preset itself where the search started off a bound (no delay, no joint friction): on an arm
+        # that is the preset (the virtual board) the search did not return to it (docs/identify.md 6).
         at_preset = problem.params(off_bounds=False)
         res0 = residual_fn(at_preset.as_vector(), at_preset)[0]
         if 0.5 * sum(float(np.sum(np.square(r))) for r in res0) < min(runs).final:
             runs.append(_solve(at_preset, residual_fn, opts, say, len(runs)))
         best = min(runs)
         opt_params, result, objective, steps = best.params, best.result, best.objective, best.steps
-        # The solver's own decision to stop (its gradient or step fell under tolerance) or ours:
-        # an iteration that still lowered the objective by more than this means it had not converged.
-        converged_below = 1e-3
+        converged_below = 1e-3  # an iteration that still lowered the objective more: not converged
         jac = np.asarray(result.jac, dtype=np.float64)
         x = opt_params.as_vector()
         _, naive = sysid.calculate_intervals(best.res, jac)
         firsts = np.cumsum([0] + [len(r) for r in best.res])
         blocks = [(int(a), len(r), _CH) for a, r in zip(firsts[:-1], best.res, strict=True)]
         cov, n_eff = hac_covariance(jac, np.concatenate(best.res), blocks)
+        more = remaining_step(jac, np.concatenate(best.res), x, lower, upper)  # stopped short of the minimum
         dof = max(1.0, n_eff - len(rows))
         quant = float(scipy.stats.t.ppf(0.975, dof))
-        half = quant * np.sqrt(np.maximum(np.diag(cov), 0.0))
         sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+        half = quant * sd
         corr = cov / np.outer(sd, sd)
         cond = float(np.linalg.cond(jac)) if jac.size else math.nan
         fitted_si = problem.si_values(opt_params)
@@ -648,6 +647,7 @@ def fit(
             corr,
             None if converged else len(objective),
             unexplained(_rms_m(traces, False, "fitted"), opts.explained_within_m),
+            more,
         )
         return FitResult(
             estimates=fitted_estimates,

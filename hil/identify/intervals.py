@@ -26,6 +26,7 @@ __all__ = [
     "ParamEstimate",
     "estimates",
     "hac_covariance",
+    "remaining_step",
     "si_interval",
     "unexplained",
 ]
@@ -55,6 +56,8 @@ class ParamEstimate:
         identifiable: the data pin it down (the interval within :data:`IDENTIFIED_WITHIN` of the value).
         why: when not identifiable, why (the interval, or the parameter it trades against).
         at_bound: the fit stopped at a search bound.
+        hac_interval: the autocorrelation-consistent interval alone, before it is widened by how far the
+            fit stopped from its local minimum (:func:`remaining_step`); ``interval`` when it stopped there.
     """
 
     name: str
@@ -66,6 +69,7 @@ class ParamEstimate:
     identifiable: bool
     why: str
     at_bound: bool
+    hac_interval: tuple[float, float] = (math.nan, math.nan)
 
     @property
     def half_width(self) -> float:
@@ -146,6 +150,28 @@ def _integrated_time(r: FloatArray) -> float:
     return total
 
 
+def remaining_step(
+    jac: FloatArray, res: FloatArray, x: FloatArray, lower: FloatArray, upper: FloatArray
+) -> FloatArray:
+    """How far, per parameter, the fit stopped from its local minimum: the Gauss-Newton step from ``x``
+    (the least-squares solution of ``jac @ step = -res``), kept inside the search box, in absolute value.
+
+    Levenberg-Marquardt stops when its steps no longer lower the objective, which near the sensors' noise
+    can happen before the minimum: its finite-difference Jacobian is a secant over 1 % steps, and the
+    delay's objective ripples with the control period. The statistical interval is centred on the
+    minimum, so around the point where the fit stopped it must be widened by the distance between the
+    two; by the triangle inequality an interval of half-width ``remaining + half`` around the stopping
+    point holds every value ``half`` holds around the minimum. At the minimum the gradient ``jac.T @ res``
+    vanishes and so does the step. A step along a valley (two parameters trading) can reach the box's
+    edge: such a parameter is not identified anyway, and the wide interval says so.
+    """
+    if jac.size == 0:
+        return np.zeros_like(x)
+    step = -np.linalg.lstsq(jac, res, rcond=None)[0]
+    step = np.where(np.isfinite(step), step, np.inf)
+    return np.abs(np.clip(x + step, lower, upper) - x)
+
+
 IDENTIFIED_WITHIN: Final = 0.10
 """The largest half-width of a 95 % interval, as a fraction of the fitted value, at which a parameter is
 called identified. It is what "identified" promises (issue 23: every parameter the fit calls identifiable
@@ -167,6 +193,7 @@ def estimates(
     corr: FloatArray,
     unconverged_after: int | None = None,
     unexplained: str | None = None,
+    remaining_x: FloatArray | None = None,
 ) -> tuple[ParamEstimate, ...]:
     """The fitted values and intervals in SI, from the optimizer's coordinates.
 
@@ -177,14 +204,17 @@ def estimates(
     converged (``unconverged_after`` None): an interval at a point still moving is no interval. Nor is any
     parameter identified when the model does not explain the data (``unexplained``: why, from the fit's
     error): every interval is conditional on the model being right, and a wrong model's best compromise is
-    not the arm's value, however narrow its interval.
+    not the arm's value, however narrow its interval. ``remaining_x`` (:func:`remaining_step`, optimizer
+    coordinates) widens each interval by how far the fit stopped from its local minimum.
     """
     out = []
     half_x = np.maximum(half_x, NUMERICAL_FLOOR_X)
+    more = np.zeros_like(half_x) if remaining_x is None else np.asarray(remaining_x, dtype=np.float64)
     for i, p in enumerate(rows):
         v0 = preset_values[p.name]
         value = p.value_at(float(x[i]), v0)
-        interval = si_interval(p, v0, float(x[i]), float(half_x[i]))
+        hac = si_interval(p, v0, float(x[i]), float(half_x[i]))
+        interval = si_interval(p, v0, float(x[i]), float(half_x[i] + more[i]))
         naive = si_interval(p, v0, float(x[i]), float(naive_x[i]) if i < len(naive_x) else math.nan)
         half = 0.5 * (interval[1] - interval[0])
         limit = IDENTIFIED_WITHIN * abs(value)
@@ -193,8 +223,10 @@ def estimates(
         partners = [rows[j].name for j in range(len(rows)) if j != i and abs(corr[i, j]) > TRADES_AGAINST]
         reasons = []
         if not (math.isfinite(half) and half <= limit):
+            stopped = 0.5 * (hac[1] - hac[0]) <= limit if more[i] > 0 else False
             reasons.append(
                 f"95 % interval ±{half:.3g} {p.unit} is wider than ±{limit:.3g}".replace("  ", " ")
+                + (" (the fit stopped short of its minimum)" if stopped else "")
             )
         if partners:
             reasons.append(f"trades against {', '.join(partners)}")
@@ -206,7 +238,7 @@ def estimates(
             reasons.append(unexplained)
         out.append(
             ParamEstimate(
-                p.name, p.unit, v0, value, interval, naive, not reasons, "; ".join(reasons), at_bound
+                p.name, p.unit, v0, value, interval, naive, not reasons, "; ".join(reasons), at_bound, hac
             )
         )
     return tuple(out)
