@@ -54,7 +54,9 @@ from hil.identify.synthetic import (  # noqa: E402
     record_truth,
     relative_error,
 )
+from hil.identify.windows import length_rms_m  # noqa: E402
 from hil.sim.config import ModelConfig, SolverConfig  # noqa: E402
+from hil.sim.spiral import SpiralDesign  # noqa: E402
 from hil.sim.uncertain import ID_PARAMS, apply, by_name  # noqa: E402
 
 GOAL_WITHIN = 0.10
@@ -162,11 +164,19 @@ def mismatch_row(name: str, args: argparse.Namespace, work: Path) -> dict[str, A
     for k, p in enumerate(paths):
         record_truth(p, truth, seed=500 + k, profile_name=args.profile, mismatch=name, preset=_base(args))
     result = _fit(paths, args, args.fit_s)  # the second held out whole
+    # What the model could do at best with the truth's own values (the shape it lacks aside): the part of
+    # the error that is the mismatch itself, against the part a better search would remove.
+    second = load_motor_data(paths[1])
+    at_truth = length_rms_m(
+        second, apply(_base(args), truth), second.design or SpiralDesign.paper_prototype()
+    )
     return {
         "kind": "mismatch",
         "name": name,
         "held_out_rms_m": result.rms_m(True),
         "held_out_rms_nominal_m": result.rms_m(True, "nominal"),
+        "second_at_truth_values_m": at_truth,
+        "second_fitted_m": _fit_traces_rms(result.traces, paths[1].name),
         "fitted_rms_m": result.rms_m(False),
         "fit_wall_s": result.wall_s,
         "identified": [e.name for e in result.estimates if e.identifiable],
@@ -339,6 +349,12 @@ def summarise(rows: list[dict[str, Any]]) -> None:
                 f"fitted samples {r.get('fitted_rms_m', math.nan) * 1e3:.3f} mm, "
                 f"{len(r['identified'])} parameters called identified"
             )
+            if "second_at_truth_values_m" in r:
+                print(
+                    f"  the second recording: fitted {r['second_fitted_m'] * 1e3:.3f} mm; the model with the "
+                    f"truth's own values {r['second_at_truth_values_m'] * 1e3:.3f} mm (what the mismatch "
+                    "itself costs)"
+                )
         elif r["kind"] == "fit-time":
             print(
                 f"fit time: {r['recordings']} recordings of {r['seconds_each']:.0f} s: {r['wall_s']:.0f} s "

@@ -48,6 +48,7 @@ from hil.identify.motor_data import MotorData
 from hil.identify.rollout import RolloutJob, RolloutPool
 from hil.identify.starts import DELAY_CELLS_S, restarts, settled_m
 from hil.identify.sysid_report import write_sysid_report
+from hil.identify.windows import CH, LEN, Window, at_samples, prepare_window
 from hil.sim.config import ModelConfig
 from hil.sim.mjcf import build_mjcf
 from hil.sim.spiral import SpiralDesign
@@ -71,8 +72,6 @@ SENSORS: Final = (
 )
 """The model's sensors: the cable tensions (not measured), the motors' view (wound cable and its speed per
 spool) and the tracked tip."""
-_TEN, _LEN, _VEL, _TIP = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12)
-_CH: Final = 12
 
 
 _SOLVER_TUNING: dict[str, Any] = {"mu_factor": 10.0, "x_scale": "jac"}
@@ -237,82 +236,6 @@ def _rms_m(traces: Sequence[Trace], held_out: bool, which: str) -> float:
     return float(np.sqrt(np.nanmean(flat**2))) if flat.size else math.nan
 
 
-@dataclass(frozen=True)
-class _Win:
-    """A recording ready to simulate from its start up to ``end``: its 1 ms input, and the measured samples
-    it is judged on."""
-
-    recording: MotorData
-    end: int
-    """One past the last sample simulated."""
-    currents_a: FloatArray
-    """(n, 3): the command in force during each control period from the first sample."""
-    t0_s: float
-    """MotorData time of the first control period (its first sample)."""
-    sample_rows: NDArray[np.int64]
-    """For each judged sample, the rollout row that ends at its time."""
-    sample_t_s: FloatArray
-    measured: FloatArray
-    """(m, 12): the sensors' columns: length from the first sample, speed, tip (NaN where not measured)."""
-    stale: NDArray[np.bool_]
-    """(m, 3): a motor's judged sample that the board read a period late (:attr:`MotorData.stale`): it is
-    compared with the rollout a period earlier."""
-
-    @property
-    def seconds(self) -> float:
-        return len(self.currents_a) * 1e-3
-
-
-def _prepare(rec: MotorData, end: int, period_s: float) -> _Win:
-    t = rec.t_s
-    t0 = float(t[0])
-    n = max(2, round((float(t[end - 1]) - t0) / 1e-3))
-    grid = t0 + np.arange(n) * 1e-3
-    if rec.source == "can":
-        # One sample per control period: the command in force from each sample to the next. A tick may
-        # start late (a real-time loop's jitter, a fraction of the period), and its stamp with it: the
-        # period a sample belongs to is its time rounded to the period. Floored, a late tick's command
-        # would act a period late in the rollout, and the fit would shorten the delay to make up for it.
-        tick = np.rint((t - t0) / 1e-3).astype(np.int64)
-        idx = np.clip(np.searchsorted(tick, np.arange(n), side="right") - 1, 0, len(t) - 1)
-        currents = rec.current_cmd_a[idx]
-    else:
-        currents = np.stack([np.interp(grid, t, rec.current_cmd_a[:, k]) for k in range(3)], axis=1)
-    # Judged samples: from the excitation's start to the end, decimated to the residual period.
-    step = max(1, round(period_s / max(rec.period_s, 1e-6)))
-    idx_s = np.arange(rec.first_judged(), end, step)
-    t_s = t[idx_s]
-    rows = np.rint((t_s - t0) / 1e-3).astype(np.int64) - 1
-    keep = (rows >= 0) & (rows < n)
-    idx_s, t_s, rows = idx_s[keep], t_s[keep], rows[keep]
-    meas = np.full((len(idx_s), _CH), np.nan)
-    meas[:, _LEN] = rec.length_m[idx_s] - rec.length_m[0]
-    meas[:, _VEL] = rec.speed_m_s[idx_s]
-    # The frames right after a late one may be late too without showing it (each repeats its
-    # predecessor's measurement, not its content; runs of three happen at 5 % a frame): a motor's sample
-    # within three frames after one seen late is not judged.
-    after_late = np.zeros_like(rec.stale)
-    for lag in (1, 2, 3):
-        after_late[lag:] |= rec.stale[:-lag]
-    doubt = after_late[idx_s]
-    meas[:, _LEN][doubt] = np.nan
-    meas[:, _VEL][doubt] = np.nan
-    if rec.tip_m is not None:
-        meas[:, _TIP] = rec.tip_m[idx_s]
-    return _Win(rec, end, currents, t0, rows, t_s, meas, rec.stale[idx_s] & (rows >= 1)[:, None])
-
-
-def _at_samples(w: _Win, out: FloatArray) -> FloatArray:
-    """A rollout's rows as the board measured them at the judged samples: a late frame holds the motor's
-    state a period before its sample's time."""
-    sim = out[w.sample_rows].copy()
-    if w.stale.any():
-        earlier = out[w.sample_rows - 1]
-        for cols in (_LEN, _VEL):
-            sim[:, cols] = np.where(w.stale, earlier[:, cols], sim[:, cols])
-    return sim
-
-
 def _spans(recordings: Sequence[MotorData], options: FitOptions) -> list[tuple[MotorData, int]]:
     """How far each fitted recording is simulated: the budget shared evenly, at least ``min_span_s`` each
     (the recordings that then get nothing are held out whole)."""
@@ -354,7 +277,7 @@ class _Problem:
         design: SpiralDesign,
         preset: ModelConfig,
         rows: Sequence[IdParam],
-        wins: list[_Win],
+        wins: list[Window],
         options: FitOptions,
         pool: RolloutPool,
     ) -> None:
@@ -367,7 +290,7 @@ class _Problem:
         self.pool = pool
         self.spec = _spec(design, preset)
         self.mj_model = self.spec.compile()
-        self._by_measured: dict[int, _Win] = {}
+        self._by_measured: dict[int, Window] = {}
         self._controls: dict[int, int] = {}
         self._cache: dict[tuple[int, tuple[float, ...]], FloatArray] = {}
         self.weights = np.array(
@@ -426,7 +349,7 @@ class _Problem:
             series,
         )
 
-    def _control(self, w: _Win) -> Any:
+    def _control(self, w: Window) -> Any:
         t = w.t0_s + np.arange(len(w.currents_a)) * 1e-3
         return sysid.TimeSeries.from_control_names(t, w.currents_a, self.mj_model)
 
@@ -476,7 +399,7 @@ class _Problem:
         self, params: Any, pred: Any, measured: Any, model: Any, return_pred_all: bool, **_: Any
     ) -> Any:
         w = self._by_measured[id(measured)]
-        sim = _at_samples(w, pred.data)
+        sim = at_samples(w, pred.data)
         r = (sim - w.measured) * self.weights
         r[~np.isfinite(w.measured)] = 0.0
         r[~np.isfinite(r)] = 1e6  # a diverged rollout: a huge residual, never NaN
@@ -527,7 +450,7 @@ def _solve(start: Any, residual_fn: Any, opts: FitOptions, say: ProgressFn, k: i
         output=io.StringIO(),  # the solver's own per-iteration lines: the progress callback says it
     )
     res = residual_fn(params.as_vector(), params)[0]
-    lengths = np.concatenate([r.reshape(-1, _CH)[:, _LEN].ravel() for r in res])
+    lengths = np.concatenate([r.reshape(-1, CH)[:, LEN].ravel() for r in res])
     rms = float(np.sqrt(np.mean(lengths**2))) * opts.sigma_length_m if lengths.size else math.nan
     final = objective[-1] if objective else math.inf
     return _Run(final, params, result, objective, steps, res, rms)
@@ -568,7 +491,7 @@ def fit(
     rows = [r for r in ID_PARAMS if r.name in opts.params]
     if not rows:
         raise FitError("no parameter to fit")
-    chosen = [_prepare(rec, end, opts.residual_period_s) for rec, end in _spans(recordings, opts)]
+    chosen = [prepare_window(rec, end, opts.residual_period_s) for rec, end in _spans(recordings, opts)]
     say = progress or (lambda stage, frac: None)
     with RolloutPool(opts.jobs) as pool:
         problem = _Problem(design, preset, rows, chosen, opts, pool)
@@ -611,7 +534,7 @@ def fit(
         x = opt_params.as_vector()
         _, naive = sysid.calculate_intervals(best.res, jac)
         firsts = np.cumsum([0] + [len(r) for r in best.res])
-        blocks = [(int(a), len(r), _CH) for a, r in zip(firsts[:-1], best.res, strict=True)]
+        blocks = [(int(a), len(r), CH) for a, r in zip(firsts[:-1], best.res, strict=True)]
         cov, n_eff = hac_covariance(jac, np.concatenate(best.res), blocks)
         more = remaining_step(jac, np.concatenate(best.res), x, lower, upper)  # stopped short of the minimum
         dof = max(1.0, n_eff - len(rows))
@@ -677,7 +600,7 @@ def _traces(
 ) -> tuple[Trace, ...]:
     """Every recording simulated whole from its start with the fitted and the preset model; a sample is
     held out when the fit never simulated it."""
-    wins = [_prepare(rec, len(rec.t_s), problem.options.residual_period_s) for rec in recordings]
+    wins = [prepare_window(rec, len(rec.t_s), problem.options.residual_period_s) for rec in recordings]
     models = [problem.for_rollout(m) for m in (fitted, preset)]
     jobs = [RolloutJob(problem.design, m, w.currents_a) for m in models for w in wins]
     outs = pool.map(jobs)
@@ -691,9 +614,9 @@ def _traces(
                 w.recording.name,
                 w.sample_t_s,
                 idx >= end,
-                w.measured[:, _LEN],
-                _at_samples(w, outs[i])[:, _LEN],
-                _at_samples(w, outs[n + i])[:, _LEN],
+                w.measured[:, LEN],
+                at_samples(w, outs[i])[:, LEN],
+                at_samples(w, outs[n + i])[:, LEN],
             )
         )
     return tuple(traces)

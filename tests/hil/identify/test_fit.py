@@ -11,12 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hil.identify.fit import START_OFF_BOUND, FitError, FitOptions, _at_samples, _prepare, _Problem, fit
+from hil.identify.fit import START_OFF_BOUND, FitError, FitOptions, _Problem, fit
 from hil.identify.intervals import _acf, _bandwidth, hac_covariance
 from hil.identify.motor_data import load_motor_data
 from hil.identify.rollout import RolloutJob, RolloutPool, simulate
 from hil.identify.starts import settled_m
 from hil.identify.synthetic import SensorLimits, record_truth
+from hil.identify.windows import at_samples, prepare_window
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
 from hil.sim.uncertain import apply, by_name
@@ -177,11 +178,11 @@ def test_late_ticks_and_late_frames_are_modelled(tmp_path: Path) -> None:
     record_truth(path, truth, seed=5, profile_name="tiny", limits=SensorLimits(20.0, 0.2, 300))
     rec = load_motor_data(path)
     assert 0.05 < float(rec.stale.mean()) < 0.2  # about the late rate, while the cables move
-    win = _prepare(rec, len(rec.t_s), FitOptions().residual_period_s)
+    win = prepare_window(rec, len(rec.t_s), FitOptions().residual_period_s)
     judged = np.isfinite(win.measured[:, 3:6])
     assert win.stale.any() and judged.mean() > 0.3
     out = simulate(RolloutJob(SpiralDesign.paper_prototype(), apply(ModelConfig(), truth), win.currents_a))
-    err = (_at_samples(win, out)[:, 3:6] - win.measured[:, 3:6])[judged]
+    err = (at_samples(win, out)[:, 3:6] - win.measured[:, 3:6])[judged]
     # The bound: 5 encoder counts at the cable (8192 counts per rotor turn, 36:1, 10 mm spool: 0.21 um each).
     count_m = 2 * np.pi * 0.010 / (8192 * 36)
     assert float(np.sqrt(np.mean(err**2))) < 5 * count_m
