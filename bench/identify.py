@@ -45,7 +45,7 @@ import numpy as np  # noqa: E402
 
 from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E402
 from hil.identify.fit import FitOptions, FitResult, fit  # noqa: E402
-from hil.identify.intervals import IDENTIFIED_WITHIN  # noqa: E402
+from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor  # noqa: E402
 from hil.identify.motor_data import load_motor_data  # noqa: E402
 from hil.identify.synthetic import (  # noqa: E402
     MISMATCHES,
@@ -57,7 +57,10 @@ from hil.identify.synthetic import (  # noqa: E402
 from hil.identify.windows import length_rms_m  # noqa: E402
 from hil.sim.config import ModelConfig, SolverConfig  # noqa: E402
 from hil.sim.spiral import SpiralDesign  # noqa: E402
-from hil.sim.uncertain import ID_PARAMS, apply, by_name  # noqa: E402
+from hil.sim.uncertain import ID_PARAMS, apply, by_name, nominal  # noqa: E402
+
+_PRESET = nominal(ModelConfig())
+"""The preset's values: the fit's optimizer coordinates are relative to them."""
 
 GOAL_WITHIN = 0.10
 GOAL_DRAWS = 18 / 20
@@ -215,15 +218,36 @@ def rejudged(x: dict[str, Any]) -> dict[str, Any]:
     stored interval; its other reasons (a bound, a correlation, an unconverged or unexplained fit) stay.
 
     Rows written under the earlier per-parameter thresholds (8-40 %, or an absolute width) so count as
-    the fit would call them now: the rule reads only the interval and the value, which the rows keep.
+    the fit would call them now: the rule reads only the interval and the value, which the rows keep. The
+    interval is first floored at the solver's step (:func:`_floored`).
     """
     others = [part for part in x.get("why", "").split("; ") if part and not part.startswith(_WIDTH_REASON)]
+    x = _floored(x)
     half = 0.5 * (x["interval"][1] - x["interval"][0])
     limit = IDENTIFIED_WITHIN * abs(x["value"])
     reasons = list(others)
     if not (math.isfinite(half) and half <= limit):
         reasons.insert(0, f"{_WIDTH_REASON} ±{half:.3g} is wider than ±{limit:.3g}")
     return {**x, "identifiable": not reasons, "why": "; ".join(reasons)}
+
+
+def _floored(x: dict[str, Any]) -> dict[str, Any]:
+    """A stored parameter row with its interval at least the solver's finite-difference step wide (the
+    default ``fd_step``, :func:`~hil.identify.intervals.fd_floor`), as the fit floors it now; rows written
+    before (with a floor of 1e-4 in the optimizer's coordinates) are widened where they were narrower, and
+    whether they cover the truth is judged again. Rows the fit floored already are unchanged."""
+    row = by_name(x["name"])
+    v0 = _PRESET[x["name"]]
+    at = row.to_x(x["value"], v0)
+    floor = float(fd_floor(np.array([at]), FitOptions().fd_step)[0])
+    out = dict(x)
+    for key, cov in (("interval", "covered"), ("hac_interval", "hac_covered")):
+        if key in x:
+            lo, hi = (row.to_x(v, v0) for v in x[key])
+            half = max(0.5 * (hi - lo), floor)
+            out[key] = sorted((row.from_x(at - half, v0), row.from_x(at + half, v0)))
+            out[cov] = out[key][0] <= x["truth"] <= out[key][1]
+    return out
 
 
 def _declined_for_correlation(x: dict[str, Any]) -> bool:
@@ -309,15 +333,15 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             f"95 % intervals covering the truth: {c}/{len(all_cov)} = {c / len(all_cov):.0%} "
             f"[{lo:.2f}, {hi:.2f}] (goal >= {GOAL_COVERAGE:.0%})"
         )
-        # Rows written before the intervals were widened by the remaining step carry no hac_covered:
-        # their interval was the autocorrelation-consistent one alone.
-        hac = [bool(x.get("hac_covered", x["covered"])) for r in truths for x in r["params"]]
-        h = sum(hac)
-        lo, hi = wilson_interval(h, len(hac))
-        print(
-            f"... without the widening for where the fit stopped (the autocorrelation-consistent interval "
-            f"alone): {h}/{len(hac)} = {h / len(hac):.0%} [{lo:.2f}, {hi:.2f}]"
-        )
+        # Rows written before the intervals were widened by the remaining step carry no hac_covered.
+        widened = [r for r in truths if all("hac_covered" in x for x in r["params"])]
+        if widened:
+            hac = [bool(x["hac_covered"]) for r in widened for x in r["params"]]
+            wid = [bool(x["covered"]) for r in widened for x in r["params"]]
+            print(
+                f"... of which in the {len(widened)} draws run with the widening for where the fit stopped: "
+                f"{sum(wid)}/{len(wid)} covered, {sum(hac)}/{len(hac)} without the widening"
+            )
         fitted = np.array([r["second_recording_rms_m"] for r in truths]) * 1e3
         held = np.array([r["held_out_rms_m"] for r in truths]) * 1e3
         nominal_ = np.array([r["held_out_rms_nominal_m"] for r in truths]) * 1e3

@@ -43,7 +43,14 @@ from numpy.typing import NDArray
 
 from hil.errors import HilError
 from hil.identify.excitation import OPENING_S
-from hil.identify.intervals import ParamEstimate, estimates, hac_covariance, remaining_step, unexplained
+from hil.identify.intervals import (
+    ParamEstimate,
+    estimates,
+    fd_floor,
+    hac_covariance,
+    remaining_step,
+    unexplained,
+)
 from hil.identify.motor_data import MotorData
 from hil.identify.rollout import RolloutJob, RolloutPool
 from hil.identify.starts import DELAY_CELLS_S, restarts, settled_m
@@ -571,6 +578,7 @@ def fit(
             None if converged else len(objective),
             unexplained(_rms_m(traces, False, "fitted"), opts.explained_within_m),
             more,
+            fd_floor(x, opts.fd_step),
         )
         return FitResult(
             estimates=fitted_estimates,

@@ -25,6 +25,7 @@ __all__ = [
     "TRADES_AGAINST",
     "ParamEstimate",
     "estimates",
+    "fd_floor",
     "hac_covariance",
     "remaining_step",
     "si_interval",
@@ -34,11 +35,26 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 NUMERICAL_FLOOR_X: Final = 1e-4
-"""The smallest half-width of an interval, in the optimizer's coordinates (0.01 % of a relative parameter,
-1e-4 of an absolute one's scale). With data that a model reproduces exactly (a synthetic recording of the same
-model), the statistical interval shrinks below what the solver resolves: its finite differences (1 % steps)
-and its stopping rule leave the minimum this uncertain, so an interval narrower than that claims more than
-the fit knows."""
+"""The smallest half-width of an interval, in the optimizer's coordinates, when the caller names no solver
+step (:func:`estimates`' ``floor_x``). The fit passes its finite-difference step (:func:`fd_floor`)."""
+
+
+def fd_floor(x: FloatArray, fd_step: float) -> FloatArray:
+    """The solver's finite-difference step at ``x``, per parameter, in the optimizer's coordinates
+    (``fd_step`` times ``max(1, |x|)``, as :func:`mujoco.minimize.jacobian_fd` steps): the smallest
+    half-width an interval may claim.
+
+    The Jacobian is a secant over this step. Where the objective is not smooth on a smaller scale, the
+    secant's slope is not the gradient, and the point where the solver stops can lie anywhere within about a
+    step of the minimum. It is not smooth there: a command delay interpolated between 1 ms periods against
+    ticks that start late, dry friction's stick and slip. Measured (docs/identify.md section 6): one draw's
+    cable-length error against its delay, every other value true, rises from 0.062 µm (the encoders'
+    quantization) to 0.105 µm at 4 µs shorter and to 0.297 µm at 4 µs longer with the loop's lateness in
+    the recording, symmetrically (0.105 and 0.107 µm) without it; the delay's step is 10 µs, and its fits
+    stopped 0.1-11 µs from the truth with statistical intervals of ±0.1-3 µs. On a smooth objective the
+    floor only widens an interval that was narrower than the solver can resolve.
+    """
+    return fd_step * np.maximum(1.0, np.abs(np.asarray(x, dtype=np.float64)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -194,6 +210,7 @@ def estimates(
     unconverged_after: int | None = None,
     unexplained: str | None = None,
     remaining_x: FloatArray | None = None,
+    floor_x: FloatArray | float = NUMERICAL_FLOOR_X,
 ) -> tuple[ParamEstimate, ...]:
     """The fitted values and intervals in SI, from the optimizer's coordinates.
 
@@ -205,10 +222,11 @@ def estimates(
     parameter identified when the model does not explain the data (``unexplained``: why, from the fit's
     error): every interval is conditional on the model being right, and a wrong model's best compromise is
     not the arm's value, however narrow its interval. ``remaining_x`` (:func:`remaining_step`, optimizer
-    coordinates) widens each interval by how far the fit stopped from its local minimum.
+    coordinates) widens each interval by how far the fit stopped from its local minimum; ``floor_x`` is the
+    smallest half-width before that (the solver's finite-difference step: :func:`fd_floor`).
     """
     out = []
-    half_x = np.maximum(half_x, NUMERICAL_FLOOR_X)
+    half_x = np.maximum(half_x, floor_x)
     more = np.zeros_like(half_x) if remaining_x is None else np.asarray(remaining_x, dtype=np.float64)
     for i, p in enumerate(rows):
         v0 = preset_values[p.name]

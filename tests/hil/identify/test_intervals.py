@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from mujoco import minimize
 
-from hil.identify.intervals import IDENTIFIED_WITHIN, estimates, remaining_step
+from hil.identify.intervals import IDENTIFIED_WITHIN, estimates, fd_floor, remaining_step
 from hil.sim.config import ModelConfig
 from hil.sim.uncertain import by_name, nominal
 
@@ -91,3 +92,30 @@ def test_an_interval_is_widened_by_how_far_the_fit_stopped_from_its_minimum() ->
     assert not e.identifiable and "stopped short of its minimum" in e.why, e.why
     (still,) = estimates({row.name: v0}, [row], np.array([x]), np.array([half]), np.array([half]), np.eye(1))
     assert still.identifiable and still.interval == still.hac_interval
+
+
+def test_the_interval_floor_is_the_solvers_own_finite_difference_step() -> None:
+    """:func:`fd_floor` is the step :func:`mujoco.minimize.jacobian_fd` takes (1 % of ``max(1, |x|)``):
+    an interval may not claim the minimum more precisely than the secant the solver steered by."""
+    x = np.array([0.3, -2.5, 0.004, 4.0])
+    seen: list[np.ndarray] = []
+
+    def residual(xs: np.ndarray) -> np.ndarray:
+        seen.append(np.array(xs, dtype=np.float64))
+        return np.atleast_2d(xs)
+
+    x_col = x.reshape(-1, 1)
+    minimize.jacobian_fd(residual, x_col, residual(x_col), np.float64(0.01), 0)
+    steps = np.abs(seen[-1] - x_col).max(axis=0)
+    assert fd_floor(x, 0.01) == pytest.approx(steps, rel=1e-9)
+    row = by_name("delay")
+    (e,) = estimates(
+        {"delay": 1e-3},
+        [row],
+        np.array([0.11]),
+        np.array([1e-4]),
+        np.array([1e-4]),
+        np.eye(1),
+        floor_x=fd_floor(np.array([0.11]), 0.01),
+    )
+    assert e.half_width == pytest.approx(0.01 * row.scale)  # a 0.11 ms delay: ±10 µs, not ±0.1 µs
