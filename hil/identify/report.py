@@ -154,9 +154,11 @@ table{{border-collapse:collapse}}img{{max-width:100%}}</style></head><body>
 {rows}</table>
 <p>The interval is autocorrelation-consistent (Newey-West around the fit's Jacobian): a simulated arm's
 errors are smooth in time, so the residuals are not independent and the naive interval (MuJoCo's
-<code>calculate_intervals</code>, shown for comparison) is far too narrow. A parameter is called identified
-when its interval is narrower than the threshold of its row (docs/identify.md); one that is not keeps its
-fitted value in the model file, marked, and says what it trades against.</p>
+<code>calculate_intervals</code>, shown for comparison) is far too narrow. It is never narrower than the
+solver's finite-difference step (the solver cannot place a minimum more finely), and it is widened by how far
+the fit stopped from its minimum. A parameter is called identified when its interval's half-width is within
+10 % of its value and nothing else speaks against it (docs/identify.md); one that is not keeps its fitted
+value in the model file, marked, and says why.</p>
 <img src="parameters.png" alt="parameters">
 <h2>Fit</h2><table>{summ}</table>
 <h2>Measured against simulated</h2>
