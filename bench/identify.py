@@ -45,7 +45,7 @@ import numpy as np  # noqa: E402
 
 from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E402
 from hil.identify.fit import FitOptions, FitResult, fit  # noqa: E402
-from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor  # noqa: E402
+from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor, si_interval  # noqa: E402
 from hil.identify.motor_data import load_motor_data  # noqa: E402
 from hil.identify.synthetic import (  # noqa: E402
     MISMATCHES,
@@ -244,8 +244,7 @@ def _floored(x: dict[str, Any]) -> dict[str, Any]:
     for key, cov in (("interval", "covered"), ("hac_interval", "hac_covered")):
         if key in x:
             lo, hi = (row.to_x(v, v0) for v in x[key])
-            half = max(0.5 * (hi - lo), floor)
-            out[key] = sorted((row.from_x(at - half, v0), row.from_x(at + half, v0)))
+            out[key] = list(si_interval(row, v0, at, max(0.5 * (hi - lo), floor)))
             out[cov] = out[key][0] <= x["truth"] <= out[key][1]
     return out
 

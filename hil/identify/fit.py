@@ -542,8 +542,9 @@ def fit(
         _, naive = sysid.calculate_intervals(best.res, jac)
         firsts = np.cumsum([0] + [len(r) for r in best.res])
         blocks = [(int(a), len(r), CH) for a, r in zip(firsts[:-1], best.res, strict=True)]
-        cov, n_eff = hac_covariance(jac, np.concatenate(best.res), blocks)
-        more = remaining_step(jac, np.concatenate(best.res), x, lower, upper)  # stopped short of the minimum
+        res_all = np.concatenate(best.res)
+        cov, n_eff = hac_covariance(jac, res_all, blocks)
+        more = remaining_step(jac, res_all, x, lower, upper)  # how far it stopped from the minimum
         dof = max(1.0, n_eff - len(rows))
         quant = float(scipy.stats.t.ppf(0.975, dof))
         sd = np.sqrt(np.maximum(np.diag(cov), 1e-300))

@@ -172,14 +172,13 @@ def remaining_step(
     """How far, per parameter, the fit stopped from its local minimum: the Gauss-Newton step from ``x``
     (the least-squares solution of ``jac @ step = -res``), kept inside the search box, in absolute value.
 
-    Levenberg-Marquardt stops when its steps no longer lower the objective, which near the sensors' noise
-    can happen before the minimum: its finite-difference Jacobian is a secant over 1 % steps, and the
-    delay's objective ripples with the control period. The statistical interval is centred on the
-    minimum, so around the point where the fit stopped it must be widened by the distance between the
-    two; by the triangle inequality an interval of half-width ``remaining + half`` around the stopping
-    point holds every value ``half`` holds around the minimum. At the minimum the gradient ``jac.T @ res``
-    vanishes and so does the step. A step along a valley (two parameters trading) can reach the box's
-    edge: such a parameter is not identified anyway, and the wide interval says so.
+    Levenberg-Marquardt can stop before the minimum: at its iteration cap, or when its steps no longer
+    lower the objective. The statistical interval is centred on the minimum, so around the point where the
+    fit stopped it must be widened by the distance between the two; by the triangle inequality an interval
+    of half-width ``remaining + half`` around the stopping point holds every value ``half`` holds around
+    the minimum. At the minimum the gradient ``jac.T @ res`` vanishes and so does the step. A step along a
+    valley (two parameters trading) can reach the box's edge: such a parameter is not identified anyway,
+    and the wide interval says so.
     """
     if jac.size == 0:
         return np.zeros_like(x)

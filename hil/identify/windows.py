@@ -21,7 +21,7 @@ from hil.identify.rollout import RolloutJob, simulate
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
 
-__all__ = ["CH", "LEN", "TIP", "VEL", "Window", "at_samples", "length_rms_m", "prepare_window"]
+__all__ = ["CH", "LEN", "TEN", "TIP", "VEL", "Window", "at_samples", "length_rms_m", "prepare_window"]
 
 FloatArray = NDArray[np.float64]
 
@@ -58,6 +58,7 @@ class Window:
 
 
 def prepare_window(rec: MotorData, end: int, period_s: float) -> Window:
+    """``rec`` up to sample ``end`` on the 1 ms grid, judged every ``period_s`` from the excitation."""
     t = rec.t_s
     t0 = float(t[0])
     n = max(2, round((float(t[end - 1]) - t0) / 1e-3))
