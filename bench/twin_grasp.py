@@ -14,7 +14,7 @@ McNemar p < 0.05. Prints per draw, then pooled: successes per plant (Wilson), ag
 to ``--out`` (JSON lines) as its draw finishes.
 
 Usage: ``.venv/bin/python bench/twin_grasp.py --fits runs/bench-identify.jsonl [--placements 8]
-[--params FILE] [--seed 0] [--jobs 2] [--out runs/twin-grasp.jsonl]``
+[--params FILE] [--seed 0] [--jobs 2] [--out runs/twin-grasp.jsonl] [--summary-only]``
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 # Run as a script, this file's directory comes first on sys.path, where bench/protocol.py would shadow
 # the protocol package; benchmarks import the project only.
@@ -39,14 +40,16 @@ from hil.identify.twin_grasp import (  # noqa: E402
     NUDGE_REL,
     PLANTS,
     AgreementSummary,
+    Verdict,
     agreement,
     nudged_truth,
     placements,
+    rate_errors,
     twin_models,
 )
 from hil.sim.config import ModelConfig  # noqa: E402
 from hil.sim.spiral import SpiralDesign  # noqa: E402
-from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial_job  # noqa: E402
+from hil.trial.grasp import GraspSetup, grasp_firmware, grasp_trial_job  # noqa: E402
 
 DEFAULT_PARAMS = _HERE.parent / "examples" / "params_prototype_tuned.toml"
 
@@ -63,17 +66,54 @@ def _line(label: str, s: AgreementSummary) -> str:
     )
 
 
+def summarise(records: list[dict[str, Any]], seed: int) -> None:
+    """Print the pooled figures and the goal's verdict from stored grasps (one record per placement)."""
+    draws: dict[int, list[dict[str, Verdict]]] = {}
+    for r in records:
+        kinds = [k for k in (*PLANTS, "nudged") if k in r]
+        draws.setdefault(int(r["seed"]), []).append({k: Verdict.from_record(r[k]) for k in kinds})
+    pooled = [t for d in draws.values() for t in d]
+    s = agreement(pooled, seed)
+    print(f"\npooled over {len(draws)} draws, " + _line(f"n = {s.n}", s), flush=True)
+    for k in ("twin", "preset"):
+        mean, lo, hi, n = s.wrap_error_deg[k]
+        print(
+            f"  {k}: mean |wrap − truth's| {mean:.0f}° [{lo:.0f}, {hi:.0f}] (bootstrap, n = {n} with a HOLD)"
+        )
+    for k, (mean, lo, hi, n) in rate_errors(list(draws.values()), seed).items():
+        print(
+            f"  {k}: mean |success rate − truth's| per draw {mean:.1%} [{lo:.1%}, {hi:.1%}] "
+            f"(bootstrap, {n} draws)"
+        )
+    pen = ", ".join(f"{k} {s.penetration_m[k] * 1e3:.2f} mm" for k in PLANTS)
+    print(f"  largest penetration: {pen}; physics step 0.25 ms, contacts 0.5 ms", flush=True)
+    print(
+        f"goal (the twin agrees in >= {GOAL_AGREEMENT:.0%} and beats the preset, p < {GOAL_P}): "
+        f"{'met' if s.goal_met else 'NOT met'}"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument(
-        "--fits", type=Path, required=True, help="a bench/identify.py JSONL with hidden-truth rows"
-    )
+    ap.add_argument("--fits", type=Path, help="a bench/identify.py JSONL with hidden-truth rows")
     ap.add_argument("--placements", type=int, default=8, help="grasps per draw and plant")
     ap.add_argument("--params", type=Path, default=DEFAULT_PARAMS, help="the controller (a parameter file)")
     ap.add_argument("--seed", type=int, default=0, help="the placements' seed")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", type=Path, default=Path("runs/twin-grasp.jsonl"))
+    ap.add_argument("--summary-only", action="store_true", help="print the figures of --out; run nothing")
     args = ap.parse_args(argv)
+    if args.summary_only:
+        try:
+            stored = [json.loads(x) for x in args.out.read_text(encoding="utf-8").splitlines() if x.strip()]
+        except (OSError, ValueError) as exc:
+            ap.error(f"--out {args.out}: {exc}")
+        if not stored:
+            ap.error(f"--out {args.out}: no grasps")
+        summarise(stored, args.seed)
+        return 0
+    if args.fits is None:
+        ap.error("--fits is required (or --summary-only)")
     if args.placements < 1:
         ap.error("--placements must be >= 1")
     try:
@@ -91,8 +131,9 @@ def main(argv: list[str] | None = None) -> int:
     spots = placements(args.placements, args.seed)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     print(
-        f"twin grasps: {len(rows)} draws x {len(spots)} placements x {len(PLANTS)} plants, "
-        f"controller {args.params.name} (strategy {'on' if firmware.grasp.strategy_on else 'off'})"
+        f"twin grasps: {len(rows)} draws x {len(spots)} placements on the truth, the twin, the preset and "
+        f"the nudged truth, controller {args.params.name} "
+        f"(strategy {'on' if firmware.grasp.strategy_on else 'off'})"
     )
 
     def setups(model: ModelConfig) -> list[tuple[GraspSetup, SpiralDesign]]:
@@ -114,24 +155,25 @@ def main(argv: list[str] | None = None) -> int:
 
     # Every draw's fit started from the same preset: its grasps are the same for all (seeded), so once.
     preset = parallel_map(grasp_trial_job, setups(twin_models(rows[0])[2]), args.jobs, None)
-    pooled: list[dict[str, GraspOutcome]] = []
+    records: list[dict[str, Any]] = []
     t0 = time.monotonic()
     with args.out.open("w", encoding="utf-8") as out:
         for i, row in enumerate(rows):
             truth, twin, _ = twin_models(row)
-            nudged = setups(nudged_truth(row))
-            outs = parallel_map(grasp_trial_job, setups(truth) + setups(twin) + nudged, args.jobs, None)
+            jobs = setups(truth) + setups(twin) + setups(nudged_truth(row))
+            outs = parallel_map(grasp_trial_job, jobs, args.jobs, None)
             n = len(spots)
             trials = [
                 {"truth": outs[j], "twin": outs[n + j], "preset": preset[j], "nudged": outs[2 * n + j]}
                 for j in range(n)
             ]
-            pooled += trials
             for j, t in enumerate(trials):
                 rec = {"seed": row["seed"], "placement": j, **{k: o.as_dict() for k, o in t.items()}}
+                records.append(json.loads(json.dumps(rec, default=str)))
                 out.write(json.dumps(rec, default=str) + "\n")
             out.flush()
-            print(_line(f"draw {row['seed']:2d}", agreement(trials)), flush=True)
+            verdicts = [{k: Verdict.of(o) for k, o in t.items()} for t in trials]
+            print(_line(f"draw {row['seed']:2d}", agreement(verdicts)), flush=True)
             elapsed = time.monotonic() - t0
             eta = elapsed / (i + 1) * (len(rows) - i - 1)
             print(
@@ -139,19 +181,7 @@ def main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
                 flush=True,
             )
-    s = agreement(pooled, args.seed)
-    print("\npooled, " + _line(f"n = {s.n}", s), flush=True)
-    for k in ("twin", "preset"):
-        mean, lo, hi, n = s.wrap_error_deg[k]
-        print(
-            f"  {k}: mean |wrap − truth's| {mean:.0f}° [{lo:.0f}, {hi:.0f}] (bootstrap, n = {n} with a HOLD)"
-        )
-    pen = ", ".join(f"{k} {s.penetration_m[k] * 1e3:.2f} mm" for k in PLANTS)
-    print(f"  largest penetration: {pen}; physics step 0.25 ms, contacts 0.5 ms", flush=True)
-    print(
-        f"goal (the twin agrees in >= {GOAL_AGREEMENT:.0%} and beats the preset, p < {GOAL_P}): "
-        f"{'met' if s.goal_met else 'NOT met'}"
-    )
+    summarise(records, args.seed)
     return 0
 
 

@@ -135,6 +135,27 @@ def nudged_truth(row: Mapping[str, Any], rel: float = NUDGE_REL, preset: str = "
     return apply(base, nudged).with_physics(EXPERIMENT_STEP_S)
 
 
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """What the agreement figures need of one grasp (:class:`~hil.trial.grasp.GraspOutcome`, or its stored
+    JSON form)."""
+
+    success: bool
+    state: str
+    wrap_deg: float
+    penetration_m: float
+
+    @classmethod
+    def of(cls, outcome: GraspOutcome) -> Verdict:
+        return cls(outcome.success, outcome.state, outcome.wrap_deg, outcome.extremes.penetration_m)
+
+    @classmethod
+    def from_record(cls, record: Mapping[str, Any]) -> Verdict:
+        """From :meth:`GraspOutcome.as_dict`'s form."""
+        pen = record["extremes"]["penetration_m"]
+        return cls(bool(record["success"]), str(record["state"]), float(record["wrap_deg"]), float(pen))
+
+
 @dataclass(frozen=True)
 class AgreementSummary:
     """How a twin and a preset agree with the truth over paired grasps.
@@ -181,8 +202,9 @@ class AgreementSummary:
         )
 
 
-def agreement(trials: Sequence[Mapping[str, GraspOutcome]], seed: int = 0) -> AgreementSummary:
-    """Summarise paired grasps: one mapping per placement from each of :data:`PLANTS` to its outcome."""
+def agreement(trials: Sequence[Mapping[str, Verdict]], seed: int = 0) -> AgreementSummary:
+    """Summarise paired grasps: one mapping per placement from each of :data:`PLANTS` (and ``nudged``, if
+    run) to its verdict."""
     success = {k: sum(t[k].success for t in trials) for k in PLANTS}
     twin = [t["twin"].success == t["truth"].success for t in trials]
     pre = [t["preset"].success == t["truth"].success for t in trials]
@@ -200,7 +222,7 @@ def agreement(trials: Sequence[Mapping[str, GraspOutcome]], seed: int = 0) -> Ag
             wrap[k] = (float(np.mean(errs)), lo, hi, len(errs))
         else:
             wrap[k] = (math.nan, math.nan, math.nan, 0)
-    pen = {k: max((t[k].extremes.penetration_m for t in trials), default=math.nan) for k in PLANTS}
+    pen = {k: max((t[k].penetration_m for t in trials), default=math.nan) for k in PLANTS}
     return AgreementSummary(
         len(trials),
         success,
@@ -215,3 +237,22 @@ def agreement(trials: Sequence[Mapping[str, GraspOutcome]], seed: int = 0) -> Ag
         if all("nudged" in t for t in trials)
         else None,
     )
+
+
+def rate_errors(
+    draws: Sequence[Sequence[Mapping[str, Verdict]]], seed: int = 0
+) -> dict[str, tuple[float, float, float, int]]:
+    """Per plant (twin, preset, and nudged if run): the mean over draws of |its success rate − the
+    truth's| on the draw's placements, with its bootstrap 95 % interval and the number of draws. A
+    verdict on an edge may flip, and a rate is what a lab reads off a campaign."""
+    out: dict[str, tuple[float, float, float, int]] = {}
+    kinds = [k for k in ("twin", "preset", "nudged") if draws and all(k in t for d in draws for t in d)]
+    for k in kinds:
+        errs = [
+            abs(sum(t[k].success for t in d) - sum(t["truth"].success for t in d)) / len(d)
+            for d in draws
+            if d
+        ]
+        lo, hi = bootstrap_interval(errs, seed=seed)
+        out[k] = (float(np.mean(errs)), lo, hi, len(errs))
+    return out

@@ -15,7 +15,15 @@ import pytest
 from controller.param_file import apply_param_file
 from hil.experiments.common import EXPERIMENT_STEP_S
 from hil.identify.synthetic import draw_truth
-from hil.identify.twin_grasp import PLANTS, agreement, nudged_truth, placements, twin_models
+from hil.identify.twin_grasp import (
+    PLANTS,
+    Verdict,
+    agreement,
+    nudged_truth,
+    placements,
+    rate_errors,
+    twin_models,
+)
 from hil.sim.presets import PRESETS
 from hil.sim.types import PhysicsExtremes
 from hil.sim.uncertain import ID_PARAMS, nominal
@@ -66,23 +74,13 @@ def test_a_row_that_is_not_a_hidden_truth_is_refused() -> None:
         twin_models({"kind": "mismatch", "name": "capsules"})
 
 
-def _outcome(success: bool, wrap_deg: float, state: str = "HOLD", pen_m: float = 1e-4) -> GraspOutcome:
+def _outcome(success: bool, wrap_deg: float, state: str = "HOLD", pen_m: float = 1e-4) -> Verdict:
     ext = PhysicsExtremes(pen_m, 0.0, 0.0, 0.0)
-    return GraspOutcome(
-        GraspSetup(0.04, -0.12, 0.02),
-        state,
-        1.0,
-        math.nan,
-        3,
-        3,
-        wrap_deg,
-        0.0,
-        0.0,
-        success,
-        success,
-        0,
-        ext,
-    )
+    setup = GraspSetup(0.04, -0.12, 0.02)
+    outcome = GraspOutcome(setup, state, 1.0, math.nan, 3, 3, wrap_deg, 0.0, 0.0, success, success, 0, ext)
+    verdict = Verdict.of(outcome)
+    assert Verdict.from_record(json.loads(json.dumps(outcome.as_dict(), default=str))) == verdict
+    return verdict
 
 
 def test_agreement_counts_the_pairs_where_one_plant_matches_the_truth() -> None:
@@ -107,6 +105,16 @@ def test_agreement_counts_the_pairs_where_one_plant_matches_the_truth() -> None:
     assert nudged.nudged_agrees == 2  # the nudged truth failed: it agrees where the truth failed
 
 
+def test_rate_errors_are_per_draw_success_rates_against_the_truth_s() -> None:
+    t, f = _outcome(True, 200.0), _outcome(False, 100.0)
+    draw_a = [{"truth": t, "twin": f, "preset": f}, {"truth": f, "twin": t, "preset": f}]  # rates equal
+    draw_b = [{"truth": t, "twin": t, "preset": f}, {"truth": t, "twin": f, "preset": f}]  # twin 1/2 off
+    errs = rate_errors([draw_a, draw_b])
+    assert set(errs) == {"twin", "preset"}  # no nudged grasps
+    assert errs["twin"][0] == pytest.approx(0.25) and errs["twin"][3] == 2
+    assert errs["preset"][0] == pytest.approx(0.75)  # 1/2 off, then 2/2 off
+
+
 def test_placements_are_seeded_and_in_the_prototype_s_reach() -> None:
     a, b = placements(6, 3), placements(6, 3)
     assert a == b and a != placements(6, 4)
@@ -121,19 +129,24 @@ def test_the_benchmark_grasps_a_twin_fitted_exactly_like_its_truth(tmp_path: Pat
     row = _row(3, draw_truth(np.random.default_rng(3), PRESETS["prototype"].model))
     fits.write_text(json.dumps(row) + "\n", encoding="utf-8")
     out = tmp_path / "grasps.jsonl"
-    cmd = [sys.executable, str(ROOT / "bench" / "twin_grasp.py"), "--fits", str(fits), "--placements", "2"]
+    cmd = [sys.executable, str(ROOT / "bench" / "twin_grasp.py"), "--fits", str(fits), "--placements", "1"]
     run = subprocess.run([*cmd, "--out", str(out)], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert run.returncode == 0, run.stderr
-    assert "agrees with the truth: twin 2/2 = 100%" in run.stdout
+    assert "agrees with the truth: twin 1/1 = 100%" in run.stdout
     assert "the truth nudged by 0.1% agrees" in run.stdout
+    again = subprocess.run(
+        [*cmd, "--out", str(out), "--summary-only"], capture_output=True, text=True, timeout=60
+    )
+    assert again.returncode == 0, again.stderr
+    assert again.stdout.strip() == run.stdout[run.stdout.index("pooled") :].strip()  # the stored figures
     recs = [json.loads(x) for x in out.read_text(encoding="utf-8").splitlines()]
-    assert len(recs) == 2
+    assert len(recs) == 1
     for r in recs:
         assert {*PLANTS, "nudged"} <= set(r)
         assert r["twin"]["success"] == r["truth"]["success"]
         assert r["twin"]["wrap_deg"] == r["truth"]["wrap_deg"]
     # The preset column is the preset's own grasp, with the shipped controller.
-    spot = placements(2, 0)[0]
+    spot = placements(1, 0)[0]
     fw = apply_param_file(ROOT / "examples" / "params_prototype_tuned.toml", grasp_firmware())
     setup = GraspSetup(
         spot.x_m, spot.z_m, spot.diameter_m, fw.grasp.strategy_on, firmware=fw, model=twin_models(row)[2]
