@@ -132,6 +132,10 @@ def nudged_truth(row: Mapping[str, Any], rel: float = NUDGE_REL, preset: str = "
     truth = draw_truth(np.random.default_rng(seed), base)
     signs = np.random.default_rng([seed, 1]).choice((-1.0, 1.0), size=len(truth))
     nudged = {k: v * (1.0 + rel * s) for (k, v), s in zip(truth.items(), signs, strict=True)}
+    # A truth the draw clipped to the model's bound (stiffness_exponent at 1 or 4) is nudged inward.
+    p = nudged["stiffness_exponent"]
+    if not 1.0 <= p <= 4.0:
+        nudged["stiffness_exponent"] = truth["stiffness_exponent"] * (1.0 - rel * math.copysign(1.0, p - 2.5))
     return apply(base, nudged).with_physics(EXPERIMENT_STEP_S)
 
 

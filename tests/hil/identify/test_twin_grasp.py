@@ -67,6 +67,15 @@ def test_the_nudged_truth_moves_every_parameter_by_a_tenth_of_a_percent() -> Non
     assert all(abs(abs(r - 1.0) - 1e-3) < 1e-9 for r in ratios)
     assert {r > 1.0 for r in ratios} == {True, False}  # both signs
     assert nominal(nudged_truth(row)) == nudged  # seeded by the draw
+    # A draw clipped to the model's bound is nudged inward, whatever its sign: every seed of 0-39 whose
+    # stiffness exponent the draw clipped to 4 (the first of them failed the benchmark before).
+    clipped = [
+        s for s in range(40) if draw_truth(np.random.default_rng(s), base)["stiffness_exponent"] == 4.0
+    ]
+    assert clipped
+    for s in clipped:
+        p = nominal(nudged_truth(_row(s, draw_truth(np.random.default_rng(s), base))))["stiffness_exponent"]
+        assert p == pytest.approx(4.0 * (1 - 1e-3))
 
 
 def test_a_row_that_is_not_a_hidden_truth_is_refused() -> None:
