@@ -14,7 +14,7 @@ McNemar p < 0.05. Prints per draw, then pooled: successes per plant (Wilson), ag
 to ``--out`` (JSON lines) as its draw finishes.
 
 Usage: ``.venv/bin/python bench/twin_grasp.py --fits runs/bench-identify.jsonl [--placements 8]
-[--params FILE] [--seed 0] [--jobs 2] [--out runs/twin-grasp.jsonl] [--summary-only]``
+[--params FILE] [--seed 0] [--jobs 2] [--out runs/twin-grasp.jsonl] [--resume] [--summary-only]``
 """
 
 from __future__ import annotations
@@ -93,6 +93,26 @@ def summarise(records: list[dict[str, Any]], seed: int) -> None:
     )
 
 
+def _kept(path: Path, placements_per_draw: int) -> list[dict[str, Any]]:
+    """The records of ``path``'s whole draws (every placement there once); a draw cut short is run again."""
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        return []
+    records: list[dict[str, Any]] = []
+    for line in lines:
+        try:
+            records.append(json.loads(line))
+        except ValueError:
+            break  # a line cut by a stop: it and what follows are run again
+    whole = {
+        seed
+        for seed in {r["seed"] for r in records}
+        if sorted(r["placement"] for r in records if r["seed"] == seed) == list(range(placements_per_draw))
+    }
+    return [r for r in records if r["seed"] in whole]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fits", type=Path, help="a bench/identify.py JSONL with hidden-truth rows")
@@ -102,6 +122,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", type=Path, default=Path("runs/twin-grasp.jsonl"))
     ap.add_argument("--summary-only", action="store_true", help="print the figures of --out; run nothing")
+    ap.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the draws --out holds whole (same --placements, --params and --seed); run the rest",
+    )
     args = ap.parse_args(argv)
     if args.summary_only:
         try:
@@ -155,10 +180,16 @@ def main(argv: list[str] | None = None) -> int:
 
     # Every draw's fit started from the same preset: its grasps are the same for all (seeded), so once.
     preset = parallel_map(grasp_trial_job, setups(twin_models(rows[0])[2]), args.jobs, None)
-    records: list[dict[str, Any]] = []
+    records = _kept(args.out, len(spots)) if args.resume else []
+    done = {int(r["seed"]) for r in records}
+    if done:
+        print(f"resumed: {len(done)} draws already in {args.out}", flush=True)
     t0 = time.monotonic()
     with args.out.open("w", encoding="utf-8") as out:
-        for i, row in enumerate(rows):
+        out.writelines(json.dumps(r) + "\n" for r in records)
+        out.flush()
+        todo = [r for r in rows if int(r["seed"]) not in done]
+        for i, row in enumerate(todo):
             truth, twin, _ = twin_models(row)
             jobs = setups(truth) + setups(twin) + setups(nudged_truth(row))
             outs = parallel_map(grasp_trial_job, jobs, args.jobs, None)
@@ -175,9 +206,9 @@ def main(argv: list[str] | None = None) -> int:
             verdicts = [{k: Verdict.of(o) for k, o in t.items()} for t in trials]
             print(_line(f"draw {row['seed']:2d}", agreement(verdicts)), flush=True)
             elapsed = time.monotonic() - t0
-            eta = elapsed / (i + 1) * (len(rows) - i - 1)
+            eta = elapsed / (i + 1) * (len(todo) - i - 1)
             print(
-                f"  {i + 1}/{len(rows)} draws, {elapsed:.0f} s, about {eta:.0f} s left",
+                f"  {len(done) + i + 1}/{len(rows)} draws, {elapsed:.0f} s, about {eta:.0f} s left",
                 file=sys.stderr,
                 flush=True,
             )

@@ -164,6 +164,28 @@ def test_the_benchmark_grasps_a_twin_fitted_exactly_like_its_truth(tmp_path: Pat
     assert (recs[0]["preset"]["success"], recs[0]["preset"]["wrap_deg"]) == (direct.success, direct.wrap_deg)
 
 
+def test_the_benchmark_resumes_without_running_a_whole_draw_again(tmp_path: Path) -> None:
+    """--resume keeps the draws --out holds whole and drops a draw cut short (and a cut line): a stored
+    record that it ran again would be replaced, so a sentinel in the kept draw's record proves it did not."""
+    base = PRESETS["prototype"].model
+    rows = [_row(s, draw_truth(np.random.default_rng(s), base)) for s in (3, 4)]
+    fits = tmp_path / "fits.jsonl"
+    fits.write_text("".join(json.dumps(r) + "\n" for r in rows), encoding="utf-8")
+    out = tmp_path / "grasps.jsonl"
+    kept: dict[str, object] = {"seed": 3, "placement": 0, "sentinel": True}
+    for k in (*PLANTS, "nudged"):
+        kept[k] = {"success": True, "state": "HOLD", "wrap_deg": 200.0, "extremes": {"penetration_m": 0.0}}
+    cut = {**kept, "seed": 4}
+    out.write_text(json.dumps(kept) + "\n" + json.dumps(cut)[:40], encoding="utf-8")
+    cmd = [sys.executable, str(ROOT / "bench" / "twin_grasp.py"), "--fits", str(fits), "--placements", "1"]
+    run = subprocess.run([*cmd, "--out", str(out), "--resume"], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert "resumed: 1 draws already in" in run.stdout
+    recs = [json.loads(x) for x in out.read_text(encoding="utf-8").splitlines()]
+    assert [(r["seed"], r.get("sentinel", False)) for r in recs] == [(3, True), (4, False)]
+    assert "draw  3" not in run.stdout and "draw  4" in run.stdout
+
+
 def test_the_benchmark_says_what_is_wrong_with_its_input(tmp_path: Path) -> None:
     empty = tmp_path / "empty.jsonl"
     empty.write_text(json.dumps({"kind": "fit_time"}) + "\n", encoding="utf-8")
