@@ -199,9 +199,12 @@ def main(argv: list[str] | None = None) -> int:
                 for j in range(n)
             ]
             for j, t in enumerate(trials):
-                rec = {"seed": row["seed"], "placement": j, **{k: o.as_dict() for k, o in t.items()}}
-                records.append(json.loads(json.dumps(rec, default=str)))
-                out.write(json.dumps(rec, default=str) + "\n")
+                line = json.dumps(
+                    {"seed": row["seed"], "placement": j, **{k: o.as_dict() for k, o in t.items()}},
+                    default=str,
+                )
+                records.append(json.loads(line))  # as --summary-only will read it
+                out.write(line + "\n")
             out.flush()
             verdicts = [{k: Verdict.of(o) for k, o in t.items()} for t in trials]
             print(_line(f"draw {row['seed']:2d}", agreement(verdicts)), flush=True)

@@ -47,9 +47,11 @@ __all__ = [
     "PLANTS",
     "AgreementSummary",
     "Placement",
+    "Verdict",
     "agreement",
     "nudged_truth",
     "placements",
+    "rate_errors",
     "twin_models",
 ]
 
@@ -121,7 +123,8 @@ def twin_models(
         path = (work or Path(tmp)) / f"twin-{int(row['seed'])}.toml"
         write_model_file(path, model_file)
         twin = resolve(str(path)).model
-    return tuple(m.with_physics(EXPERIMENT_STEP_S) for m in (truth, twin, base))  # type: ignore[return-value]
+    step = EXPERIMENT_STEP_S
+    return truth.with_physics(step), twin.with_physics(step), base.with_physics(step)
 
 
 def nudged_truth(row: Mapping[str, Any], rel: float = NUDGE_REL, preset: str = "prototype") -> ModelConfig:
