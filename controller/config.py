@@ -205,6 +205,14 @@ class GraspConfig:
         release_dwell_us: time spent uncurled after a release before re-packing (IDLE).
         hold_length: HOLD freezes the pulling cables' length (``controller.lengthhold``) instead of
             their tension: a grasped load stays still instead of sagging until the tension balances it.
+        hold_min_payin_m: HOLD is evidence the wrap has closed, from the motors alone: the pulling cables
+            must have paid in at least this since the wrap began (strategy on: since contact) when they
+            come to rest at the wrap tension; short of it the wrap stalled open and the grasp is FAILED
+            (its tension kept). 0 = off. The prototype's 39 mm comes from a study of 40 placements
+            (docs/grasping.md): no HOLD below it held its object.
+        hold_max_payin_m: FAILED instead of HOLD when the pulling cables paid in more than this since the
+            wrap began: nothing blocked the curl (an empty curl pays in the most). 0 = off; a lab sets it
+            a little under the pay-in of a grasp in the air (``bench/hold.py`` measures it).
     """
 
     strategy_on: bool = default("grasp.strategy_on")
@@ -230,6 +238,8 @@ class GraspConfig:
     reach_timeout_us: int = default("grasp.reach_timeout_us")
     release_dwell_us: int = default("grasp.release_dwell_us")
     hold_length: bool = default("grasp.hold_length")
+    hold_min_payin_m: float = default("grasp.hold_min_payin_m")
+    hold_max_payin_m: float = default("grasp.hold_max_payin_m")
 
 
 @dataclass(frozen=True, slots=True)
@@ -358,6 +368,12 @@ class FirmwareConfig:
             "grasp_reach_timeout_us",
             v["grasp_reach_timeout_us"] > v["grasp_contact_grace_us"],
             "must exceed grasp_contact_grace_us",
+        )
+        lo, hi = v["grasp_hold_min_payin_m"], v["grasp_hold_max_payin_m"]
+        _require(
+            "grasp_hold_max_payin_m",
+            hi == 0.0 or hi > lo,
+            f"must exceed grasp_hold_min_payin_m ({lo:g} m) or be 0 (off)",
         )
 
     @property

@@ -34,7 +34,10 @@ direction the present curl tension bends the arm toward.
   ``grasp_takeup_speed_m_per_s`` (a fast spool would snap the cable taut), until they have been still
   for ``grasp_contact_dwell_us``; then the tension ramps to ``grasp_wrap_n``.
 - HOLD (entered once the wrap tension is reached and the pulling cables have been still for
-  ``grasp_contact_dwell_us``: the arm has closed on the object): the tension is kept; with
+  ``grasp_contact_dwell_us``: the arm has closed on the object): the tension is kept. With
+  ``grasp_hold_min_payin_m`` / ``grasp_hold_max_payin_m`` the cables' pay-in since the wrap began must
+  also say the wrap closed around something (not stalled open, not an empty curl), else the grasp is
+  FAILED with the figure (its tension kept); with
   ``grasp_hold_length`` the pulling cables' length is held instead (``controller.lengthhold``, engaged
   by the mode selector), so a grasped load does not sag.
 - RELEASE: the tension ramps to 0 (uncurl), stays there ``grasp_release_dwell_us``, then IDLE re-packs
@@ -121,6 +124,9 @@ class GraspMachine:
             harness or an experiment: REACH then goes to WRAP on the first tick it returns True and the
             detector is not consulted.
         hold_length: ``grasp_hold_length`` (HOLD holds the pulling cables' length).
+        wrap_payin_m: cable the pulling cables have paid in since the wrap began (their filtered
+            speed, share-weighted, integrated from the wrap's first tick, take-up included): the evidence
+            HOLD is judged on.
     """
 
     def __init__(self, config: FirmwareConfig, events: EventQueue) -> None:
@@ -142,6 +148,7 @@ class GraspMachine:
         self._t_state_us = 0
         self._stall_since_us = -1
         self._zero_since_us = -1
+        self.wrap_payin_m = 0.0
         self.configure(config)
         self.target_rad = self._default_dir_rad
         self.direction_rad = self._default_dir_rad
@@ -167,6 +174,8 @@ class GraspMachine:
         self._timeout_us = g.reach_timeout_us
         self._release_dwell_us = g.release_dwell_us
         self.hold_length = g.hold_length
+        self._hold_min_m = g.hold_min_payin_m
+        self._hold_max_m = g.hold_max_payin_m
         self.detector.configure(config)
 
     @property
@@ -198,6 +207,8 @@ class GraspMachine:
         self._zero_since_us = -1
         if state == GraspState.REACH:
             self.detector.reset(now_us)
+        elif state == GraspState.WRAP:
+            self.wrap_payin_m = 0.0
         elif state == GraspState.IDLE:
             self.direction_rad = self.target_rad
         self._events.push(now_us, EventKind.GRASP, int(state), self.curl_n, f"grasp {state.name}: {why}")
@@ -286,13 +297,15 @@ class GraspMachine:
         elif state == GraspState.REACH:
             self._reach(now_us, dt_us, cable_speed_m_s, tension_est_n)
         elif state == GraspState.WRAP:
+            payin = self._pull_side_speed(cable_speed_m_s)
+            self.wrap_payin_m += payin * dt_us * 1e-6
             if not self._taut:
-                self._take_up(now_us, cable_speed_m_s)
+                self._take_up(now_us, payin)
             else:
                 curl = min(self._wrap_n, curl + self._wrap_rate * dt_us)
                 self.curl_n = curl
-                if curl >= self._wrap_n and self._still(now_us, self._pull_side_speed(cable_speed_m_s)):
-                    self._enter(now_us, GraspState.HOLD, "wrapped: wrap tension reached, cable still")
+                if curl >= self._wrap_n and self._still(now_us, payin):
+                    self._closed(now_us)
         elif state == GraspState.RELEASE:
             curl = max(0.0, curl - self._release_rate * dt_us)
             self.curl_n = curl
@@ -303,6 +316,24 @@ class GraspMachine:
                     self._enter(now_us, GraspState.IDLE, "released")
         # HOLD and FAILED keep the tension.
         return self.curl_n
+
+    def _closed(self, now_us: int) -> None:
+        """The pulling cables came to rest at the wrap tension: HOLD if their pay-in says the wrap closed
+        around something (``grasp_hold_min_payin_m`` / ``grasp_hold_max_payin_m``), else FAILED."""
+        paid = self.wrap_payin_m
+        lo, hi = self._hold_min_m, self._hold_max_m
+        if lo > 0.0 and paid < lo:
+            why = f"wrap stalled open: {paid * 1e3:.1f} mm paid in < {lo * 1e3:.1f}"
+            self._enter(now_us, GraspState.FAILED, why)
+        elif hi > 0.0 and paid > hi:
+            why = f"empty curl: {paid * 1e3:.1f} mm paid in > {hi * 1e3:.1f}"
+            self._enter(now_us, GraspState.FAILED, why)
+        elif lo > 0.0 or hi > 0.0:
+            self._enter(
+                now_us, GraspState.HOLD, f"wrapped: at wrap tension, still, {paid * 1e3:.1f} mm paid in"
+            )
+        else:  # the rules off: the words every recording before them carries
+            self._enter(now_us, GraspState.HOLD, "wrapped: wrap tension reached, cable still")
 
     def _arm_mean(self, per_motor: Sequence[float], out: list[float]) -> list[float]:
         """Each cable's value averaged over the arms (motor m = cable (m-1) % C of arm (m-1) // C)."""
@@ -352,9 +383,9 @@ class GraspMachine:
         self._enter(now_us, GraspState.WRAP, why)
         self._taut = self._takeup_n <= 0.0
 
-    def _take_up(self, now_us: int, cable_speed_m_s: Sequence[float]) -> None:
-        """Reel the wrap-side cables' slack in at a bounded speed; taut once they stay still."""
-        payin = self._pull_side_speed(cable_speed_m_s)
+    def _take_up(self, now_us: int, payin: float) -> None:
+        """Reel the wrap-side cables' slack in at a bounded speed (``payin``: their paid-in speed); taut
+        once they stay still."""
         self.curl_n = self._takeup_n if payin < self._takeup_m_s else 0.0
         if self._still(now_us, payin):
             self._taut = True

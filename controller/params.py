@@ -369,6 +369,13 @@ PARAM_TABLE: Final[tuple[Param, ...]] = (
     Param("grasp_hold_length", "grasp.hold_length", _B, "", False, None,
           "HOLD freezes the pulling cables' length instead of their tension",
           wire="GRASP_HOLD_LEN", index=30),
+    # Off by default: every documented grasp figure was measured without them (docs/grasping.md).
+    Param("grasp_hold_min_payin_m", "grasp.hold_min_payin_m", _F, "m", 0.0, Range(0.0, 10.0),
+          "HOLD needs the wrap side to have paid in this since the wrap began, else FAILED (0 = off)",
+          wire="GRASP_HOLD_MIN_M", index=44),
+    Param("grasp_hold_max_payin_m", "grasp.hold_max_payin_m", _F, "m", 0.0, Range(0.0, 10.0),
+          "FAILED instead of HOLD past this pay-in since the wrap began: an empty curl (0 = off)",
+          wire="GRASP_HOLD_MAX_M", index=45),
     Param("speed_filter_tau_us", "motor.speed_filter_tau_us", _I, _US, 20_000, Range(0, 10_000_000),
           "low-pass time constant of the cable speed used for contact detection",
           wire="SPEED_TAU_US", index=25),

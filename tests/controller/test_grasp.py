@@ -141,6 +141,60 @@ def test_strategy_off_is_a_plain_ramp_from_straight() -> None:
     assert g.state == GraspState.HOLD and g.curl_n == c.grasp.wrap_n
 
 
+PAYING_IN = [0.02, 0.02, 0.02]  # the wrap curls the arm: its pulling cables reel in at 20 mm/s
+
+
+def ramp_then_rest(ms_paying_in: int, **cfg: object) -> tuple[GraspMachine, list[str]]:
+    """A ramp grasp whose pulling cables reel in for ``ms_paying_in`` ms, then rest: the events' texts."""
+    events = EventQueue(64)
+    g = GraspMachine(FirmwareConfig.from_dict({"grasp_strategy_on": False, **cfg}), events)
+    t = run(g, 0, 100)
+    g.request_grasp(t)
+    t = run(g, t, ms_paying_in, speed=PAYING_IN)
+    ramp_ms = int(1000 * g._wrap_n / (g._wrap_rate * 1e6)) + 1  # at rest until the wrap tension is reached
+    run(g, t, ramp_ms + g._dwell_us // 1000 + 1, speed=STALLED)
+    return g, [e.text for e in events.pop_all()]
+
+
+def test_hold_needs_the_wrap_side_pay_in_that_says_the_wrap_closed() -> None:
+    g, texts = ramp_then_rest(1000, grasp_hold_min_payin_m=0.030)  # 20 mm paid in: stalled open
+    assert g.wrap_payin_m == pytest.approx(0.020, abs=5e-5)
+    assert g.state == GraspState.FAILED and g.curl_n == g._wrap_n  # the tension is kept
+    assert texts[-1] == "grasp FAILED: wrap stalled open: 20.0 mm paid in < 30.0"
+    g, texts = ramp_then_rest(2000, grasp_hold_min_payin_m=0.030)  # 40 mm: closed
+    assert g.state == GraspState.HOLD and "40.0 mm paid in" in texts[-1]
+
+
+def test_an_empty_curl_is_not_a_hold() -> None:
+    g, texts = ramp_then_rest(4000, grasp_hold_max_payin_m=0.060)  # 80 mm: nothing stopped the curl
+    assert g.state == GraspState.FAILED
+    assert texts[-1] == "grasp FAILED: empty curl: 80.0 mm paid in > 60.0"
+    g, _ = ramp_then_rest(2000, grasp_hold_min_payin_m=0.030, grasp_hold_max_payin_m=0.060)
+    assert g.state == GraspState.HOLD
+    g, _ = ramp_then_rest(4000)  # both rules off (the default): a rest at the wrap tension is HOLD
+    assert g.state == GraspState.HOLD
+
+
+def test_the_pay_in_counts_from_each_wrap_take_up_included() -> None:
+    g, c = machine(grasp_hold_min_payin_m=0.001)
+    contact_ms = c.grasp.contact_dwell_us // 1000 + 1
+    t = start_reach(g)
+    t = run(g, run(g, t, 300), contact_ms, speed=STALLED)  # unrolling, then blocked: contact
+    assert g.state == GraspState.WRAP and g.wrap_payin_m == 0.0
+    t = run(g, t, 100, speed=[0.01, 0.01, 0.01])  # the take-up reels the wrap side in
+    assert g.state == GraspState.WRAP and g.wrap_payin_m == pytest.approx(0.001, abs=2e-5)
+    g.request_release(t)
+    t = start_reach(g, run(g, t, 3000, speed=STALLED))
+    run(g, run(g, t, 300), contact_ms, speed=STALLED)
+    assert g.state == GraspState.WRAP and g.wrap_payin_m == 0.0  # a new wrap counts from zero
+
+
+def test_the_pay_in_window_must_be_a_window() -> None:
+    with pytest.raises(ConfigError, match="grasp_hold_max_payin_m"):
+        FirmwareConfig().replaced(grasp_hold_min_payin_m=0.04, grasp_hold_max_payin_m=0.03)
+    FirmwareConfig().replaced(grasp_hold_min_payin_m=0.04)  # the ceiling off
+
+
 def test_requests_in_wrong_states() -> None:
     g, _ = machine()
     assert g.request_hold(0) == AckResult.REJECTED  # nothing to hold in IDLE

@@ -92,7 +92,13 @@ def test_run_time_parameters_fit_the_wire_in_their_index_order() -> None:
         "TORQUE_K_NM_A",
         "CURRENT_LIMIT_A",
     )
-    assert PARAMS[-3:] == ("GRASP_WRAP_M_S", "PAYIN_MAX_M_S", "GRASP_REST_M")
+    assert PARAMS[-5:] == (
+        "GRASP_WRAP_M_S",
+        "PAYIN_MAX_M_S",
+        "GRASP_REST_M",
+        "GRASP_HOLD_MIN_M",
+        "GRASP_HOLD_MAX_M",
+    )
 
 
 def test_the_safety_parameters_are_the_documented_seven() -> None:
