@@ -5,7 +5,9 @@ item 5).
 Both run the same placements in this process, interleaved trial by trial (so a busy machine slows both
 alike), and the figures are trials per minute of this process's CPU time (wall time beside it).
 
-It also says whether the physics is the same: the paired outcomes (success rates with Wilson intervals,
+It prints where a physics step's time goes (MuJoCo's stage timers, and the time outside ``mj_step``: the
+firmware and the plant's Python), which bounds what any solver option can gain. It also says whether the
+physics is the same: the paired outcomes (success rates with Wilson intervals,
 the exact McNemar p of the discordant pairs), the largest penetration of each, and the free arm's drift
 between the two Jacobians under the same random currents (rounding, or a different plant).
 
@@ -19,6 +21,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 # Run as a script, this file's directory comes first on sys.path, where bench/protocol.py would shadow
@@ -26,6 +29,7 @@ from pathlib import Path
 _HERE = Path(__file__).resolve().parent
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 
+import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hil.experiments.stats import mcnemar_exact, wilson_interval  # noqa: E402
@@ -34,8 +38,17 @@ from hil.sim.plant import Plant  # noqa: E402
 from hil.sim.spiral import SpiralDesign  # noqa: E402
 from hil.sim.types import PlantConfig  # noqa: E402
 from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_trial  # noqa: E402
+from hil.trial.rig import Rig  # noqa: E402
 
 CONFIGS = (("auto (the default; sparse here)", "auto"), ("dense", "dense"))
+STAGES = (
+    ("step", "mjTIMER_STEP"),
+    ("position", "mjTIMER_POSITION"),
+    ("kinematics+tendons", "mjTIMER_POS_KINEMATICS"),
+    ("collision", "mjTIMER_POS_COLLISION"),
+    ("constraint", "mjTIMER_CONSTRAINT"),
+)
+"""MuJoCo's own stage timers (``MjData.timer``, wall time inside ``mj_step``) printed per physics step."""
 GOAL_SPEEDUP = 2.0
 
 
@@ -56,6 +69,16 @@ def placements(n: int, seed: int) -> list[tuple[float, float, float, bool]]:
 
 def model(jacobian: str) -> ModelConfig:
     return ModelConfig(solver=SolverConfig(timestep_s=PHYSICS_STEPS_S["fine"], jacobian=jacobian))
+
+
+def _keep_first(into: list[Rig]) -> Callable[[Rig], None]:
+    """An ``on_tick`` that keeps the trial's rig (its ``MjData`` holds the stage timers)."""
+
+    def keep(rig: Rig) -> None:
+        if not into:
+            into.append(rig)
+
+    return keep
 
 
 def drift_m(seconds: float, seed: int) -> float:
@@ -94,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
     cpu = {jac: 0.0 for _, jac in CONFIGS}
     wall = {jac: 0.0 for _, jac in CONFIGS}
     outs: dict[str, list[GraspOutcome]] = {jac: [] for _, jac in CONFIGS}
+    stage_s = {jac: dict.fromkeys([k for k, _ in STAGES], 0.0) for _, jac in CONFIGS}
+    steps = dict.fromkeys(cpu, 0)
     print(
         f"grasp throughput at the fine step ({PHYSICS_STEPS_S['fine'] * 1e3:g} ms): {args.trials} placements"
     )
@@ -101,10 +126,15 @@ def main(argv: list[str] | None = None) -> int:
         order = CONFIGS if i % 2 == 0 else CONFIGS[::-1]
         for _, jac in order:
             setup = GraspSetup(x, z, dia, strategy_on=on, model=model(jac), seed=args.seed + i)
+            rigs: list[Rig] = []
             c0, w0 = time.process_time(), time.perf_counter()
-            outs[jac].append(grasp_trial(setup, design))
+            outs[jac].append(grasp_trial(setup, design, on_tick=_keep_first(rigs)))
             cpu[jac] += time.process_time() - c0
             wall[jac] += time.perf_counter() - w0
+            timer = rigs[0].plant.mj_data.timer
+            steps[jac] += int(timer[int(mujoco.mjtTimer.mjTIMER_STEP)].number)
+            for key, name in STAGES:
+                stage_s[jac][key] += float(timer[int(getattr(mujoco.mjtTimer, name))].duration)
         print(f"  {i + 1}/{args.trials}", file=sys.stderr, flush=True)
     rate = {}
     for label, jac in CONFIGS:
@@ -117,6 +147,14 @@ def main(argv: list[str] | None = None) -> int:
             f"{label:28s} {rate[jac]:6.1f} trials per CPU-minute "
             f"({n / wall[jac] * 60.0:6.1f} per wall-minute); "
             f"success {wins}/{n} = {wins / n:.0%} [{lo:.2f}, {hi:.2f}]; largest penetration {pen:.2f} mm"
+        )
+    for label, jac in CONFIGS:
+        per = {k: v / max(1, steps[jac]) * 1e6 for k, v in stage_s[jac].items()}
+        outside = max(0.0, cpu[jac] - stage_s[jac]["step"]) / max(1, steps[jac]) * 1e6
+        print(
+            f"{label:28s} per physics step (MuJoCo's timers): "
+            + ", ".join(f"{k} {v:.0f} us" for k, v in per.items())
+            + f"; outside mj_step (firmware, plant in Python) {outside:.0f} us"
         )
     a, b = (outs[jac] for _, jac in CONFIGS)
     only_a = sum(x.success and not y.success for x, y in zip(a, b, strict=True))

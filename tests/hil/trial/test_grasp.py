@@ -3,10 +3,55 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
-from hil.trial.grasp import GraspSetup, grasp_trial
+from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial
+from hil.trial.rig import Rig
+from protocol.messages import GraspState
 
 
 def test_an_object_out_of_reach_is_a_failed_grasp() -> None:
     out = grasp_trial(GraspSetup(0.20, -0.05, 0.02, strategy_on=True))
     assert out.state == "FAILED" and not out.held and math.isnan(out.t_hold_s)
+
+
+def test_a_ramp_that_curls_in_the_air_is_held_without_the_ceiling_and_failed_with_it() -> None:
+    """The firmware's empty-curl rule on the real plant: the ramp closes on nothing (the object is half a
+    metre away), its pulling cables pay in as much as they ever do; with ``grasp_hold_max_payin_m`` under
+    that pay-in the board says FAILED with the figure, without it HOLD (nothing is held either way)."""
+    events: list[str] = []
+
+    def listen(rig: Rig) -> None:
+        """Hear the grasp machine's events as it pushes them (the board's link task takes them away)."""
+        queue = rig.firmware.grasp._events
+        if getattr(queue, "heard", False):
+            return
+        push = queue.push
+
+        def heard(time_us: int, kind: Any, code: int = 0, value: float = 0.0, text: str = "") -> None:
+            events.append(text)
+            push(time_us, kind, code, value, text)
+
+        queue.push = heard  # type: ignore[method-assign]
+        queue.heard = True  # type: ignore[attr-defined]
+
+    def air(**rules: float) -> tuple[GraspOutcome, float]:
+        paid: list[float] = []
+
+        def look(rig: Rig) -> None:
+            g = rig.firmware.grasp
+            if not paid and g.state in (GraspState.HOLD, GraspState.FAILED):
+                paid.append(g.wrap_payin_m)
+            listen(rig)
+
+        setup = GraspSetup(0.5, -0.12, 0.02, strategy_on=False, firmware=grasp_firmware(**rules))
+        return grasp_trial(setup, on_tick=look), paid[0]
+
+    free, paid = air()
+    assert free.state == "HOLD" and not free.held and paid > 0.05  # the prototype's empty curl: about 70 mm
+    events.clear()
+    ceiling = round(paid * 0.9, 4)
+    refused, paid_again = air(grasp_hold_max_payin_m=ceiling)
+    assert paid_again == paid  # the same physics up to the verdict
+    assert refused.state == "FAILED" and math.isnan(refused.t_hold_s)
+    assert f"grasp FAILED: empty curl: {paid * 1e3:.1f} mm paid in > {ceiling * 1e3:.1f}" in events
