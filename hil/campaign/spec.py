@@ -73,6 +73,7 @@ _DESIGN_KEYS = {
     "dtheta_deg": _FLOAT,
     "cables": _INT,
     "base_stiffness_nm_per_rad": _FLOAT,
+    "stiffness_exponent": _FLOAT,
     "cable_mu": _FLOAT,
     "arm_friction": _FLOAT,
 }
@@ -563,7 +564,8 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
 
     ``design.preset`` (default ``prototype``) gives the plant model and, unless physical inputs
     (``length_m``, ``tip_width_m``, ``taper_deg`` or ``b``, ``dtheta_deg``) are given, the design;
-    ``cables``, ``base_stiffness_nm_per_rad``, ``cable_mu`` and ``arm_friction`` change either;
+    ``cables``, ``base_stiffness_nm_per_rad``, ``stiffness_exponent``, ``cable_mu`` and ``arm_friction``
+    change either;
     ``design.physics`` (default ``physics``: ``fine`` for grasp trials, as the experiments run them,
     ``board`` for scenarios) names the physics step and constraint stiffness
     (:data:`~hil.sim.config.PHYSICS_STEPS_S`).
@@ -592,6 +594,7 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
             raise CampaignError(f"design has {design.units} units; at most {_MAX_UNITS_N} are modelled")
         arm_changes = {
             "base_stiffness_nm_per_rad": d.get("base_stiffness_nm_per_rad"),
+            "stiffness_exponent": d.get("stiffness_exponent"),
             "cable_mu": d.get("cable_mu"),
             "geom_friction": d.get("arm_friction"),
         }

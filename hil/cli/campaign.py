@@ -101,6 +101,13 @@ def configure_campaign(p: argparse.ArgumentParser) -> None:
         help="write a success map per design (PNG) into DIR, pictures of a success and a failure "
         "(rendered by MuJoCo) and campaign.md listing them",
     )
+    p.add_argument(
+        "--paired",
+        metavar="KEY",
+        help="a two-valued axis (e.g. controller.strategy_on): pair each run with the one that differs only "
+        "in KEY and say, per plant and controller, where KEY's larger value wins (exact McNemar; with "
+        "--report, claim_map.png)",
+    )
     p.add_argument("--top", type=int, default=10, metavar="N", help="designs in the table (default 10)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
 
@@ -139,6 +146,13 @@ def run_campaign_command(args: argparse.Namespace) -> int:
     if args.report is not None:  # checked before the first run, not after the last
         writable_dir(args.report, "write the maps into", PROG)
     runs = campaign.runs()
+    if args.paired is not None:
+        from hil.campaign.claims import arm_values
+
+        try:
+            arm_values([{"inputs": r.inputs} for r in runs], args.paired)
+        except ValueError as exc:
+            raise UsageError(f"--paired: {exc}", PROG) from None
     err = Console(stderr=True)
     executor = (
         f"Ray at {args.ray_address}"
@@ -254,6 +268,7 @@ def _summarise(
     if args.report is not None:
         pictures, notes = campaign_pictures(rows, args.report)
         index = write_index(args.report, "campaign", f"{campaign.kind} campaign", maps, pictures, notes)
+    paired = _paired(args, rows) if args.paired is not None else None
     if args.json:
         summary = {
             "file": str(out),
@@ -269,6 +284,8 @@ def _summarise(
             "pictures": [str(p) for _, pics in pictures for p in pics.paths],
             "report": None if index is None else str(index),
         }
+        if paired is not None:
+            summary["paired"] = paired
         print(json.dumps(summary, allow_nan=False))
         return EXIT_FAILURE if errors_n else EXIT_OK
     table = Table(
@@ -297,4 +314,69 @@ def _summarise(
             console.print(f"pictures: {line}", highlight=False, soft_wrap=True)
     if index is not None:
         console.print(f"report: {index}", highlight=False, soft_wrap=True)
+    if paired is not None:
+        _print_paired(console, paired)
     return EXIT_FAILURE if errors_n else EXIT_OK
+
+
+def _paired(args: argparse.Namespace, rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The claim's cells, its verdict and its map (with ``--report``), JSON-ready."""
+    from hil.campaign.claims import ALPHA, arm_values, claim_map, paired_cells, verdict
+
+    a, b = arm_values(rows, args.paired)
+    cells = paired_cells(rows, args.paired)
+    title = f"{args.paired}={a} minus {b}: success rate per cell (* p < {ALPHA:g})"
+    drawn = claim_map(cells, args.report / "claim_map.png", title) if args.report is not None else None
+    return {
+        "arm": args.paired,
+        "a": a,
+        "b": b,
+        "cells": [
+            {
+                "inputs": c.inputs,
+                "pairs": c.pairs,
+                "a_successes": c.a_successes,
+                "b_successes": c.b_successes,
+                "only_a": c.only_a,
+                "only_b": c.only_b,
+                "p": c.p,
+                "holds": c.holds,
+                "penetration_m": None if c.penetration_m != c.penetration_m else c.penetration_m,
+            }
+            for c in cells
+        ],
+        "verdict": verdict(cells, args.paired, a),
+        "map": None if drawn is None else str(drawn),
+    }
+
+
+def _print_paired(console: Console, paired: dict[str, Any]) -> None:
+    table = Table(
+        title=f"{paired['arm']} = {paired['a']} against {paired['b']}, paired per plant and controller",
+        title_justify="left",
+    )
+    for name in (
+        "cell",
+        "pairs",
+        str(paired["a"]),
+        str(paired["b"]),
+        "only a / only b",
+        "McNemar p",
+        "holds",
+    ):
+        table.add_column(name)
+    for c in paired["cells"]:
+        label = ", ".join(f"{k.partition('.')[2]}={v}" for k, v in sorted(c["inputs"].items())) or "all"
+        table.add_row(
+            label,
+            str(c["pairs"]),
+            str(c["a_successes"]),
+            str(c["b_successes"]),
+            f"{c['only_a']} / {c['only_b']}",
+            f"{c['p']:.2g}",
+            "yes" if c["holds"] else "no",
+        )
+    console.print(table)
+    console.print(f"verdict: {paired['verdict']}", highlight=False, soft_wrap=True)
+    if paired["map"]:
+        console.print(f"claim map: {paired['map']}", highlight=False, soft_wrap=True)

@@ -535,6 +535,23 @@ def test_a_sensitivity_variant_scales_its_parameter_and_a_bad_one_is_one_line() 
             build_design({"design.variant": bad})
 
 
+def test_the_size_law_is_an_axis_and_out_of_its_range_is_one_line() -> None:
+    _, base = build_design({}, physics="fine")
+    _, p2 = build_design({"design.stiffness_exponent": 2.0, "design.base_stiffness_nm_per_rad": 0.25})
+    assert (p2.arm.stiffness_exponent, p2.arm.base_stiffness_nm_per_rad) == (2.0, 0.25)
+    assert base.arm.stiffness_exponent == 3
+    with pytest.raises(CampaignError, match=r"design stiffness_exponent=5.0: .*stiffness_exponent"):
+        build_design({"design.stiffness_exponent": 5.0})
+
+
+def test_the_claims_strategy_example_expands_to_its_stated_runs() -> None:
+    path = Path(__file__).resolve().parents[3] / "examples" / "campaign_claims_strategy.toml"
+    runs = load_campaign(path, []).runs()
+    assert len(runs) == 384  # 2 mountings x 4 stiffnesses x 2 size laws x 12 placements x 2 arms
+    for r in runs[:: len(runs) // 8]:
+        build_design(r.inputs, physics="fine")  # every plant builds
+
+
 def test_the_sensitivity_strategy_example_expands_to_its_stated_runs() -> None:
     path = Path(__file__).resolve().parents[3] / "examples" / "campaign_sensitivity_strategy.toml"
     runs = load_campaign(path, []).runs()
