@@ -2,15 +2,16 @@
 
 A claim such as "the strategy grasps more than the plain ramp" is a comparison of two arms on the same
 placements. A campaign that varies the arm (``controller.strategy_on``) beside the plant's uncertain
-parameters (``design.*``) answers it per plant: every run is paired with the run that differs only in the
-arm, and each *cell* (one value of every other design and controller axis) gets the exact McNemar test of
-its discordant pairs. The claim **holds in a cell** when the arm it names (the larger value of the axis:
-``true`` for a switch) wins more discordant pairs with p < :data:`ALPHA`. The rule is fixed here, before any
-campaign is run with it; :func:`verdict` says in one sentence where it holds, or that it holds nowhere.
+parameters (``design.*``) answers it per plant: every run is paired with the run that differs only in
+the arm, and each *cell* (one value of every other design, controller and array axis) gets the exact
+McNemar test of its discordant pairs. The claim **holds in a cell** when the arm it names (the larger
+value of the axis: ``true`` for a switch) wins more discordant pairs with p < :data:`ALPHA`. The rule is
+fixed here, before any campaign is run with it; :func:`verdict` says in one sentence where it holds, or
+that it holds nowhere.
 
 :func:`claim_map` draws the cells as panels of heat maps (the difference of the two arms' success rates,
-each cell marked with both arms' successes of its pairs and p) when at most three design or controller
-axes besides the arm vary.
+each cell marked with both arms' successes of its pairs and p) when at most three of those axes besides
+the arm vary.
 """
 
 from __future__ import annotations
@@ -21,13 +22,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
+from hil.campaign.summary import CHOICE_PREFIXES
 from hil.experiments.stats import mcnemar_exact
 
 __all__ = ["ALPHA", "PairedCell", "claim_map", "paired_cells", "verdict"]
 
 ALPHA: Final = 0.05
 """A cell's claim holds at McNemar p below this (two-sided, exact), the named arm winning."""
-_CELL_PREFIXES = ("design.", "controller.")
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,7 +36,8 @@ class PairedCell:
     """One plant and controller, its pairs compared.
 
     Attributes:
-        inputs: the cell's ``design.*`` and ``controller.*`` inputs, the arm's axis left out.
+        inputs: the cell's design choices (:data:`~hil.campaign.summary.CHOICE_PREFIXES`), the arm's axis
+            left out.
         pairs: placements (and seeds) run with both arms, neither an error.
         a_successes: successes of the named arm (the axis's larger value).
         b_successes: successes of the other.
@@ -96,11 +98,11 @@ def paired_cells(rows: Sequence[Mapping[str, Any]], arm_key: str) -> list[Paired
     for r in rows:
         inputs = r["inputs"]
         cell = tuple(
-            sorted((k, repr(v)) for k, v in inputs.items() if k != arm_key and k.startswith(_CELL_PREFIXES))
+            sorted((k, repr(v)) for k, v in inputs.items() if k != arm_key and k.startswith(CHOICE_PREFIXES))
         )
         spot = tuple(
             sorted(
-                (k, repr(v)) for k, v in inputs.items() if k != arm_key and not k.startswith(_CELL_PREFIXES)
+                (k, repr(v)) for k, v in inputs.items() if k != arm_key and not k.startswith(CHOICE_PREFIXES)
             )
         )
         cells.setdefault(cell, {}).setdefault(spot, {})[inputs[arm_key]] = r
@@ -123,7 +125,7 @@ def paired_cells(rows: Sequence[Mapping[str, Any]], arm_key: str) -> list[Paired
         first = both[0][0]["inputs"]
         out.append(
             PairedCell(
-                {k: v for k, v in first.items() if k != arm_key and k.startswith(_CELL_PREFIXES)},
+                {k: v for k, v in first.items() if k != arm_key and k.startswith(CHOICE_PREFIXES)},
                 len(both),
                 sum(wins_a),
                 sum(wins_b),

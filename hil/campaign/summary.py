@@ -23,9 +23,11 @@ from hil.experiments.stats import wilson_interval
 if TYPE_CHECKING:
     from hil.render import Pictures
 
-__all__ = ["DesignRate", "campaign_pictures", "design_rates", "success_maps"]
+__all__ = ["CHOICE_PREFIXES", "DesignRate", "campaign_pictures", "design_rates", "success_maps"]
 
-_CHOICE_PREFIXES = ("design.", "controller.", "array.")
+CHOICE_PREFIXES = ("design.", "controller.", "array.")
+"""Inputs that choose a design (the arm, the plant, the firmware, an array's layout); the rest (the object,
+its placement, the seed, faults) are what a design is judged over."""
 _MAP_BINS_N = 8
 """The most cells along a placement axis of a map."""
 
@@ -77,7 +79,7 @@ def _fmt(v: Any) -> str:
 
 
 def _choice(row: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in row["inputs"].items() if k.startswith(_CHOICE_PREFIXES)}
+    return {k: v for k, v in row["inputs"].items() if k.startswith(CHOICE_PREFIXES)}
 
 
 def _group(rows: Iterable[Mapping[str, Any]]) -> dict[str, list[Mapping[str, Any]]]:
