@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import math
 import sys
 import threading
 import time
@@ -341,7 +342,7 @@ def _paired(args: argparse.Namespace, rows: list[dict[str, Any]]) -> dict[str, A
                 "only_b": c.only_b,
                 "p": c.p,
                 "holds": c.holds,
-                "penetration_m": None if c.penetration_m != c.penetration_m else c.penetration_m,
+                "penetration_m": None if math.isnan(c.penetration_m) else c.penetration_m,
             }
             for c in cells
         ],
