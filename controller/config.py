@@ -208,8 +208,8 @@ class GraspConfig:
         hold_min_payin_m: HOLD is evidence the wrap has closed, from the motors alone: the pulling cables
             must have paid in at least this since the wrap began (strategy on: since contact) when they
             come to rest at the wrap tension; short of it the wrap stalled open and the grasp is FAILED
-            (its tension kept). 0 = off. The prototype's 39 mm comes from a study of 40 placements
-            (docs/grasping.md): no HOLD below it held its object.
+            (its tension kept). 0 = off. On the prototype it does not separate held from dropped
+            grasps (docs/grasping.md): measured, not recommended.
         hold_max_payin_m: FAILED instead of HOLD when the pulling cables paid in more than this since the
             wrap began: nothing blocked the curl (an empty curl pays in the most). 0 = off; a lab sets it
             a little under the pay-in of a grasp in the air (``bench/hold.py`` measures it).
