@@ -19,6 +19,7 @@ Usage: ``.venv/bin/python bench/grasp.py [--trials 24] [--seed 0]``
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from collections.abc import Callable
@@ -33,7 +34,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hil.experiments.stats import mcnemar_exact, wilson_interval  # noqa: E402
-from hil.sim.config import PHYSICS_STEPS_S, ModelConfig, SolverConfig  # noqa: E402
+from hil.sim.config import PHYSICS_STEPS_S, ModelConfig  # noqa: E402
 from hil.sim.plant import Plant  # noqa: E402
 from hil.sim.spiral import SpiralDesign  # noqa: E402
 from hil.sim.types import PlantConfig  # noqa: E402
@@ -68,7 +69,8 @@ def placements(n: int, seed: int) -> list[tuple[float, float, float, bool]]:
 
 
 def model(jacobian: str) -> ModelConfig:
-    return ModelConfig(solver=SolverConfig(timestep_s=PHYSICS_STEPS_S["fine"], jacobian=jacobian))
+    fine = ModelConfig().with_physics(PHYSICS_STEPS_S["fine"])  # the experiments' step and constraints
+    return dataclasses.replace(fine, solver=dataclasses.replace(fine.solver, jacobian=jacobian))
 
 
 def _keep_first(into: list[Rig]) -> Callable[[Rig], None]:
