@@ -45,8 +45,9 @@ import numpy as np  # noqa: E402
 
 from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E402
 from hil.identify.fit import FitOptions, FitResult, fit  # noqa: E402
-from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor, si_interval  # noqa: E402
+from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor, si_interval, unexplained  # noqa: E402
 from hil.identify.motor_data import load_motor_data  # noqa: E402
+from hil.identify.starts import SETTLED_FACTOR  # noqa: E402
 from hil.identify.synthetic import (  # noqa: E402
     MISMATCHES,
     SensorLimits,
@@ -58,9 +59,16 @@ from hil.identify.windows import length_rms_m  # noqa: E402
 from hil.sim.config import ModelConfig, SolverConfig  # noqa: E402
 from hil.sim.spiral import SpiralDesign  # noqa: E402
 from hil.sim.uncertain import ID_PARAMS, apply, by_name, nominal  # noqa: E402
+from protocol.c610 import ANGLE_COUNTS  # noqa: E402
 
 _PRESET = nominal(ModelConfig())
 """The preset's values: the fit's optimizer coordinates are relative to them."""
+
+_MOTOR = ModelConfig().motor
+SETTLED_M = 2.0 * math.pi / (ANGLE_COUNTS * _MOTOR.gear_ratio) * _MOTOR.spool_radius_m / math.sqrt(12.0)
+SETTLED_M *= SETTLED_FACTOR
+"""The sensors' own noise on the prototype (``hil.identify.starts.settled_m`` of its recordings): the fit's
+default bound on what it may leave unexplained and still call a parameter identified."""
 
 GOAL_WITHIN = 0.10
 GOAL_DRAWS = 18 / 20
@@ -213,21 +221,43 @@ def fit_time_row(args: argparse.Namespace, work: Path) -> dict[str, Any]:
 _WIDTH_REASON = "95 % interval"
 
 
-def rejudged(x: dict[str, Any]) -> dict[str, Any]:
-    """A stored parameter row judged by today's width rule (:data:`IDENTIFIED_WITHIN` of its value) from its
-    stored interval; its other reasons (a bound, a correlation, an unconverged or unexplained fit) stay.
+def kept_rms_m(r: dict[str, Any]) -> float:
+    """The fitted cable lengths' error of the start a stored row kept (the least objective), as the fit
+    judges it; rows without starts say their traces' figure."""
+    starts = r.get("starts") or []
+    return float(min(starts)[1]) if starts else float(r["fitted_rms_m"])
 
-    Rows written under the earlier per-parameter thresholds (8-40 %, or an absolute width) so count as
-    the fit would call them now: the rule reads only the interval and the value, which the rows keep. The
-    interval is first floored at the solver's step (:func:`_floored`).
+
+def settled(r: dict[str, Any]) -> bool:
+    """The row's fit explained its recording to the sensors' own noise (:data:`SETTLED_M`)."""
+    return kept_rms_m(r) <= SETTLED_M
+
+
+def rejudged(x: dict[str, Any], rms_m: float = 0.0) -> dict[str, Any]:
+    """A stored parameter row judged by today's rules from its stored interval: the width rule
+    (:data:`IDENTIFIED_WITHIN` of its value) and the fit's default bound on what it may leave unexplained
+    (``rms_m``, the kept start's, against the sensors' noise); its other reasons (a bound, a correlation,
+    an unconverged fit) stay.
+
+    Rows written under the earlier rules (per-parameter thresholds of 8-40 %, or an absolute width; a fit
+    that explained its data within 0.3 mm) so count as the fit would call them now: the rules read only the
+    interval, the value and the kept start's error, which the rows keep. The interval is first floored at
+    the solver's step (:func:`_floored`).
     """
-    others = [part for part in x.get("why", "").split("; ") if part and not part.startswith(_WIDTH_REASON)]
+    kept = [
+        part
+        for part in x.get("why", "").split("; ")
+        if part and not part.startswith(_WIDTH_REASON) and "unexplained" not in part
+    ]
     x = _floored(x)
     half = 0.5 * (x["interval"][1] - x["interval"][0])
     limit = IDENTIFIED_WITHIN * abs(x["value"])
-    reasons = list(others)
+    reasons = list(kept)
     if not (math.isfinite(half) and half <= limit):
         reasons.insert(0, f"{_WIDTH_REASON} ±{half:.3g} is wider than ±{limit:.3g}")
+    why = unexplained(rms_m, None, SETTLED_M)
+    if why is not None:
+        reasons.append(why)
     return {**x, "identifiable": not reasons, "why": "; ".join(reasons)}
 
 
@@ -292,7 +322,11 @@ def _say(stage: str, fraction: float) -> None:
 
 def summarise(rows: list[dict[str, Any]]) -> None:
     """Print the goals' figures from every row there is."""
-    truths = [{**r, "params": [rejudged(x) for x in r["params"]]} for r in rows if r["kind"] == "truth"]
+    truths = [
+        {**r, "params": [rejudged(x, kept_rms_m(r)) for x in r["params"]]}
+        for r in rows
+        if r["kind"] == "truth"
+    ]
     if truths:
         n = len(truths)
         print(f"\nhidden truth: {n} draws, fit on the first {truths[0].get('fit_s', '?')} s of one recording")
@@ -332,6 +366,21 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             f"95 % intervals covering the truth: {c}/{len(all_cov)} = {c / len(all_cov):.0%} "
             f"[{lo:.2f}, {hi:.2f}] (goal >= {GOAL_COVERAGE:.0%})"
         )
+        for label, part in (("settled", True), ("did not settle", False)):
+            group = [bool(x["covered"]) for r in truths if settled(r) == part for x in r["params"]]
+            wrong = [
+                r["seed"]
+                for r in truths
+                if settled(r) == part and any(x["rel_error"] > GOAL_WITHIN for x in r["params"])
+            ]
+            if group:
+                lo, hi = wilson_interval(sum(group), len(group))
+                print(
+                    f"... in the {len(group) // max(1, len(truths[0]['params']))} draws whose fit {label} "
+                    f"(the sensors' noise: {SETTLED_M * 1e6:.2g} um): {sum(group)}/{len(group)} covered "
+                    f"[{lo:.2f}, {hi:.2f}]; draws with a fitted value more than 10 % off, identified or "
+                    f"not: {wrong or 'none'}"
+                )
         # Rows written before the intervals were widened by the remaining step carry no hac_covered.
         widened = [r for r in truths if all("hac_covered" in x for x in r["params"])]
         if widened:

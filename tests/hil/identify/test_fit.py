@@ -23,9 +23,6 @@ from hil.sim.spiral import SpiralDesign
 from hil.sim.uncertain import apply, by_name
 from tests.hil.identify.conftest import TRUTH
 
-EXPLAINED_WITHIN_M = 5e-6
-"""A bound on the fitted lengths' error far under the default (0.3 mm), that a model reproducing its own data
-(encoders of 0.2 um) still meets and the ``tiny`` capsule recording (12 um) does not."""
 # The recordings are made on MuJoCo's ``auto`` Jacobian, and these fits resolve 0.01 %: the fit's ``dense``
 # default differs from ``auto`` by rounding only, yet enough to move the damping by 0.03 %.
 FAST = FitOptions(
@@ -34,7 +31,6 @@ FAST = FitOptions(
     min_span_s=4.0,
     max_iters=6,
     jobs=2,
-    explained_within_m=EXPLAINED_WITHIN_M,
     jacobian=None,
 )
 
@@ -76,17 +72,22 @@ def test_a_fit_through_noisy_timing_converges_without_wasted_rollouts(tmp_path: 
 
 def test_a_model_that_cannot_follow_the_arm_identifies_nothing(tmp_path: Path) -> None:
     """Capsule units fitted with wedges: the fitted value is still reported (the best compromise, and the
-    model file keeps it), but no parameter is called identified, and the reason says by how much the model
-    misses. The same bound lets the right model's parameters through (the test above)."""
+    model file keeps it), but no parameter is called identified, and the reason says by how much the fit
+    misses the sensors' noise (the default bound, which lets the right model's parameters through: the
+    test above). A bound the lab sets (the twin's 0.3 mm) lets the compromise be judged by its interval."""
     path = tmp_path / "capsules.mcap"
     record_truth(path, {}, seed=4, profile_name="tiny", limits=SensorLimits(0.0, 0.0, 0), mismatch="capsules")
     opts = dataclasses.replace(FAST, params=("damping_ratio",), max_iters=4)
-    result = fit([load_motor_data(path)], ModelConfig(), opts)
-    assert result.rms_m(False) > EXPLAINED_WITHIN_M
+    data = load_motor_data(path)
+    result = fit([data], ModelConfig(), opts)
+    assert result.starts[0][1] > settled_m([data])
     (e,) = result.estimates
     assert math.isfinite(e.value)
     assert not e.identifiable
-    assert "unexplained" in e.why and "mm RMS" in e.why, e.why
+    assert "unexplained, more than the sensors' own noise" in e.why, e.why
+    lenient = fit([data], ModelConfig(), dataclasses.replace(opts, explained_within_m=3e-4))
+    (e,) = lenient.estimates
+    assert "unexplained" not in e.why, e.why
 
 
 def test_a_fit_that_leaves_more_than_the_sensors_noise_starts_again_and_keeps_the_best(

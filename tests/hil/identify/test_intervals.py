@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 from mujoco import minimize
 
-from hil.identify.intervals import IDENTIFIED_WITHIN, estimates, fd_floor, remaining_step
+from hil.identify.intervals import (
+    IDENTIFIED_WITHIN,
+    TWIN_TARGET_M,
+    estimates,
+    fd_floor,
+    remaining_step,
+    unexplained,
+)
 from hil.sim.config import ModelConfig
 from hil.sim.uncertain import by_name, nominal
 
@@ -119,3 +126,22 @@ def test_the_interval_floor_is_the_solvers_own_finite_difference_step() -> None:
         floor_x=fd_floor(np.array([0.11]), 0.01),
     )
     assert e.half_width == pytest.approx(0.01 * row.scale)  # a 0.11 ms delay: ±10 µs, not ±0.1 µs
+
+
+def test_a_fit_explains_its_data_only_down_to_the_sensors_noise_by_default() -> None:
+    """By default the bound is the sensors' own noise: a fit that leaves more stopped in a minimum that is
+    not the arm's, or its model cannot follow the arm, and the reason says so with both figures. A bound
+    the user sets is the weaker claim and says it in millimetres; an unknown noise falls back to the
+    twin's accuracy target."""
+    noise = 0.6e-6
+    assert unexplained(0.5e-6, None, noise) is None
+    why = unexplained(2.1e-6, None, noise)
+    assert why is not None and "2.1 um" in why and "sensors' own noise (0.6 um)" in why, why
+    assert unexplained(2.1e-6, 3e-4, noise) is None
+    why = unexplained(0.4e-3, 3e-4, noise)
+    assert why is not None and "0.4 mm" in why and "0.3 mm" in why, why
+    assert unexplained(0.2e-3, None, math.nan) is None
+    assert unexplained(2 * TWIN_TARGET_M, None, math.nan) is not None
+    assert unexplained(math.nan, None, noise) == (
+        "the fitted model's cable lengths could not be compared with the recording"
+    )
