@@ -236,18 +236,22 @@ def settled(r: dict[str, Any]) -> bool:
 def rejudged(x: dict[str, Any], rms_m: float = 0.0) -> dict[str, Any]:
     """A stored parameter row judged by today's rules from its stored interval: the width rule
     (:data:`IDENTIFIED_WITHIN` of its value) and the fit's default bound on what it may leave unexplained
-    (``rms_m``, the kept start's, against the sensors' noise); its other reasons (a bound, a correlation,
-    an unconverged fit) stay.
+    (``rms_m``, the kept start's, against the sensors' noise, which also counts as converged); its other
+    reasons (a bound, a correlation, an unconverged fit that did not settle) stay.
 
     Rows written under the earlier rules (per-parameter thresholds of 8-40 %, or an absolute width; a fit
     that explained its data within 0.3 mm) so count as the fit would call them now: the rules read only the
     interval, the value and the kept start's error, which the rows keep. The interval is first floored at
     the solver's step (:func:`_floored`).
     """
+    at_noise = rms_m <= SETTLED_M  # a fit that settled counts as converged (hil.identify.fit)
     kept = [
         part
         for part in x.get("why", "").split("; ")
-        if part and not part.startswith(_WIDTH_REASON) and "unexplained" not in part
+        if part
+        and not part.startswith(_WIDTH_REASON)
+        and "unexplained" not in part
+        and not (at_noise and part.startswith("the fit had not converged"))
     ]
     x = _floored(x)
     half = 0.5 * (x["interval"][1] - x["interval"][0])

@@ -555,10 +555,13 @@ def fit(
         cond = float(np.linalg.cond(jac)) if jac.size else math.nan
         fitted_si = problem.si_values(opt_params)
         fitted_model = apply(preset, fitted_si)
-        # Converged: the solver stopped on its own, the objective no longer fell, or the last step moved
-        # every parameter by less than half its interval (further steps cannot take it out of it).
+        # Converged: the solver stopped on its own, the objective no longer fell, the last step moved
+        # every parameter by less than half its interval (further steps cannot take it out of it), or the
+        # fit explains the data to the sensors' noise: what is left to explain is noise, its steps wander
+        # in it, and the interval is widened by the step to the minimum anyway (``remaining_step``).
         converged = (
             len(objective) <= opts.max_iters
+            or best.length_rms_m <= settled
             or (len(objective) >= 2 and 1.0 - objective[-1] / max(objective[-2], 1e-300) < converged_below)
             or (bool(steps) and len(steps[-1]) == len(half) and bool(np.all(steps[-1] <= 0.5 * half)))
         )

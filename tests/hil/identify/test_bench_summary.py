@@ -55,10 +55,13 @@ def _row(seed: int, kept_rms_m: float, off: dict[str, float]) -> dict[str, Any]:
 def test_a_stored_fit_that_did_not_settle_is_judged_to_identify_nothing(tmp_path: Path) -> None:
     """Two rows written by the earlier rule (a fit explained its data within 0.3 mm): one settled at the
     sensors' noise and right, one stopped at 2.1 um and called a damping 17 % off identified. Judged
-    again, the second identifies nothing (its kept start, not its first, decides), and the coverage is
-    printed apart for fits that settled and fits that did not."""
+    again, the second identifies nothing (its kept start, not its first, decides), the first everything
+    although it stopped at its iteration cap, and the coverage is printed apart for fits that settled and
+    fits that did not."""
     rows = tmp_path / "rows.jsonl"
     settled = _row(22, 0.06e-6, {})
+    for x in settled["params"]:  # at its iteration cap: a fit that settled counts as converged
+        x["identifiable"], x["why"] = False, "the fit had not converged after 25 iterations"
     stuck = _row(26, 2.1e-6, {"damping_ratio": 0.17})
     rows.write_text("".join(json.dumps(r) + "\n" for r in (settled, stuck)), encoding="utf-8")
     run = subprocess.run(
@@ -72,6 +75,7 @@ def test_a_stored_fit_that_did_not_settle_is_judged_to_identify_nothing(tmp_path
     out = run.stdout
     assert "draws whose every identifiable parameter is within 10 %: 2/2" in out, out
     assert "called nothing identified (met by refusing): seeds [26]" in out, out
+    assert "delay                      1/2          1/1" in out, out
     assert "damping_ratio              1/2          1/1            1/2" in out, out
     assert "in the 1 draws whose fit settled (the sensors' noise: 0.62 um): 8/8 covered" in out, out
     assert "in the 1 draws whose fit did not settle (the sensors' noise: 0.62 um): 7/8 covered" in out, out
