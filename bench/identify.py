@@ -17,11 +17,16 @@ Every row is written to ``--out`` (JSON lines) as it finishes; ``--resume`` skip
 Prints the figures and their intervals (Wilson for rates, bootstrap for medians) with the sample sizes.
 
 ``--no-timing-noise`` records without late feedback frames and tick jitter (the current noise stays).
+``--line`` reads the rows of ``--out`` and prints, per draw, the fit's objective along the straight line from
+its fitted values to its truth's (``--line-params``: move only these, the others at the fit's values or,
+with ``--line-others truth``, the truth's; ``--line-t``: the points), with the
+same recording: a wall between them is a local minimum the solver cannot leave (docs/identify.md 6).
 ``--known-torque`` gives each draw's true torque constant to the fit (as a lab gives the datasheet's, or a
 bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
 
 Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]
-[--known-torque] [--jacobian dense] [--shard J/K] [--seeds A,B] [--resume] [--summary-only]``
+[--known-torque] [--jacobian dense] [--shard J/K] [--seeds A,B] [--resume] [--summary-only]
+[--line [--line-params A,B] [--line-others fit|truth] [--line-t 0,0.5,1]]``
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _HERE]
 import numpy as np  # noqa: E402
 
 from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E402
-from hil.identify.fit import FitOptions, FitResult, fit  # noqa: E402
+from hil.identify.fit import FitOptions, FitResult, fit, objective_at  # noqa: E402
 from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor, si_interval, unexplained  # noqa: E402
 from hil.identify.motor_data import load_motor_data  # noqa: E402
 from hil.identify.starts import SETTLED_FACTOR  # noqa: E402
@@ -441,6 +446,58 @@ def summarise(rows: list[dict[str, Any]]) -> None:
             )
 
 
+def line_to_truth(
+    row: dict[str, Any], args: argparse.Namespace, work: Path
+) -> list[tuple[float, float, float]]:
+    """(t, objective, cable-length RMS [m]) along the line from a stored row's fitted values (t = 0) to its
+    truth's (t = 1), on the draw's first recording made again (the same seed, profile and Jacobian)."""
+    seed = int(row["seed"])
+    truth = draw_truth(np.random.default_rng(seed))
+    path = work / f"truth{seed}-0.mcap"
+    limits = None if row.get("timing_noise", True) else SensorLimits(can_late_rate=0.0, loop_jitter_us=0)
+    base = ModelConfig(solver=SolverConfig(jacobian=row.get("jacobian", args.jacobian)))
+    record_truth(path, truth, seed=1000 * seed, profile_name=args.profile, limits=limits, preset=base)
+    known = dict(row.get("known") or {})
+    fitted = {x["name"]: float(x["value"]) for x in row["params"]}
+    move = set(args.line_params.split(",")) if args.line_params else set(fitted)
+    ts = [float(v) for v in args.line_t.split(",")]
+    rest = truth if args.line_others == "truth" else fitted  # where the parameters not moved stay
+    points = [{n: v + t * (truth[n] - v) if n in move else rest[n] for n, v in fitted.items()} for t in ts]
+    fit_s = float(row.get("fit_s", args.fit_s))
+    opts = FitOptions(params=tuple(fitted), budget_s=fit_s, min_span_s=fit_s, jobs=args.jobs, jacobian=None)
+    values = objective_at([load_motor_data(path)], apply(base, known), opts, points)
+    return [(t, obj, rms) for t, (obj, rms) in zip(ts, values, strict=True)]
+
+
+def _lines(rows: list[dict[str, Any]], args: argparse.Namespace) -> int:
+    """``--line``: the objective along the line from each stored fit to its truth."""
+    truths = [r for r in rows if r["kind"] == "truth" and (not args.seeds or r["seed"] in _seeds(args.seeds))]
+    if not truths:
+        print(f"{args.out}: no hidden-truth rows (--line reads them)", file=sys.stderr)
+        return 1
+    try:
+        [float(v) for v in args.line_t.split(",")]
+    except ValueError:
+        print(f"--line-t {args.line_t!r}: numbers A,B,...", file=sys.stderr)
+        return 2
+    names = {x["name"] for r in truths for x in r["params"]}
+    unknown = sorted(set(args.line_params.split(",")) - names) if args.line_params else []
+    if unknown:
+        print(f"--line-params: {', '.join(unknown)} not fitted in these rows", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory(prefix="bench-identify-line-") as tmp:
+        for r in truths:
+            moved = (
+                f"{args.line_params}, the others at the {args.line_others}'s"
+                if args.line_params
+                else "every parameter"
+            )
+            print(f"draw {r['seed']}: from the fit (t = 0) to the truth (t = 1), moving {moved}", flush=True)
+            for t, obj, rms in line_to_truth(r, args, Path(tmp)):
+                print(f"  t = {t:.3g}: objective {obj:.4g}, cable lengths {rms * 1e6:.3g} um RMS", flush=True)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=20, help="hidden-truth draws (0: none)")
@@ -482,6 +539,18 @@ def main(argv: list[str] | None = None) -> int:
     )
     ap.add_argument("--summary-only", action="store_true", help="print the figures of --out; run nothing")
     ap.add_argument("--seeds", help="these draws' seeds (A,B,...) instead of the first --draws")
+    ap.add_argument(
+        "--line", action="store_true", help="the objective from each row's fit to its truth (rows of --out)"
+    )
+    ap.add_argument("--line-params", help="with --line: move only these parameters (A,B,...)")
+    ap.add_argument("--line-t", default="0,0.25,0.5,0.75,1", help="with --line: the points (0 fit, 1 truth)")
+    ap.add_argument(
+        "--line-others",
+        choices=("fit", "truth"),
+        default="fit",
+        help="with --line-params: the other parameters at the fit's values or the truth's (a probe of the "
+        "objective around the truth)",
+    )
     args = ap.parse_args(argv)
     try:
         shard, shards = (int(v) for v in args.shard.split("/"))
@@ -498,7 +567,7 @@ def main(argv: list[str] | None = None) -> int:
         args.draws, args.profile, args.fit_s = 3, "quick", 12.0
     args.out.parent.mkdir(parents=True, exist_ok=True)
     rows: list[dict[str, Any]] = []
-    if (args.resume or args.summary_only) and args.out.exists():
+    if (args.resume or args.summary_only or args.line) and args.out.exists():
         rows = [json.loads(line) for line in args.out.read_text().splitlines() if line.strip()]
     done = {(r["kind"], r.get("seed"), r.get("name")) for r in rows}
     if args.summary_only:
@@ -507,6 +576,8 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         summarise(rows)
         return 0
+    if args.line:
+        return _lines(rows, args)
     print(
         f"identification benchmark: {args.draws} draws of '{args.profile}', fit on {args.fit_s:g} s",
         flush=True,

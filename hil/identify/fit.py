@@ -26,11 +26,12 @@ identifiable (its half-width within 10 % of its value: :data:`~hil.identify.inte
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import io
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Final
@@ -61,7 +62,7 @@ from hil.sim.mjcf import build_mjcf
 from hil.sim.spiral import SpiralDesign
 from hil.sim.uncertain import ID_PARAMS, IdParam, apply, nominal
 
-__all__ = ["FitError", "FitOptions", "FitResult", "Trace", "fit"]
+__all__ = ["FitError", "FitOptions", "FitResult", "Trace", "fit", "objective_at"]
 
 FloatArray = NDArray[np.float64]
 
@@ -465,6 +466,72 @@ def _solve(start: Any, residual_fn: Any, opts: FitOptions, say: ProgressFn, k: i
     return _Run(final, params, result, objective, steps, res, rms)
 
 
+@contextlib.contextmanager
+def _objective(
+    recordings: Sequence[MotorData], preset: ModelConfig, opts: FitOptions, design: SpiralDesign | None
+) -> Iterator[tuple[_Problem, Any, Any]]:
+    """The fit's problem, its residual function (the toolbox's, around our rollout) and the measured
+    sequences, with the rollouts' worker pool open."""
+    if not recordings:
+        raise FitError("no recordings")
+    designs = {rec.design for rec in recordings if rec.design is not None}
+    if design is None:
+        if len(designs) > 1:
+            raise FitError("the recordings were made with different arm designs")
+        design = next(iter(designs)) if designs else SpiralDesign.paper_prototype()
+    rows = [r for r in ID_PARAMS if r.name in opts.params]
+    if not rows:
+        raise FitError("no parameter to fit")
+    chosen = [prepare_window(rec, end, opts.residual_period_s) for rec, end in _spans(recordings, opts)]
+    with RolloutPool(opts.jobs) as pool:
+        problem = _Problem(design, preset, rows, chosen, opts, pool)
+        measured = problem.measured()
+        residual_fn = sysid.build_residual_fn(
+            models_sequences=[measured],
+            build_model=problem.build_model,
+            custom_rollout=problem.rollout,
+            modify_residual=problem.residual,
+            n_threads=1,
+            resample_true=False,
+        )
+        yield problem, residual_fn, measured
+
+
+def objective_at(
+    recordings: Sequence[MotorData],
+    preset: ModelConfig,
+    options: FitOptions,
+    points: Sequence[Mapping[str, float]],
+    *,
+    design: SpiralDesign | None = None,
+) -> list[tuple[float, float]]:
+    """The fit's objective and its cable-length RMS error [m] (on the samples the fit sees) at each of
+    ``points`` (the fitted parameters' values, in their units; a parameter a point leaves out keeps the
+    preset's): the landscape the solver walks, e.g. along the line from a fit to a hidden truth.
+
+    Raises:
+        FitError: as :func:`fit`.
+    """
+    out: list[tuple[float, float]] = []
+    with _objective(recordings, preset, options, design) as (problem, residual_fn, _):
+        at = problem.params(off_bounds=False)
+        for point in points:
+            x = np.array(
+                [
+                    r.to_x(point.get(r.name, problem.preset_values[r.name]), problem.preset_values[r.name])
+                    for r in problem.rows
+                ]
+            )
+            pd = at.copy()
+            pd.update_from_vector(x)
+            res = residual_fn(x, pd)[0]
+            flat = np.concatenate([np.asarray(a, dtype=np.float64).ravel() for a in res])
+            lengths = np.concatenate([np.asarray(a).reshape(-1, CH)[:, LEN].ravel() for a in res])
+            rms = float(np.sqrt(np.mean(lengths**2))) * options.sigma_length_m if lengths.size else math.nan
+            out.append((0.5 * float(flat @ flat), rms))
+    return out
+
+
 def fit(
     recordings: Sequence[MotorData],
     preset: ModelConfig,
@@ -490,32 +557,13 @@ def fit(
     """
     opts = options or FitOptions()
     t_start = time.monotonic()
-    if not recordings:
-        raise FitError("no recordings")
-    designs = {rec.design for rec in recordings if rec.design is not None}
-    if design is None:
-        if len(designs) > 1:
-            raise FitError("the recordings were made with different arm designs")
-        design = next(iter(designs)) if designs else SpiralDesign.paper_prototype()
-    rows = [r for r in ID_PARAMS if r.name in opts.params]
-    if not rows:
-        raise FitError("no parameter to fit")
-    chosen = [prepare_window(rec, end, opts.residual_period_s) for rec, end in _spans(recordings, opts)]
     say = progress or (lambda stage, frac: None)
-    with RolloutPool(opts.jobs) as pool:
-        problem = _Problem(design, preset, rows, chosen, opts, pool)
+    with _objective(recordings, preset, opts, design) as (problem, residual_fn, measured):
+        pool = problem.pool
+        rows = problem.rows
         # A parameter whose preset sits on a bound (no joint friction) starts a little inside:
         # Levenberg-Marquardt can stall in a corner of the box.
         initial = problem.params().move_off_bounds()
-        measured = problem.measured()
-        residual_fn = sysid.build_residual_fn(
-            models_sequences=[measured],
-            build_model=problem.build_model,
-            custom_rollout=problem.rollout,
-            modify_residual=problem.residual,
-            n_threads=1,
-            resample_true=False,
-        )
         runs = [_solve(initial, residual_fn, opts, say, 0)]
         settled = settled_m(recordings)
         lower, upper = initial.get_bounds()
@@ -572,7 +620,7 @@ def fit(
             )
         say("measured against simulated", 0.95)
         traces = _traces(
-            problem, recordings, {w.recording.name: w.end for w in chosen}, fitted_model, preset, pool
+            problem, recordings, {w.recording.name: w.end for w in problem.wins}, fitted_model, preset, pool
         )
         fitted_estimates = estimates(
             problem.preset_values,

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from hil.identify.synthetic import draw_truth
 from hil.sim.config import ModelConfig
 from hil.sim.uncertain import ID_PARAMS, nominal
 
@@ -80,3 +84,40 @@ def test_a_stored_fit_that_did_not_settle_is_judged_to_identify_nothing(tmp_path
     assert "in the 1 draws whose fit settled (the sensors' noise: 0.62 um): 8/8 covered" in out, out
     assert "in the 1 draws whose fit did not settle (the sensors' noise: 0.62 um): 7/8 covered" in out, out
     assert "identified or not: [26]" in out, out
+
+
+def _bench(*args: str) -> subprocess.CompletedProcess[str]:
+    cmd = [sys.executable, str(ROOT / "bench" / "identify.py"), *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=ROOT)
+
+
+def test_the_line_from_a_fit_to_its_truth_ends_at_the_sensors_noise(tmp_path: Path) -> None:
+    """``--line`` makes the draw's recording again and walks the fit's objective from a stored fit (here its
+    truth with the damping 20 % high) to the truth: real MuJoCo, the fit's own residual. At the truth the
+    objective is lowest and the cable lengths are left at the encoders' noise."""
+    seed = 3
+    truth = draw_truth(np.random.default_rng(seed))
+    row = _row(seed, 1e-6, {})
+    for x in row["params"]:
+        x["truth"] = truth[x["name"]]
+        x["value"] = truth[x["name"]] * (1.2 if x["name"] == "damping_ratio" else 1.0)
+    row.update(known={"torque_scale": truth["torque_scale"]}, jacobian="auto", timing_noise=True, fit_s=4.0)
+    rows = tmp_path / "rows.jsonl"
+    rows.write_text(json.dumps(row) + "\n", encoding="utf-8")
+    run = _bench("--line", "--out", str(rows), "--profile", "tiny", "--line-t", "0,1", "--jobs", "1")
+    assert run.returncode == 0, run.stderr
+    found = re.findall(r"t = (\S+): objective (\S+), cable lengths (\S+) um RMS", run.stdout)
+    assert [t for t, _, _ in found] == ["0", "1"], run.stdout
+    (_, at_fit, _), (_, at_truth, truth_um) = found
+    assert float(at_truth) < 0.1 * float(at_fit), run.stdout
+    assert float(truth_um) < 0.62, run.stdout
+    # Only the damping moved, the others at the truth's: at t = 1 that is the truth again, to the digit.
+    probe = _bench(
+        "--line", "--out", str(rows), "--profile", "tiny", "--line-t", "1", "--jobs", "1",
+        "--line-params", "damping_ratio", "--line-others", "truth",
+    )  # fmt: skip
+    assert probe.returncode == 0, probe.stderr
+    assert f"t = 1: objective {at_truth}," in probe.stdout, probe.stdout
+    assert "moving damping_ratio, the others at the truth's" in probe.stdout, probe.stdout
+    bad = _bench("--line", "--out", str(rows), "--line-params", "no_such_param")
+    assert bad.returncode == 2 and "no_such_param not fitted" in bad.stderr, bad.stderr
