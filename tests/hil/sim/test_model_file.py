@@ -4,6 +4,7 @@ every bad file is one line."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from pathlib import Path
 
@@ -105,3 +106,17 @@ def test_nan_intervals_survive(tmp_path: Path) -> None:
     write_model_file(tmp_path / "a.toml", ModelFile(m.preset, m.design, {"delay": p}))
     back = read_model_file(tmp_path / "a.toml").parameters["delay"]
     assert all(math.isnan(x) for x in back.interval)
+
+
+def test_the_shipped_soft_plant_is_the_prototype_with_a_softer_base_joint() -> None:
+    """examples/plant_soft_base.toml (the claims map's soft cell, docs/experiments.md) is a model file that
+    changes the base joint's stiffness alone: the design, the size law and everything else are the
+    prototype's."""
+    path = Path(__file__).resolve().parents[3] / "examples" / "plant_soft_base.toml"
+    soft = resolve(str(path)).model
+    proto = PRESETS["prototype"].model
+    assert soft.arm.base_stiffness_nm_per_rad == 0.125
+    assert soft.arm.stiffness_exponent == proto.arm.stiffness_exponent == 3.0
+    base = proto.arm.base_stiffness_nm_per_rad
+    assert dataclasses.replace(soft.arm, base_stiffness_nm_per_rad=base) == proto.arm
+    assert soft.motor == proto.motor
