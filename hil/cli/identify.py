@@ -203,7 +203,9 @@ def run_identify_command(args: argparse.Namespace) -> int:
     else:
         _print(result, args.output, page, known)
         delay_fitted = any(e.name == "delay" for e in result.estimates)
-        hint = local_minimum_hint(result.starts, settled_m(data), args.restarts, delay_fitted)
+        hint = local_minimum_hint(
+            result.starts, settled_m(data), args.restarts, delay_fitted, args.explained_within_mm is None
+        )
         if hint:
             Console().print(f"[yellow]{hint}", highlight=False)
     return EXIT_OK
@@ -350,13 +352,18 @@ def _finite(value: Any) -> Any:
 
 
 def local_minimum_hint(
-    starts: Sequence[tuple[float, float]], settled: float, restarts: int, delay_fitted: bool = True
+    starts: Sequence[tuple[float, float]],
+    settled: float,
+    restarts: int,
+    delay_fitted: bool = True,
+    bound_is_noise: bool = True,
 ) -> str | None:
     """What to do when the best start left more than the encoders' noise (``settled``, m), or None.
 
     ``starts`` are the fit's ``(objective, fitted length RMS in m)``, one per start. In the hidden-truth
     draws every wrong fit left more than that, and no fit that left less was wrong (docs/identify.md section
-    6); a real arm's fit always leaves more, so the hint says what it can and cannot mean.
+    6); a real arm's fit always leaves more, so the hint says what it can and cannot mean. With
+    ``bound_is_noise`` (no ``--explained-within-mm``) it also says why nothing is called identified.
     """
     if not starts or not math.isfinite(settled):
         return None
@@ -364,7 +371,13 @@ def local_minimum_hint(
     if not rms > settled:
         return None
     left = (
-        f"the fit left {_mm(rms)} mm on its samples, over ten times the encoders' noise ({_mm(settled)} mm)"
+        f"the fit left {_mm(rms)} mm on its samples, more than the sensors' noise ({_mm(settled)} mm, ten "
+        "times the encoders' quantization RMS)"
+    )
+    why = (
+        " Below that no parameter is called identified (--explained-within-mm sets a weaker bound)."
+        if bound_is_noise
+        else ""
     )
     if restarts == 0:
         cells = " and ".join(f"{1e3 * v:g}" for v in DELAY_CELLS_S)
@@ -372,9 +385,9 @@ def local_minimum_hint(
         return (
             f"{left}: a model that follows its arm gets there, so it may have stopped in a local minimum; "
             f"--restarts 2 starts again {where} (about one fit's time each). "
-            "No model follows a real arm to its encoders' noise: there this only says the model misses."
+            "No model follows a real arm to its encoders' noise: there this only says the model misses." + why
         )
     return (
         f"{left} after {len(starts)} starts: either the model cannot follow this arm (compare the report's "
-        "traces) or every start stopped in a local minimum"
+        "traces) or every start stopped in a local minimum." + why
     )

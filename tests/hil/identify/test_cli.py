@@ -100,3 +100,8 @@ def test_a_fit_that_left_more_than_the_encoders_noise_says_what_to_do() -> None:
     after = local_minimum_hint([(14424.0, 0.19e-3), (2925.0, 0.086e-3)], settled, 2)
     assert after is not None and "0.086 mm" in after and "after 2 starts" in after
     assert "--restarts" not in after
+    # With the default bound (the sensors' noise) it says why nothing is identified; with a bound the user
+    # set it does not.
+    assert "no parameter is called identified" in after and "ten times the encoders' quantization" in after
+    weaker = local_minimum_hint([(14424.0, 0.19e-3)], settled, 2, bound_is_noise=False)
+    assert weaker is not None and "identified" not in weaker
