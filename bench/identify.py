@@ -51,8 +51,8 @@ import numpy as np  # noqa: E402
 from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E402
 from hil.identify.fit import FitOptions, FitResult, fit, objective_at  # noqa: E402
 from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor, si_interval, unexplained  # noqa: E402
-from hil.identify.motor_data import load_motor_data  # noqa: E402
-from hil.identify.starts import SETTLED_FACTOR  # noqa: E402
+from hil.identify.motor_data import length_quantum_m, load_motor_data  # noqa: E402
+from hil.identify.starts import settled_for  # noqa: E402
 from hil.identify.synthetic import (  # noqa: E402
     MISMATCHES,
     SensorLimits,
@@ -64,14 +64,11 @@ from hil.identify.windows import length_rms_m  # noqa: E402
 from hil.sim.config import ModelConfig, SolverConfig  # noqa: E402
 from hil.sim.spiral import SpiralDesign  # noqa: E402
 from hil.sim.uncertain import ID_PARAMS, apply, by_name, nominal  # noqa: E402
-from protocol.c610 import ANGLE_COUNTS  # noqa: E402
 
 _PRESET = nominal(ModelConfig())
 """The preset's values: the fit's optimizer coordinates are relative to them."""
 
-_MOTOR = ModelConfig().motor
-SETTLED_M = 2.0 * math.pi / (ANGLE_COUNTS * _MOTOR.gear_ratio) * _MOTOR.spool_radius_m / math.sqrt(12.0)
-SETTLED_M *= SETTLED_FACTOR
+SETTLED_M = settled_for(length_quantum_m(ModelConfig().motor.spool_radius_m, ModelConfig().motor.gear_ratio))
 """The sensors' own noise on the prototype (``hil.identify.starts.settled_m`` of its recordings): the fit's
 default bound on what it may leave unexplained and still call a parameter identified."""
 

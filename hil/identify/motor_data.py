@@ -43,7 +43,14 @@ from protocol.errors import DecodeError
 from protocol.messages import Telemetry
 from protocol.stream import MessageStream
 
-__all__ = ["EXCITATION_KEY", "EXCITATION_TOPIC", "IdentifyDataError", "MotorData", "load_motor_data"]
+__all__ = [
+    "EXCITATION_KEY",
+    "EXCITATION_TOPIC",
+    "IdentifyDataError",
+    "MotorData",
+    "length_quantum_m",
+    "load_motor_data",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -150,6 +157,11 @@ def load_motor_data(path: str | Path) -> MotorData:
         raise IdentifyDataError(f"{path}: {exc}") from exc
 
 
+def length_quantum_m(spool_radius_m: float, gear_ratio: float) -> float:
+    """One encoder count as cable length: a rotor turn's counts, through the gear, on the spool."""
+    return 2.0 * math.pi / (ANGLE_COUNTS * gear_ratio) * spool_radius_m
+
+
 def _load(p: Path) -> MotorData:
     if not p.is_file():
         raise IdentifyDataError(f"{p}: no such file")
@@ -159,7 +171,7 @@ def _load(p: Path) -> MotorData:
     firmware = _json(meta.get("firmware"), p, "firmware")
     spool_r = float(firmware.get("spool_radius_m", 0.010)) if firmware else 0.010
     gear = float(firmware.get("gear_ratio", 36.0)) if firmware else 36.0
-    quantum = 2.0 * math.pi / (ANGLE_COUNTS * gear) * spool_r  # one encoder count as cable length
+    quantum = length_quantum_m(spool_r, gear)
     signs = [int(s) for s in firmware.get("motor_signs", [1, 1, 1])] if firmware else [1, 1, 1]
     design_d = _json(meta.get("design"), p, "design")
     design = _design(design_d, p) if design_d else None

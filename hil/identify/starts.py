@@ -35,7 +35,15 @@ from numpy.typing import NDArray
 
 from hil.identify.motor_data import MotorData
 
-__all__ = ["DELAY_CELLS_S", "SETTLED_FACTOR", "cell_starts", "restart_points", "restarts", "settled_m"]
+__all__ = [
+    "DELAY_CELLS_S",
+    "SETTLED_FACTOR",
+    "cell_starts",
+    "restart_points",
+    "restarts",
+    "settled_for",
+    "settled_m",
+]
 
 SETTLED_FACTOR = 10.0
 """How far above the encoders' quantization RMS a fit may stay and still count as having explained what
@@ -78,7 +86,12 @@ def settled_m(recordings: Sequence[MotorData]) -> float:
     """The fitted cable lengths' RMS error below which a fit has nothing left to explain (the largest of
     the recordings' quantization RMS, times :data:`SETTLED_FACTOR`); NaN when no recording says."""
     quanta = [r.length_quantum_m for r in recordings if math.isfinite(r.length_quantum_m)]
-    return max(quanta) / math.sqrt(12.0) * SETTLED_FACTOR if quanta else math.nan
+    return settled_for(max(quanta)) if quanta else math.nan
+
+
+def settled_for(quantum_m: float) -> float:
+    """:func:`settled_m` for encoders of one count ``quantum_m`` of cable length."""
+    return quantum_m / math.sqrt(12.0) * SETTLED_FACTOR
 
 
 def restart_points(
