@@ -192,6 +192,17 @@ class ArmFootprint:
         return gap
 
 
+def design_scale(design: SpiralDesign) -> float:
+    """The design's length over the prototype's (exactly 1 for the prototype and for a model file of it).
+
+    The grasp experiments chose their gaps, depths and diameters on the 22 cm prototype; on another arm
+    they scale them by this factor (a geometrically similar experiment), else a 47 cm arm, 92 mm wide at
+    its base, covers every placement 5-45 mm from its axis.
+    """
+    s = design.length_m / SpiralDesign.paper_prototype().length_m
+    return 1.0 if abs(s - 1.0) < 1e-6 else s
+
+
 def gap_depth_placements(
     foot: ArmFootprint,
     diameter_m: float,

@@ -20,7 +20,7 @@ import numpy as np
 
 from hil.experiments.base import Conditions, Experiment, Sizes
 from hil.experiments.common import Row, extremes_rows, mm, pyplot, save_figure
-from hil.experiments.geometry import ArmFootprint, gap_depth_placements
+from hil.experiments.geometry import ArmFootprint, design_scale, gap_depth_placements
 from hil.experiments.outcomes import GraspOutcomes, grasp_trials
 from hil.experiments.stats import bootstrap_interval
 from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware
@@ -32,7 +32,9 @@ PULL_DIR = (1.0, 0.0, 0.0)
 @dataclass(frozen=True)
 class GraspRangeParams:
     """Attributes:
-    diameters_m: cylinders to try (around d_min = 12.8 mm and up to d_max = 123 mm on the prototype).
+    diameters_m: cylinders to try (around d_min = 12.8 mm and up to d_max = 123 mm on the prototype; on
+        another arm these, the gaps and the depths are scaled by its length:
+        :func:`~hil.experiments.geometry.design_scale`).
     gap_range_m: horizontal gap between the arm's axis and the cylinder's near surface, low and high.
     depth_range_m: depth of the cylinder's top below the base, low and high.
     grid: cells over (gap, depth); one jittered placement per cell.
@@ -208,6 +210,14 @@ def grasp_range(p: GraspRangeParams, on: Conditions) -> GraspRangeResult:
     grasped with the strategy on, released, then pulled out along +x (see the module); on the plant
     ``on.model``; against the paper's d_min (eq. 14) and d_max (eq. 15)."""
     design, model, seed = on.design, on.model, on.seed
+    s = design_scale(design)
+    if s != 1.0:
+        p = dataclasses.replace(
+            p,
+            diameters_m=tuple(d * s for d in p.diameters_m),
+            gap_range_m=(p.gap_range_m[0] * s, p.gap_range_m[1] * s),
+            depth_range_m=(p.depth_range_m[0] * s, p.depth_range_m[1] * s),
+        )
     fw = grasp_firmware(grasp_wrap_n=p.wrap_n)
     foot = ArmFootprint.of(design, model)
     setups: list[GraspSetup] = []

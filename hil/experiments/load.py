@@ -21,7 +21,7 @@ import numpy as np
 
 from hil.experiments.base import Conditions, Experiment, Sizes
 from hil.experiments.common import G, Row, extremes_rows, pyplot, save_figure
-from hil.experiments.geometry import ArmFootprint, gap_depth_placements
+from hil.experiments.geometry import ArmFootprint, design_scale, gap_depth_placements
 from hil.experiments.outcomes import GraspOutcomes, grasp_trials
 from hil.experiments.stats import Slope, ols_slope
 from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware
@@ -185,6 +185,14 @@ def load(p: LoadParams, on: Conditions) -> LoadResult:
     support, then grow a downward force on it until it comes out (see the module); on the plant
     ``on.model`` with its friction replaced by each μ."""
     design, model, seed = on.design, on.model, on.seed
+    s = design_scale(design)
+    if s != 1.0:
+        p = dataclasses.replace(
+            p,
+            diameter_m=p.diameter_m * s,
+            gap_range_m=(p.gap_range_m[0] * s, p.gap_range_m[1] * s),
+            depth_range_m=(p.depth_range_m[0] * s, p.depth_range_m[1] * s),
+        )
     d = p.diameter_m
     bound_slope = design.max_load_kg(d, 1.0)  # eq. (16) is proportional to F
     foot = ArmFootprint.of(design, model)

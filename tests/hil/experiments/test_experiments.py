@@ -15,7 +15,7 @@ from hil.experiments.base import Conditions
 from hil.experiments.catalogue import EXPERIMENTS, run_experiment
 from hil.experiments.contact import ContactParams, ReachTrial, contact_jobs
 from hil.experiments.convergence import ConvergenceResult
-from hil.experiments.geometry import ArmFootprint
+from hil.experiments.geometry import ArmFootprint, design_scale
 from hil.experiments.packing import PackingResult
 from hil.experiments.strategy import StrategyParams, StrategyResult, arm_of, placements
 from hil.experiments.workspace import WorkspaceResult
@@ -214,3 +214,20 @@ def test_physics_flag_and_a_step_too_coarse_for_fine_constraints(capsys: pytest.
     assert main(["experiment", "packing", "--size", "tiny", "--timestep-ms", "1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--physics board" in err[0] and "Traceback" not in err[0]
+
+
+@pytest.mark.parametrize("name", ["grasp-range", "load"])
+def test_the_grasp_experiments_scale_their_placements_to_a_longer_arm(name: str) -> None:
+    # The placements were chosen on the 22 cm prototype: on the authors' 47 cm arm, 92 mm wide at its base,
+    # the unscaled gaps (5-45 mm from the axis) all lie inside the arm and no placement cleared it.
+    proto = SpiralDesign.paper_prototype()
+    authors = SpiralDesign.authors_default()
+    s = design_scale(authors)
+    assert design_scale(proto) == 1.0
+    assert s == pytest.approx(authors.length_m / proto.length_m)
+    r = run_experiment(name, design=authors, size="tiny")
+    d = r.params.diameters_m[0] if name == "grasp-range" else r.params.diameter_m
+    base = EXPERIMENTS[name].sizes.tiny
+    assert d == pytest.approx(s * (base.diameters_m[0] if name == "grasp-range" else base.diameter_m))
+    for o in r.outcomes:
+        assert ArmFootprint.of(authors, o.setup.model).clearance_m(o.setup.x_m, o.setup.z_m, d / 2) > 0.0
