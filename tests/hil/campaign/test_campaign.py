@@ -552,6 +552,18 @@ def test_the_claims_strategy_example_expands_to_its_stated_runs() -> None:
         build_design(r.inputs, physics="fine")  # every plant builds
 
 
+def test_the_claims_strategy_axes_example_expands_to_its_stated_runs() -> None:
+    path = Path(__file__).resolve().parents[3] / "examples" / "campaign_claims_strategy_axes.toml"
+    runs = load_campaign(path, []).runs()
+    assert len(runs) == 192  # 2 actuators x 2 cable counts x 2 stiffnesses x 12 placements x 2 arms
+    kinds = set()
+    for r in runs[:: len(runs) // 8]:
+        design, model = build_design(r.inputs, physics="fine")  # every plant builds
+        assert design.cables == r.inputs["design.cables"]
+        kinds.add(model.actuator.kind)
+    assert kinds == {"motor", "tension"}
+
+
 def test_the_sensitivity_strategy_example_expands_to_its_stated_runs() -> None:
     path = Path(__file__).resolve().parents[3] / "examples" / "campaign_sensitivity_strategy.toml"
     runs = load_campaign(path, []).runs()
