@@ -25,7 +25,7 @@ same recording: a wall between them is a local minimum the solver cannot leave (
 bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
 
 Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]
-[--known-torque] [--jacobian dense] [--shard J/K] [--seeds A,B] [--resume] [--summary-only]
+[--known-torque] [--jacobian dense] [--horizons S,S] [--shard J/K] [--seeds A,B] [--resume] [--summary-only]
 [--line [--line-params A,B] [--line-others fit|truth] [--line-t 0,0.5,1]]``
 """
 
@@ -100,8 +100,20 @@ def _fit(
         jobs=args.jobs,
         jacobian=None,
         restarts=args.restarts,
+        horizons_s=args.horizons,
     )
     return fit(data, apply(_base(args), known), opts, progress=_say)
+
+
+def _horizons(text: str) -> tuple[float, ...]:
+    """``--horizons``: seconds, comma-separated (empty: none)."""
+    try:
+        out = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: seconds S,S,... expected") from None
+    if any(not 0.0 < v < 3600.0 for v in out):
+        raise argparse.ArgumentTypeError(f"{text!r}: every horizon must be above 0 and below 3600 s")
+    return out
 
 
 def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[str, Any]:
@@ -504,6 +516,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--restarts", type=int, default=FitOptions().restarts, help="restarts of a fit that has not settled"
     )
+    ap.add_argument(
+        "--horizons",
+        type=_horizons,
+        default=FitOptions().horizons_s,
+        help="horizon continuation: fit each start to the first S seconds first, S,S,... (FitOptions)",
+    )
     ap.add_argument("--jobs", type=int, default=None)
     ap.add_argument("--mismatch", action="store_true", help="also the model-mismatch plants")
     ap.add_argument("--fit-time", action="store_true", help="also five 60 s recordings, timed")
@@ -595,6 +613,7 @@ def main(argv: list[str] | None = None) -> int:
             if kind == "truth":
                 row = hidden_truth_row(int(key), args, work)
                 row["fit_s"] = args.fit_s
+                row["horizons_s"] = list(args.horizons)
             elif kind == "mismatch":
                 row = mismatch_row(str(key), args, work)
             else:

@@ -56,7 +56,7 @@ from hil.identify.motor_data import MotorData
 from hil.identify.rollout import RolloutJob, RolloutPool
 from hil.identify.starts import DELAY_CELLS_S, restarts, settled_m
 from hil.identify.sysid_report import write_sysid_report
-from hil.identify.windows import CH, LEN, Window, at_samples, prepare_window
+from hil.identify.windows import CH, LEN, Trace, Window, at_samples, prepare_window, rms_of_traces
 from hil.sim.config import ModelConfig
 from hil.sim.mjcf import build_mjcf
 from hil.sim.spiral import SpiralDesign
@@ -139,6 +139,14 @@ class FitOptions:
             cells first, then scattered in the box), each a whole fit, taken
             while the best so far leaves more than the sensors' own noise (``settled_m``); the lowest
             objective is kept. The preset itself is one more start when it beats them all.
+        horizons_s: horizon continuation: every start is first fitted to each recording's first
+            seconds only, each of these horizons in turn (shortest first; those not shorter than the
+            fitted span are skipped), each stage from the last one's values, then to the whole span. A slip
+            that a parameter's change flips changes every length after it (friction holds the difference),
+            so the objective of a long simulation is a field of pits; over a few seconds there are few
+            slips to flip, and on hidden-truth draw 26 the objective falls smoothly from the stuck fit to the
+            truth over 3 or 6 s but not over 10 or 14.5 s (docs/identify.md section 6). Empty: off.
+        horizon_iters: Levenberg-Marquardt iterations at most in each horizon's stage.
     """
 
     params: tuple[str, ...] = tuple(p.name for p in ID_PARAMS)
@@ -156,35 +164,8 @@ class FitOptions:
     explained_within_m: float | None = None
     jacobian: str | None = "dense"
     restarts: int = 0
-
-
-@dataclass(frozen=True, slots=True)
-class Trace:
-    """Measured against simulated for one recording, simulated whole from its start (the report draws it).
-
-    Attributes:
-        recording: the recording's name.
-        t_s: judged sample times (the recording's clock).
-        held_out: per sample, the fit never saw it.
-        measured_m: (m, 3) cable lengths from the first sample.
-        fitted_m: the fitted model's.
-        nominal_m: the preset's.
-    """
-
-    recording: str
-    t_s: FloatArray
-    held_out: NDArray[np.bool_]
-    measured_m: FloatArray
-    fitted_m: FloatArray
-    nominal_m: FloatArray
-
-    def rms_m(self, held_out: bool, which: str = "fitted") -> float:
-        """RMS length error of the fitted (or ``nominal``) model over the fitted (or held-out) samples."""
-        sim = self.fitted_m if which == "fitted" else self.nominal_m
-        sel = self.held_out == held_out
-        if not sel.any():
-            return math.nan
-        return float(np.sqrt(np.nanmean((sim[sel] - self.measured_m[sel]) ** 2)))
+    horizons_s: tuple[float, ...] = ()
+    horizon_iters: int = 12
 
 
 @dataclass(frozen=True)
@@ -234,16 +215,7 @@ class FitResult:
     def rms_m(self, held_out: bool, which: str = "fitted") -> float:
         """RMS length error over the fitted (or held-out) samples of every recording, of the fitted or
         ``nominal`` model."""
-        return _rms_m(self.traces, held_out, which)
-
-
-def _rms_m(traces: Sequence[Trace], held_out: bool, which: str) -> float:
-    errs = [
-        ((t.fitted_m if which == "fitted" else t.nominal_m) - t.measured_m)[t.held_out == held_out]
-        for t in traces
-    ]
-    flat = np.concatenate([e.ravel() for e in errs]) if errs else np.empty(0)
-    return float(np.sqrt(np.nanmean(flat**2))) if flat.size else math.nan
+        return rms_of_traces(self.traces, held_out, which)
 
 
 def _spans(recordings: Sequence[MotorData], options: FitOptions) -> list[tuple[MotorData, int]]:
@@ -434,11 +406,12 @@ class _Run:
     length_rms_m: float = field(compare=False)
 
 
-def _solve(start: Any, residual_fn: Any, opts: FitOptions, say: ProgressFn, k: int) -> _Run:
-    """MuJoCo's Levenberg-Marquardt from ``start`` (the ``k``-th restart, 0 the first start)."""
+def _solve(start: Any, residual_fn: Any, opts: FitOptions, say: ProgressFn, k: int, stage: str = "") -> _Run:
+    """MuJoCo's Levenberg-Marquardt from ``start`` (the ``k``-th restart, 0 the first start; ``stage``
+    names a horizon's stage in the progress)."""
     objective: list[float] = []
     steps: list[FloatArray] = []
-    label = f"start {k + 1} of at most {opts.restarts + 1}: " if k else ""
+    label = (f"start {k + 1} of at most {opts.restarts + 1}: " if k else "") + stage
 
     def on_iter(trace: list[Any]) -> None:
         objective.append(float(trace[-1].objective))
@@ -485,16 +458,40 @@ def _objective(
     chosen = [prepare_window(rec, end, opts.residual_period_s) for rec, end in _spans(recordings, opts)]
     with RolloutPool(opts.jobs) as pool:
         problem = _Problem(design, preset, rows, chosen, opts, pool)
-        measured = problem.measured()
-        residual_fn = sysid.build_residual_fn(
-            models_sequences=[measured],
-            build_model=problem.build_model,
-            custom_rollout=problem.rollout,
-            modify_residual=problem.residual,
-            n_threads=1,
-            resample_true=False,
-        )
+        residual_fn, measured = _residual_fn(problem)
         yield problem, residual_fn, measured
+
+
+def _residual_fn(problem: _Problem) -> tuple[Any, Any]:
+    """The toolbox's residual function around ``problem``'s rollout, and its measured sequences."""
+    measured = problem.measured()
+    residual_fn = sysid.build_residual_fn(
+        models_sequences=[measured],
+        build_model=problem.build_model,
+        custom_rollout=problem.rollout,
+        modify_residual=problem.residual,
+        n_threads=1,
+        resample_true=False,
+    )
+    return residual_fn, measured
+
+
+def _continued(start: Any, problem: _Problem, opts: FitOptions, say: ProgressFn, k: int) -> Any:
+    """``start`` carried through the horizons' stages (:attr:`FitOptions.horizons_s`): each fits every
+    window's first seconds from the last stage's values."""
+    at = start
+    stage_opts = dataclasses.replace(opts, max_iters=opts.horizon_iters)
+    for h in sorted(opts.horizons_s):
+        wins = [
+            prepare_window(w.recording, min(w.end, w.recording.index_after(h)), opts.residual_period_s)
+            for w in problem.wins
+        ]
+        if all(w.end == full.end for w, full in zip(wins, problem.wins, strict=True)):
+            break  # the horizon covers what the fit sees: the whole stage is next
+        sub = _Problem(problem.design, problem.preset, problem.rows, wins, opts, problem.pool)
+        at = _solve(at, _residual_fn(sub)[0], stage_opts, say, k, f"the first {h:g} s: ").params
+        at = at.move_off_bounds()  # a stage may end on a bound (no delay): the next starts inside
+    return at
 
 
 def objective_at(
@@ -564,7 +561,7 @@ def fit(
         # A parameter whose preset sits on a bound (no joint friction) starts a little inside:
         # Levenberg-Marquardt can stall in a corner of the box.
         initial = problem.params().move_off_bounds()
-        runs = [_solve(initial, residual_fn, opts, say, 0)]
+        runs = [_solve(_continued(initial, problem, opts, say, 0), residual_fn, opts, say, 0)]
         settled = settled_m(recordings)
         lower, upper = initial.get_bounds()
         names = [r.name for r in rows]
@@ -577,7 +574,7 @@ def fit(
                 break
             start = initial.copy()
             start.update_from_vector(x)
-            runs.append(_solve(start, residual_fn, opts, say, k))
+            runs.append(_solve(_continued(start, problem, opts, say, k), residual_fn, opts, say, k))
         # The preset itself where the search started off a bound (no delay, no joint friction): on an arm
         # that is the preset (the virtual board) the search did not return to it (docs/identify.md 6).
         at_preset = problem.params(off_bounds=False)

@@ -4,12 +4,14 @@ The fit (:mod:`hil.identify.fit`) simulates each recording from its first sample
 the board sent, one per control period, and compares the motors' view (cable length from the first sample,
 cable speed, and the tracked tip when recorded) at the judged samples. :func:`length_rms_m` does the same
 for one model and one recording, with no fit: what a given model predicts (a benchmark's reference, such
-as the truth's own values in a model that cannot represent the truth exactly).
+as the truth's own values in a model that cannot represent the truth exactly). :class:`Trace` is a
+recording's measured cable lengths against a fitted and the preset model's, as the report draws them.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -21,7 +23,19 @@ from hil.identify.rollout import RolloutJob, simulate
 from hil.sim.config import ModelConfig
 from hil.sim.spiral import SpiralDesign
 
-__all__ = ["CH", "LEN", "TEN", "TIP", "VEL", "Window", "at_samples", "length_rms_m", "prepare_window"]
+__all__ = [
+    "CH",
+    "LEN",
+    "TEN",
+    "TIP",
+    "VEL",
+    "Trace",
+    "Window",
+    "at_samples",
+    "length_rms_m",
+    "prepare_window",
+    "rms_of_traces",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -115,3 +129,43 @@ def length_rms_m(rec: MotorData, model: ModelConfig, design: SpiralDesign, perio
     sim = at_samples(w, simulate(RolloutJob(design, model, w.currents_a)))
     err = sim[:, LEN] - w.measured[:, LEN]
     return float(np.sqrt(np.nanmean(err**2))) if err.size else math.nan
+
+
+@dataclass(frozen=True, slots=True)
+class Trace:
+    """Measured against simulated for one recording, simulated whole from its start (the report draws it).
+
+    Attributes:
+        recording: the recording's name.
+        t_s: judged sample times (the recording's clock).
+        held_out: per sample, the fit never saw it.
+        measured_m: (m, 3) cable lengths from the first sample.
+        fitted_m: the fitted model's.
+        nominal_m: the preset's.
+    """
+
+    recording: str
+    t_s: FloatArray
+    held_out: NDArray[np.bool_]
+    measured_m: FloatArray
+    fitted_m: FloatArray
+    nominal_m: FloatArray
+
+    def rms_m(self, held_out: bool, which: str = "fitted") -> float:
+        """RMS length error of the fitted (or ``nominal``) model over the fitted (or held-out) samples."""
+        sim = self.fitted_m if which == "fitted" else self.nominal_m
+        sel = self.held_out == held_out
+        if not sel.any():
+            return math.nan
+        return float(np.sqrt(np.nanmean((sim[sel] - self.measured_m[sel]) ** 2)))
+
+
+def rms_of_traces(traces: Sequence[Trace], held_out: bool, which: str) -> float:
+    """RMS length error over the fitted (or held-out) samples of every trace, of the fitted or ``nominal``
+    model."""
+    errs = [
+        ((t.fitted_m if which == "fitted" else t.nominal_m) - t.measured_m)[t.held_out == held_out]
+        for t in traces
+    ]
+    flat = np.concatenate([e.ravel() for e in errs]) if errs else np.empty(0)
+    return float(np.sqrt(np.nanmean(flat**2))) if flat.size else math.nan

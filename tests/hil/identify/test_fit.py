@@ -55,6 +55,23 @@ def test_a_fit_recovers_the_hidden_parameters(truth_recording: Path) -> None:
     assert np.allclose(np.diag(result.correlation), 1.0)
 
 
+def test_horizon_continuation_fits_the_first_seconds_first_and_still_recovers_the_truth(
+    truth_recording: Path,
+) -> None:
+    """Each start is fitted to the recording's first 2 s, then to all the fit sees; a horizon not shorter
+    than that (100 s) is no stage."""
+    data = load_motor_data(truth_recording)
+    opts = dataclasses.replace(FAST, horizons_s=(100.0, 2.0), horizon_iters=3)
+    progress: list[str] = []
+    result = fit([data], ModelConfig(), opts, progress=lambda stage, frac: progress.append(stage))
+    stages = [p for p in progress if p.startswith("the first ")]
+    assert stages and all(p.startswith("the first 2 s: ") for p in stages), progress
+    assert any(p.startswith("iteration") for p in progress[progress.index(stages[-1]) :]), progress
+    by = {e.name: e for e in result.estimates}
+    for name, true in TRUTH.items():
+        assert by[name].value == pytest.approx(true, rel=0.05), name
+
+
 def test_a_fit_through_noisy_timing_converges_without_wasted_rollouts(tmp_path: Path) -> None:
     """Near the optimum the sensors' noise fails most steps. Each iteration costs a Jacobian (one rollout
     per parameter) and a step, a failed step one more: on average at most two failures an iteration. With
