@@ -134,9 +134,33 @@ def configure_identify(p: argparse.ArgumentParser) -> None:
         f"one fit (default {FitOptions().restarts})",
     )
     p.add_argument(
+        "--horizons",
+        metavar="S,S",
+        help="horizon continuation: fit every start to the recordings' first S seconds first, each horizon "
+        "in turn, then to all the fit sees (e.g. 3,6,10: a long simulation's objective is a field of pits "
+        "from stick-slip, a few seconds' is smooth); 'none' turns it off (default "
+        + (",".join(f"{v:g}" for v in FitOptions().horizons_s) or "none")
+        + ")",
+    )
+    p.add_argument(
         "--jobs", type=int, metavar="N", help="worker processes for the rollouts (default: one per core)"
     )
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+
+
+def _horizons(text: str | None) -> tuple[float, ...]:
+    """``--horizons``: None keeps the default, ``none`` turns continuation off, else seconds S,S,..."""
+    if text is None:
+        return FitOptions().horizons_s
+    if text.strip().lower() in ("none", ""):
+        return ()
+    try:
+        out = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise UsageError(f"--horizons: seconds S,S,... or 'none', got {text!r}") from None
+    if any(not 0.0 < v < 3600.0 for v in out):
+        raise UsageError(f"--horizons: every horizon must be above 0 and below 3600 s, got {text!r}")
+    return out
 
 
 def run_identify_command(args: argparse.Namespace) -> int:
@@ -153,6 +177,7 @@ def run_identify_command(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--explained-within-mm must be above 0 and at most 1000, got {args.explained_within_mm:g}"
         )
+    horizons = _horizons(args.horizons)
     writable_file(args.output, "the model file")
     if args.report is not None:
         writable_dir(args.report, "the report")
@@ -182,6 +207,7 @@ def run_identify_command(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         explained_within_m=None if args.explained_within_mm is None else args.explained_within_mm * 1e-3,
         restarts=args.restarts,
+        horizons_s=horizons,
     )
     designs = {d.design for d in data if d.design is not None}
     design = next(iter(designs)) if len(designs) == 1 else chosen.spiral()

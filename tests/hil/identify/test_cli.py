@@ -30,6 +30,8 @@ from hil.sim.uncertain import by_name
         (["--explained-within-mm", "inf"], "must be a finite number"),
         (["--restarts", "-1"], "--restarts must be 0..16"),
         (["--restarts", "17"], "--restarts must be 0..16"),
+        (["--horizons", "3,x"], "--horizons: seconds S,S,... or 'none'"),
+        (["--horizons", "0,6"], "every horizon must be above 0"),
     ],
 )
 def test_known_mistakes_are_one_line_and_status_2(
