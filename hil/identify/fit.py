@@ -406,9 +406,17 @@ class _Run:
     length_rms_m: float = field(compare=False)
 
 
-def _solve(start: Any, residual_fn: Any, opts: FitOptions, say: ProgressFn, k: int, stage: str = "") -> _Run:
+def _solve(
+    start: Any,
+    residual_fn: Any,
+    opts: FitOptions,
+    say: ProgressFn,
+    k: int,
+    stage: str = "",
+    part: tuple[float, float] = (0.0, 1.0),
+) -> _Run:
     """MuJoCo's Levenberg-Marquardt from ``start`` (the ``k``-th restart, 0 the first start; ``stage``
-    names a horizon's stage in the progress)."""
+    names a horizon's stage in the progress, ``part`` the share of the start's progress it runs in)."""
     objective: list[float] = []
     steps: list[FloatArray] = []
     label = (f"start {k + 1} of at most {opts.restarts + 1}: " if k else "") + stage
@@ -417,10 +425,10 @@ def _solve(start: Any, residual_fn: Any, opts: FitOptions, say: ProgressFn, k: i
         objective.append(float(trace[-1].objective))
         if trace[-1].step is not None:
             steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
-        frac = (k + len(trace) / (opts.max_iters + 2)) / (opts.restarts + 1)
-        say(f"{label}iteration {len(trace)} of at most {opts.max_iters}", frac)
+        done = part[0] + (part[1] - part[0]) * len(trace) / (opts.max_iters + 2)
+        say(f"{label}iteration {len(trace)} of at most {opts.max_iters}", (k + done) / (opts.restarts + 1))
 
-    say(f"{label}first evaluation", k / (opts.restarts + 1))
+    say(f"{label}first evaluation", (k + part[0]) / (opts.restarts + 1))
     params, result = sysid.optimize(
         start,
         residual_fn,
@@ -481,7 +489,8 @@ def _continued(start: Any, problem: _Problem, opts: FitOptions, say: ProgressFn,
     window's first seconds from the last stage's values."""
     at = start
     stage_opts = dataclasses.replace(opts, max_iters=opts.horizon_iters)
-    for h in sorted(opts.horizons_s):
+    horizons = sorted(opts.horizons_s)
+    for i, h in enumerate(horizons):
         wins = [
             prepare_window(w.recording, min(w.end, w.recording.index_after(h)), opts.residual_period_s)
             for w in problem.wins
@@ -489,7 +498,8 @@ def _continued(start: Any, problem: _Problem, opts: FitOptions, say: ProgressFn,
         if all(w.end == full.end for w, full in zip(wins, problem.wins, strict=True)):
             break  # the horizon covers what the fit sees: the whole stage is next
         sub = _Problem(problem.design, problem.preset, problem.rows, wins, opts, problem.pool)
-        at = _solve(at, _residual_fn(sub)[0], stage_opts, say, k, f"the first {h:g} s: ").params
+        part = (0.5 * i / len(horizons), 0.5 * (i + 1) / len(horizons))  # the stages: a start's first half
+        at = _solve(at, _residual_fn(sub)[0], stage_opts, say, k, f"the first {h:g} s: ", part).params
         at = at.move_off_bounds()  # a stage may end on a bound (no delay): the next starts inside
     return at
 
@@ -561,7 +571,8 @@ def fit(
         # A parameter whose preset sits on a bound (no joint friction) starts a little inside:
         # Levenberg-Marquardt can stall in a corner of the box.
         initial = problem.params().move_off_bounds()
-        runs = [_solve(_continued(initial, problem, opts, say, 0), residual_fn, opts, say, 0)]
+        last = (0.5, 1.0) if opts.horizons_s else (0.0, 1.0)  # the whole span's share of each start
+        runs = [_solve(_continued(initial, problem, opts, say, 0), residual_fn, opts, say, 0, "", last)]
         settled = settled_m(recordings)
         lower, upper = initial.get_bounds()
         names = [r.name for r in rows]
@@ -574,7 +585,7 @@ def fit(
                 break
             start = initial.copy()
             start.update_from_vector(x)
-            runs.append(_solve(_continued(start, problem, opts, say, k), residual_fn, opts, say, k))
+            runs.append(_solve(_continued(start, problem, opts, say, k), residual_fn, opts, say, k, "", last))
         # The preset itself where the search started off a bound (no delay, no joint friction): on an arm
         # that is the preset (the virtual board) the search did not return to it (docs/identify.md 6).
         at_preset = problem.params(off_bounds=False)

@@ -62,11 +62,16 @@ def test_horizon_continuation_fits_the_first_seconds_first_and_still_recovers_th
     than that (100 s) is no stage."""
     data = load_motor_data(truth_recording)
     opts = dataclasses.replace(FAST, horizons_s=(100.0, 2.0), horizon_iters=3)
-    progress: list[str] = []
-    result = fit([data], ModelConfig(), opts, progress=lambda stage, frac: progress.append(stage))
+    said: list[tuple[str, float]] = []
+    result = fit([data], ModelConfig(), opts, progress=lambda stage, frac: said.append((stage, frac)))
+    progress = [p for p, _ in said]
     stages = [p for p in progress if p.startswith("the first ")]
     assert stages and all(p.startswith("the first 2 s: ") for p in stages), progress
     assert any(p.startswith("iteration") for p in progress[progress.index(stages[-1]) :]), progress
+    # Progress never goes back: the stages run in the start's first half, the whole span in its second.
+    stage_fracs = [f for p, f in said if p.startswith("the first ")]
+    assert stage_fracs == sorted(stage_fracs) and max(stage_fracs) <= 0.5
+    assert all(f >= max(stage_fracs) for p, f in said if p.startswith("iteration"))
     by = {e.name: e for e in result.estimates}
     for name, true in TRUTH.items():
         assert by[name].value == pytest.approx(true, rel=0.05), name
