@@ -230,7 +230,12 @@ def run_identify_command(args: argparse.Namespace) -> int:
         _print(result, args.output, page, known)
         delay_fitted = any(e.name == "delay" for e in result.estimates)
         hint = local_minimum_hint(
-            result.starts, settled_m(data), args.restarts, delay_fitted, args.explained_within_mm is None
+            result.starts,
+            settled_m(data),
+            args.restarts,
+            delay_fitted,
+            args.explained_within_mm is None,
+            bool(horizons),
         )
         if hint:
             Console().print(f"[yellow]{hint}", highlight=False)
@@ -383,13 +388,15 @@ def local_minimum_hint(
     restarts: int,
     delay_fitted: bool = True,
     bound_is_noise: bool = True,
+    horizons: bool = False,
 ) -> str | None:
     """What to do when the best start left more than the encoders' noise (``settled``, m), or None.
 
     ``starts`` are the fit's ``(objective, fitted length RMS in m)``, one per start. In the hidden-truth
     draws every wrong fit left more than that, and no fit that left less was wrong (docs/identify.md section
     6); a real arm's fit always leaves more, so the hint says what it can and cannot mean. With
-    ``bound_is_noise`` (no ``--explained-within-mm``) it also says why nothing is called identified.
+    ``bound_is_noise`` (no ``--explained-within-mm``) it also says why nothing is called identified; without
+    ``horizons`` (no ``--horizons``) it offers horizon continuation.
     """
     if not starts or not math.isfinite(settled):
         return None
@@ -405,15 +412,22 @@ def local_minimum_hint(
         if bound_is_noise
         else ""
     )
+    span = (
+        ""
+        if horizons
+        else " --horizons 3,6,10 fits the first seconds first, where stick-slip leaves fewer such minima."
+    )
     if restarts == 0:
         cells = " and ".join(f"{1e3 * v:g}" for v in DELAY_CELLS_S)
         where = f"with the delay at {cells} ms" if delay_fitted else "from points around the first start"
         return (
             f"{left}: a model that follows its arm gets there, so it may have stopped in a local minimum; "
             f"--restarts 2 starts again {where} (about one fit's time each). "
-            "No model follows a real arm to its encoders' noise: there this only says the model misses." + why
+            "No model follows a real arm to its encoders' noise: there this only says the model misses."
+            + span
+            + why
         )
     return (
         f"{left} after {len(starts)} starts: either the model cannot follow this arm (compare the report's "
-        "traces) or every start stopped in a local minimum." + why
+        "traces) or every start stopped in a local minimum." + span + why
     )

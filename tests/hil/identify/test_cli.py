@@ -107,3 +107,7 @@ def test_a_fit_that_left_more_than_the_encoders_noise_says_what_to_do() -> None:
     assert "no parameter is called identified" in after and "ten times the encoders' quantization" in after
     weaker = local_minimum_hint([(14424.0, 0.19e-3)], settled, 2, bound_is_noise=False)
     assert weaker is not None and "identified" not in weaker
+    # Horizon continuation is offered to a fit that ran without it, not to one that ran with it.
+    assert "--horizons 3,6,10" in hint and "--horizons" in after
+    with_horizons = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0, horizons=True)
+    assert with_horizons is not None and "--horizons" not in with_horizons
