@@ -62,7 +62,7 @@ from hil.sim.mjcf import build_mjcf
 from hil.sim.spiral import SpiralDesign
 from hil.sim.uncertain import ID_PARAMS, IdParam, apply, nominal
 
-__all__ = ["FitError", "FitOptions", "FitResult", "Trace", "fit", "objective_at"]
+__all__ = ["FitError", "FitOptions", "FitResult", "fit", "objective_at"]
 
 FloatArray = NDArray[np.float64]
 

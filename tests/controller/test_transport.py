@@ -118,10 +118,11 @@ def test_spy_url_logs_the_board_link_over_a_pty(tmp_path: Path) -> None:
             assert os.read(master, 100) == frame
             os.write(master, b"\x5a\x42\x17")
             got = b""
-            for _ in range(1000):
+            for _ in range(2000):  # as above: wait for the pty's bytes, bounded at about 2 s
                 got += t.read()
-                if got:
+                if len(got) >= 3:
                     break
+                time.sleep(0.001)
             assert got == b"\x5a\x42\x17"
         finally:
             t.close()
