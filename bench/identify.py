@@ -52,7 +52,7 @@ from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E
 from hil.identify.fit import FitOptions, FitResult, fit, objective_at  # noqa: E402
 from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor, si_interval, unexplained  # noqa: E402
 from hil.identify.motor_data import length_quantum_m, load_motor_data  # noqa: E402
-from hil.identify.starts import settled_for  # noqa: E402
+from hil.identify.starts import parse_horizons, settled_for  # noqa: E402
 from hil.identify.synthetic import (  # noqa: E402
     MISMATCHES,
     SensorLimits,
@@ -106,14 +106,11 @@ def _fit(
 
 
 def _horizons(text: str) -> tuple[float, ...]:
-    """``--horizons``: seconds, comma-separated (empty: none)."""
+    """``--horizons``: :func:`~hil.identify.starts.parse_horizons` for argparse."""
     try:
-        out = tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: seconds S,S,... expected") from None
-    if any(not 0.0 < v < 3600.0 for v in out):
-        raise argparse.ArgumentTypeError(f"{text!r}: every horizon must be above 0 and below 3600 s")
-    return out
+        return parse_horizons(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[str, Any]:

@@ -20,7 +20,7 @@ from hil.cli.design import preset_arg
 from hil.identify.fit import FitError, FitOptions, FitResult, fit
 from hil.identify.motor_data import IdentifyDataError, load_motor_data
 from hil.identify.report import write_report
-from hil.identify.starts import DELAY_CELLS_S, settled_m
+from hil.identify.starts import DELAY_CELLS_S, parse_horizons, settled_m
 from hil.recording import package_version
 from hil.sim.model_file import FittedParameter, ModelFile, read_model_file, write_model_file
 from hil.sim.presets import is_model_file, resolve
@@ -152,15 +152,10 @@ def _horizons(text: str | None) -> tuple[float, ...]:
     """``--horizons``: None keeps the default, ``none`` turns continuation off, else seconds S,S,..."""
     if text is None:
         return FitOptions().horizons_s
-    if text.strip().lower() in ("none", ""):
-        return ()
     try:
-        out = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise UsageError(f"--horizons: seconds S,S,... or 'none', got {text!r}") from None
-    if any(not 0.0 < v < 3600.0 for v in out):
-        raise UsageError(f"--horizons: every horizon must be above 0 and below 3600 s, got {text!r}")
-    return out
+        return parse_horizons(text)
+    except ValueError as exc:
+        raise UsageError(f"--horizons: {exc}") from None
 
 
 def run_identify_command(args: argparse.Namespace) -> int:

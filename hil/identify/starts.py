@@ -21,6 +21,8 @@ then costs time and can only lower the objective, as the best of all starts is k
   repeatable) over the half of the search box around the first start, in the optimizer's coordinates
   (each parameter in its own size: a factor of 0.58-1.73 on a relative row's preset; an absolute row
   between halfway down to its lower bound and halfway up to its upper).
+- :func:`parse_horizons`: the horizons of horizon continuation (``FitOptions.horizons_s``) as a user writes
+  them, for the command and the benchmark alike.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ __all__ = [
     "DELAY_CELLS_S",
     "SETTLED_FACTOR",
     "cell_starts",
+    "parse_horizons",
     "restart_points",
     "restarts",
     "settled_for",
@@ -132,3 +135,20 @@ def restarts(
         i, xs = cells
         first = cell_starts(x0, i, [min(float(upper[i]), max(float(lower[i]), x)) for x in xs], n)
     return first + restart_points(x0, lower, upper, n - len(first))
+
+
+def parse_horizons(text: str) -> tuple[float, ...]:
+    """Horizons as written: seconds ``S,S,...``; ``none`` or nothing: no continuation.
+
+    Raises:
+        ValueError: not numbers, or a horizon outside (0, 3600) s (one line: what is wrong).
+    """
+    if text.strip().lower() in ("none", ""):
+        return ()
+    try:
+        out = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"seconds S,S,... or 'none', got {text!r}") from None
+    if any(not 0.0 < v < 3600.0 for v in out):  # also refuses nan
+        raise ValueError(f"every horizon must be above 0 and below 3600 s, got {text!r}")
+    return out

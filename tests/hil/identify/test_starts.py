@@ -13,7 +13,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hil.identify.motor_data import load_motor_data
-from hil.identify.starts import SETTLED_FACTOR, cell_starts, restart_points, restarts, settled_m
+from hil.identify.starts import (
+    SETTLED_FACTOR,
+    cell_starts,
+    parse_horizons,
+    restart_points,
+    restarts,
+    settled_m,
+)
 
 
 @given(
@@ -88,3 +95,11 @@ def test_restarts_take_the_cells_first_clipped_to_the_box_then_sobol() -> None:
     assert [p.tolist() for p in restarts(x0, lower, upper, 1, (1, [12.0, 3.5]))] == [[0.0, 10.0]]
     # No cells: the Sobol points alone.
     assert len(restarts(x0, lower, upper, 3)) == 3
+
+
+def test_horizons_are_read_as_a_user_writes_them() -> None:
+    assert parse_horizons("3,6,10") == (3.0, 6.0, 10.0)
+    assert parse_horizons("none") == () == parse_horizons(" ")
+    for bad, says in (("3,x", "seconds S,S"), ("0,6", "above 0"), ("nan", "above 0"), ("5000", "below 3600")):
+        with pytest.raises(ValueError, match=says):
+            parse_horizons(bad)
