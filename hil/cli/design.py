@@ -11,7 +11,14 @@ from hil.sim.config import ModelConfig
 from hil.sim.presets import PRESETS, is_model_file, resolve
 from hil.sim.spiral import SpiralDesign
 
-__all__ = ["MAX_UNITS_N", "add_design_arguments", "design_from_args", "model_from_args", "preset_arg"]
+__all__ = [
+    "MAX_UNITS_N",
+    "add_design_arguments",
+    "design_from_args",
+    "design_options_given",
+    "model_from_args",
+    "preset_arg",
+]
 
 MAX_UNITS_N = 1000
 """The most units a command line accepts: every unit is a MuJoCo body and a joint of the 1 kHz plant, and
@@ -77,6 +84,26 @@ _COMBINATIONS = (
     "both: the preset's design with those values changed (e.g. --preset prototype --length 0.3, --preset "
     "authors --units 20). --dtheta-deg goes with (2), (3) and (4); --cables with all of them."
 )
+
+
+_SHAPE_OPTIONS = (
+    "length",
+    "tip_width",
+    "taper_deg",
+    "base_width",
+    "a",
+    "b",
+    "theta0_deg",
+    "units",
+    "dtheta_deg",
+    "cables",
+)
+
+
+def design_options_given(args: argparse.Namespace) -> list[str]:
+    """The options of :func:`add_design_arguments` that shape the arm (all but ``--preset``, which also
+    names the plant model) given on this command line, as flags (``["--length", "--cables"]``)."""
+    return ["--" + name.replace("_", "-") for name in _SHAPE_OPTIONS if getattr(args, name) is not None]
 
 
 def design_from_args(args: argparse.Namespace) -> SpiralDesign:

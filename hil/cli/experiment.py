@@ -16,9 +16,9 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from controller.cli_kit import EXIT_OK, finite_float, seed, writable_dir
+from controller.cli_kit import EXIT_OK, UsageError, finite_float, seed, writable_dir
 from controller.config import CONTROL_PERIOD_US
-from hil.cli.design import add_design_arguments, design_from_args, model_from_args
+from hil.cli.design import add_design_arguments, design_from_args, design_options_given, model_from_args
 from hil.experiments.catalogue import EXPERIMENTS, run_experiment
 from hil.experiments.common import PHYSICS, SIZES, grasp_pictures
 from hil.experiments.outcomes import GraspOutcomes
@@ -85,6 +85,12 @@ def run_experiment_command(args: argparse.Namespace) -> int:
     if args.report is not None:  # checked before the experiment runs, not after
         writable_dir(args.report, "write the figure into", "spirob-hil experiment")
     exp = EXPERIMENTS[args.name]
+    shaped = design_options_given(args)
+    if exp.own_arm and shaped:
+        raise UsageError(
+            f"experiment {exp.name} drives {exp.own_arm} whatever the design options say: drop "
+            f"{' '.join(shaped)} (--preset still picks the plant model)"
+        )
     step_s = PHYSICS[args.physics] if args.physics else exp.model.solver.timestep_s
     model = model_from_args(args).with_physics(step_s)
     if args.timestep_ms is not None:

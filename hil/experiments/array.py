@@ -275,5 +275,6 @@ EXPERIMENT = Experiment(
     # tiny: a ball by 2 and 4 arms; default: 4 sizes x 10 objects x 5 trials (the paper's count); large: 10
     Sizes(TINY, ArrayParams(), ArrayParams(trials=10)),
     array,
+    own_arm="arrays of one-cable arms (Table S2)",
 )
 """The array experiment (:mod:`hil.experiments.catalogue`)."""

@@ -468,5 +468,6 @@ EXPERIMENT = Experiment(
     # tiny: one placement in the prototype's catch and between bands; default: 16 per band and set-up
     Sizes(TINY, BandsParams(), BandsParams(per_band=40)),
     bands,
+    own_arm="its set-ups' arms (the prototype; the 45 cm 2-cable arm)",
 )
 """The bands experiment (:mod:`hil.experiments.catalogue`)."""

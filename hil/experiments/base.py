@@ -104,6 +104,9 @@ class Experiment(Generic[P, R]):
         model: the plant model it runs on unless given one: the experiments' fine physics
             (:data:`~hil.experiments.common.DEFAULT_MODEL`), or the board's for ``convergence``, which
             varies the step under the board's constraint time constants.
+        own_arm: the arms it drives whatever :attr:`Conditions.design` is, in words (empty: it runs on the
+            design it is given); the command line refuses design options for such an experiment rather
+            than print figures of other arms.
     """
 
     name: str
@@ -111,6 +114,7 @@ class Experiment(Generic[P, R]):
     sizes: Sizes[P]
     run: Callable[[P, Conditions], R]
     model: ModelConfig = DEFAULT_MODEL
+    own_arm: str = ""
 
     def run_at_size(self, size: str, conditions: Conditions) -> R:
         """Run at ``size`` (see :class:`Sizes`).

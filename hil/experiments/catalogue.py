@@ -42,6 +42,10 @@ class Entry(Protocol):
     def model(self) -> ModelConfig:
         """The plant model it runs on unless given one."""
 
+    @property
+    def own_arm(self) -> str:
+        """The arms it drives whatever the design given, in words; empty when it runs on that design."""
+
     def run_at_size(self, size: str, conditions: Conditions) -> Result:
         """Run at ``size``."""
 

@@ -282,5 +282,6 @@ EXPERIMENT = Experiment(
     convergence,
     # the board's model: only the step changes between the columns, and its 2 ms constraints allow 1 ms
     BOARD_MODEL,
+    own_arm="the prototype",
 )
 """The convergence experiment (:mod:`hil.experiments.catalogue`)."""

@@ -540,6 +540,7 @@ EXPERIMENT = Experiment(
         ),
     ),
     dynamic,
+    own_arm="the paper's 45 cm 2-cable arm (Fig. S11)",
 )
 """The dynamic experiment (:mod:`hil.experiments.catalogue`)."""
 

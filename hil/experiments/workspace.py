@@ -383,5 +383,6 @@ EXPERIMENT = Experiment(
         WorkspaceParams(cables=(2, 3), duration_s=600.0, saturate_gain=0.005),
     ),
     workspace,
+    own_arm="2- and 3-cable arms of three tapers (Note S2)",
 )
 """The workspace experiment (:mod:`hil.experiments.catalogue`)."""

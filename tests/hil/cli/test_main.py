@@ -171,6 +171,9 @@ def test_design_help_lists_the_valid_combinations(capsys: pytest.CaptureFixture[
         ["model", "export", "-o", "x.xml", "--total-mass", "nan"],
         ["experiment", "packing", "--jobs", "100000"],
         ["experiment", "packing", "--timestep-ms", "nan"],
+        # experiments that drive arms of their own refuse design options rather than ignore them
+        ["experiment", "workspace", "--length", "0.3"],
+        ["experiment", "dynamic", "--cables", "2"],
         ["model", "export"],
         ["model"],
         ["frobnicate"],
@@ -181,6 +184,16 @@ def test_user_mistakes_are_one_line_and_status_2(argv: list[str], capsys: pytest
     status, out, err = run(argv, capsys)
     assert_one_line_error(status, err)
     assert out == ""
+
+
+@pytest.mark.parametrize("name", ["workspace", "dynamic", "array", "bands", "convergence"])
+def test_an_experiment_on_its_own_arms_names_them_when_given_a_design(
+    name: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["experiment", name, "--size", "tiny", "--preset", "prototype", "--cables", "2"]
+    status, _, err = run(argv, capsys)
+    assert_one_line_error(status, err)
+    assert f"experiment {name} drives" in err and "--cables" in err
 
 
 @pytest.mark.parametrize("cables", ["1", "2", "3"])
