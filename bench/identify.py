@@ -10,8 +10,8 @@ exact, and how long does it take (issue 23's proof without hardware).
    intervals cover the truth in at least 90 % of cases; held-out cable lengths within 0.3 mm RMS.
 2. Model mismatch (``--mismatch``): truths the fit cannot represent (capsule units, a stretchier cable,
    joint-to-joint stiffness scatter): the fitted model's held-out error against the preset's (goal: halved).
-3. Fit time (``--fit-time``): five 60 s recordings of one plant, the default fit, on the cores there are
-   (goal: at most 10 minutes).
+3. Fit time (``--fit-time``): five 60 s recordings of one plant, the default fit (with ``--horizons``'
+   stages when given), on the cores there are (goal: at most 10 minutes).
 
 Every row is written to ``--out`` (JSON lines) as it finishes; ``--resume`` skips the rows already there.
 Prints the figures and their intervals (Wilson for rates, bootstrap for medians) with the sample sizes.
@@ -206,16 +206,18 @@ def mismatch_row(name: str, args: argparse.Namespace, work: Path) -> dict[str, A
 
 
 def fit_time_row(args: argparse.Namespace, work: Path) -> dict[str, Any]:
-    """Five 60 s recordings of one plant, the default fit."""
+    """Five 60 s recordings of one plant, the default fit (with ``--horizons``' stages if given)."""
     truth = draw_truth(np.random.default_rng(2026))
     paths = [work / f"five-{k}.mcap" for k in range(5)]
     for k, p in enumerate(paths):
         record_truth(p, truth, seed=700 + k, profile_name="standard", preset=_base(args))
     t0 = time.monotonic()
     data = [load_motor_data(p) for p in paths]
-    result = fit(data, _base(args), FitOptions(jobs=args.jobs), progress=_say)
+    options = FitOptions(jobs=args.jobs, horizons_s=args.horizons)
+    result = fit(data, _base(args), options, progress=_say)
     return {
         "kind": "fit-time",
+        "horizons_s": list(args.horizons),
         "recordings": len(paths),
         "seconds_each": data[0].duration_s,
         "wall_s": time.monotonic() - t0,
@@ -443,8 +445,10 @@ def summarise(rows: list[dict[str, Any]]) -> None:
                     "itself costs)"
                 )
         elif r["kind"] == "fit-time":
+            stages = r.get("horizons_s") or []
             print(
-                f"fit time: {r['recordings']} recordings of {r['seconds_each']:.0f} s: {r['wall_s']:.0f} s "
+                f"fit time{' (horizons ' + ','.join(f'{h:g}' for h in stages) + ' s)' if stages else ''}: "
+                f"{r['recordings']} recordings of {r['seconds_each']:.0f} s: {r['wall_s']:.0f} s "
                 f"wall ({r['iterations']} iterations, {r['rollouts']} rollouts, {r['simulated_s']:.0f} s "
                 "simulated; "
                 f"goal <= 600 s); held out {r['held_out_rms_m'] * 1e3:.3f} mm "

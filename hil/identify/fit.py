@@ -415,20 +415,27 @@ def _solve(
     stage: str = "",
     part: tuple[float, float] = (0.0, 1.0),
 ) -> _Run:
-    """MuJoCo's Levenberg-Marquardt from ``start`` (the ``k``-th restart, 0 the first start; ``stage``
-    names a horizon's stage in the progress, ``part`` the share of the start's progress it runs in)."""
+    """MuJoCo's Levenberg-Marquardt from ``start`` (the ``k``-th restart, 0 the first start, one past the
+    restarts the preset's own start; ``stage`` names a horizon's stage in the progress, ``part`` the share
+    of the start's progress it runs in). The starts share the progress up to 0.9 (then the report): one
+    slot each and one for the preset's, so it never passes 0.9 nor goes back."""
     objective: list[float] = []
     steps: list[FloatArray] = []
-    label = (f"start {k + 1} of at most {opts.restarts + 1}: " if k else "") + stage
+    label = (
+        "from the preset: "
+        if k > opts.restarts
+        else (f"start {k + 1} of at most {opts.restarts + 1}: " if k else "")
+    ) + stage
+    slots = opts.restarts + 2
 
     def on_iter(trace: list[Any]) -> None:
         objective.append(float(trace[-1].objective))
         if trace[-1].step is not None:
             steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
         done = part[0] + (part[1] - part[0]) * len(trace) / (opts.max_iters + 2)
-        say(f"{label}iteration {len(trace)} of at most {opts.max_iters}", (k + done) / (opts.restarts + 1))
+        say(f"{label}iteration {len(trace)} of at most {opts.max_iters}", 0.9 * (k + done) / slots)
 
-    say(f"{label}first evaluation", (k + part[0]) / (opts.restarts + 1))
+    say(f"{label}first evaluation", 0.9 * (k + part[0]) / slots)
     params, result = sysid.optimize(
         start,
         residual_fn,
@@ -591,7 +598,7 @@ def fit(
         at_preset = problem.params(off_bounds=False)
         res0 = residual_fn(at_preset.as_vector(), at_preset)[0]
         if 0.5 * sum(float(np.sum(np.square(r))) for r in res0) < min(runs).final:
-            runs.append(_solve(at_preset, residual_fn, opts, say, len(runs)))
+            runs.append(_solve(at_preset, residual_fn, opts, say, opts.restarts + 1))
         best = min(runs)
         opt_params, result, objective, steps = best.params, best.result, best.objective, best.steps
         converged_below = 1e-3  # an iteration that still lowered the objective more: not converged

@@ -136,8 +136,15 @@ def test_a_recording_of_the_preset_itself_returns_the_preset(preset_recording: P
     off its bound, and from there stopped short of the truth (the README's three commands ended at a
     delay of 0.047 ms, called identified, against 0). The preset is one more start when it beats them."""
     opts = dataclasses.replace(FAST, params=("damping_ratio", "joint_friction", "delay"), max_iters=3)
-    result = fit([load_motor_data(preset_recording)], ModelConfig(), opts)
+    said: list[tuple[str, float]] = []
+    result = fit(
+        [load_motor_data(preset_recording)], ModelConfig(), opts, progress=lambda s, f: said.append((s, f))
+    )
     assert len(result.starts) == 2, result.starts
+    # The preset's start says so, and the progress neither passes 1 nor goes back (it once read 120 %).
+    assert any(stage.startswith("from the preset: ") for stage, _ in said), said
+    fractions = [f for _, f in said]
+    assert fractions == sorted(fractions) and fractions[0] >= 0.0 and fractions[-1] <= 1.0, said
     by = {e.name: e for e in result.estimates}
     assert by["delay"].value == 0.0 and by["joint_friction"].value == 0.0
     assert by["damping_ratio"].value == pytest.approx(ModelConfig().arm.damping_ratio, rel=1e-6)
