@@ -22,7 +22,8 @@ its fitted values to its truth's (``--line-params``: move only these, the others
 with ``--line-others truth``, the truth's; ``--line-t``: the points), with the
 same recording: a wall between them is a local minimum the solver cannot leave (docs/identify.md 6).
 ``--known-torque`` gives each draw's true torque constant to the fit (as a lab gives the datasheet's, or a
-bench test's with a known weight) and fits the other parameters: it removes the common-scale tie.
+bench test's with a known weight) and fits the other parameters: it removes the common-scale tie. With it
+the fits continue over 3, 6 and 10 s as ``spirob-hil identify`` does (``--horizons none`` turns that off).
 
 Usage: ``.venv/bin/python bench/identify.py [--draws 20] [--mismatch] [--fit-time] [--quick]
 [--known-torque] [--jacobian dense] [--horizons S,S] [--shard J/K] [--seeds A,B] [--resume] [--summary-only]
@@ -52,7 +53,7 @@ from hil.experiments.stats import bootstrap_interval, wilson_interval  # noqa: E
 from hil.identify.fit import FitOptions, FitResult, fit, objective_at  # noqa: E402
 from hil.identify.intervals import IDENTIFIED_WITHIN, fd_floor, si_interval, unexplained  # noqa: E402
 from hil.identify.motor_data import length_quantum_m, load_motor_data  # noqa: E402
-from hil.identify.starts import parse_horizons, settled_for  # noqa: E402
+from hil.identify.starts import default_horizons, parse_horizons, settled_for  # noqa: E402
 from hil.identify.synthetic import (  # noqa: E402
     MISMATCHES,
     SensorLimits,
@@ -520,8 +521,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--horizons",
         type=_horizons,
-        default=FitOptions().horizons_s,
-        help="horizon continuation: fit each start to the first S seconds first, S,S,... (FitOptions)",
+        default=None,
+        help="horizon continuation: fit each start to the first S seconds first, S,S,... or none "
+        "(default: the command's, 3,6,10 with --known-torque, else none)",
     )
     ap.add_argument("--jobs", type=int, default=None)
     ap.add_argument("--mismatch", action="store_true", help="also the model-mismatch plants")
@@ -568,6 +570,8 @@ def main(argv: list[str] | None = None) -> int:
         "objective around the truth)",
     )
     args = ap.parse_args(argv)
+    if args.horizons is None:  # the command's default (hil.identify.starts.default_horizons)
+        args.horizons = default_horizons(["torque_scale"] if args.known_torque else [])
     try:
         shard, shards = (int(v) for v in args.shard.split("/"))
         if not 0 <= shard < shards:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +20,13 @@ from hil.cli.design import preset_arg
 from hil.identify.fit import FitError, FitOptions, FitResult, fit
 from hil.identify.motor_data import IdentifyDataError, load_motor_data
 from hil.identify.report import write_report
-from hil.identify.starts import DELAY_CELLS_S, parse_horizons, settled_m
+from hil.identify.starts import (
+    DELAY_CELLS_S,
+    KNOWN_TORQUE_HORIZONS_S,
+    default_horizons,
+    parse_horizons,
+    settled_m,
+)
 from hil.recording import package_version
 from hil.sim.model_file import FittedParameter, ModelFile, read_model_file, write_model_file
 from hil.sim.presets import is_model_file, resolve
@@ -139,8 +145,8 @@ def configure_identify(p: argparse.ArgumentParser) -> None:
         help="horizon continuation: fit every start to the recordings' first S seconds first, each horizon "
         "in turn, then to all the fit sees (e.g. 3,6,10: a long simulation's objective is a field of pits "
         "from stick-slip, a few seconds' is smooth); 'none' turns it off (default "
-        + (",".join(f"{v:g}" for v in FitOptions().horizons_s) or "none")
-        + ")",
+        + ",".join(f"{v:g}" for v in KNOWN_TORQUE_HORIZONS_S)
+        + " when --known gives torque_scale, where it was shown to help; else none)",
     )
     p.add_argument(
         "--jobs", type=int, metavar="N", help="worker processes for the rollouts (default: one per core)"
@@ -148,10 +154,11 @@ def configure_identify(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the result as one JSON object")
 
 
-def _horizons(text: str | None) -> tuple[float, ...]:
-    """``--horizons``: None keeps the default, ``none`` turns continuation off, else seconds S,S,..."""
+def _horizons(text: str | None, known: Collection[str]) -> tuple[float, ...]:
+    """``--horizons``: None takes :func:`~hil.identify.starts.default_horizons` of the parameters given
+    (``known``), ``none`` turns continuation off, else seconds S,S,..."""
     if text is None:
-        return FitOptions().horizons_s
+        return default_horizons(known)
     try:
         return parse_horizons(text)
     except ValueError as exc:
@@ -172,7 +179,7 @@ def run_identify_command(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--explained-within-mm must be above 0 and at most 1000, got {args.explained_within_mm:g}"
         )
-    horizons = _horizons(args.horizons)
+    horizons = _horizons(args.horizons, [name for name, _ in args.known])
     writable_file(args.output, "the model file")
     if args.report is not None:
         writable_dir(args.report, "the report")
@@ -220,7 +227,8 @@ def run_identify_command(args: argparse.Namespace) -> int:
             result, args.report, f"Identification: {', '.join(p.name for p in args.recordings)}"
         )
     if args.json:
-        print(json.dumps(_finite(_as_dict(result, args.output, page) | {"known": known}), allow_nan=False))
+        extra = {"known": known, "horizons_s": list(horizons)}
+        print(json.dumps(_finite(_as_dict(result, args.output, page) | extra), allow_nan=False))
     else:
         _print(result, args.output, page, known)
         delay_fitted = any(e.name == "delay" for e in result.estimates)

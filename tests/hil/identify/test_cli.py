@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from hil.cli.identify import KNOWN_NOTE, local_minimum_hint
+from hil.cli.identify import KNOWN_NOTE, _horizons, local_minimum_hint
 from hil.cli.main import main
 from hil.sim.model_file import read_model_file
 from hil.sim.presets import PRESETS, resolve
@@ -58,6 +58,7 @@ def test_a_known_parameter_is_set_not_fitted_and_the_file_carries_it(
     assert main([*argv, "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["known"] == {"torque_scale": given}
+    assert result["horizons_s"] == [3.0, 6.0, 10.0]  # the default with the torque constant given
     assert [p["name"] for p in result["parameters"]] == ["base_stiffness", "damping_ratio"]  # not fitted
     fitted = read_model_file(out).parameters["torque_scale"]
     assert fitted.value == given and fitted.preset == preset and fitted.note == KNOWN_NOTE
@@ -111,3 +112,10 @@ def test_a_fit_that_left_more_than_the_encoders_noise_says_what_to_do() -> None:
     assert "--horizons 3,6,10" in hint and "--horizons" in after
     with_horizons = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0, horizons=True)
     assert with_horizons is not None and "--horizons" not in with_horizons
+
+
+def test_the_command_continues_over_horizons_by_default_only_with_the_torque_constant_given() -> None:
+    assert _horizons(None, ["torque_scale"]) == (3.0, 6.0, 10.0)
+    assert _horizons(None, []) == () == _horizons(None, ["delay"])
+    assert _horizons("none", ["torque_scale"]) == ()  # asked for: kept
+    assert _horizons("2,4", []) == (2.0, 4.0)

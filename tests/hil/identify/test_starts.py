@@ -16,6 +16,7 @@ from hil.identify.motor_data import load_motor_data
 from hil.identify.starts import (
     SETTLED_FACTOR,
     cell_starts,
+    default_horizons,
     parse_horizons,
     restart_points,
     restarts,
@@ -103,3 +104,11 @@ def test_horizons_are_read_as_a_user_writes_them() -> None:
     for bad, says in (("3,x", "seconds S,S"), ("0,6", "above 0"), ("nan", "above 0"), ("5000", "below 3600")):
         with pytest.raises(ValueError, match=says):
             parse_horizons(bad)
+
+
+def test_continuation_is_the_default_only_where_the_torque_constant_is_given() -> None:
+    """The twenty hidden-truth draws that showed continuation helps gave the torque constant; the timed fit
+    that fitted it ended worse with it (docs/identify.md)."""
+    assert default_horizons(["torque_scale"]) == (3.0, 6.0, 10.0)
+    assert default_horizons(["delay", "torque_scale"]) == (3.0, 6.0, 10.0)
+    assert default_horizons([]) == () == default_horizons(["delay"])
