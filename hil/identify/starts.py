@@ -146,9 +146,10 @@ KNOWN_TORQUE_HORIZONS_S = (3.0, 6.0, 10.0)
 
 def default_horizons(known: Collection[str]) -> tuple[float, ...]:
     """The command's horizons when none are asked for: :data:`KNOWN_TORQUE_HORIZONS_S` when ``torque_scale``
-    is among the parameters the lab gives (``known``), else none. The evidence for continuation is in fits
-    with the torque constant given; the one timed fit with it fitted ended worse with continuation (0.43 mm
-    against 0.23 mm, docs/identify.md section 5), so there it stays off."""
+    is among the parameters the lab gives (``known``), else none. The twenty draws that showed continuation
+    helps gave the torque constant; with it fitted, the evidence is two plants, one each way (the timed fit
+    ended worse with it, 0.43 against 0.23 mm; a draw settled only with it: docs/identify.md section 6), so
+    there it stays off until more is run."""
     return KNOWN_TORQUE_HORIZONS_S if "torque_scale" in known else ()
 
 
