@@ -95,7 +95,7 @@ START_OFF_BOUND: Final = {"delay": 0.002}
 """Where the search starts for a parameter whose preset sits on a search bound (the prototype has no
 delay): two control periods, the command's way to the ESC and the ESC's own loop. Started just above 0,
 the other parameters made up for a delay (joint friction, damping, capstan friction) and pressed it to 0
-(docs/identify.md section 6)."""
+(docs/identify.md section 7)."""
 
 
 class FitError(HilError):
@@ -115,7 +115,7 @@ class FitOptions:
         min_span_s: the shortest stretch of a recording worth fitting (a recording that would get less is
             held out whole). Default: the excitation's opening, one segment of each kind (``OPENING_S``).
         max_iters: Levenberg-Marquardt iterations at most (the hidden-truth fits of one opening converge
-            in 11-24, docs/identify.md section 6).
+            in 11-24, docs/identify.md section 7).
         fd_step: finite-difference step, in each parameter's own units (1 % of its size).
         jobs: worker processes for the rollouts (None: one per core).
         residual_period_s: the residual's sample period (the data are decimated to it).
@@ -130,7 +130,7 @@ class FitOptions:
             about 0.6 um on the prototype). Every interval assumes the fit found the arm's own minimum,
             and a fit that leaves more than the sensors' noise did not, or has a model that cannot follow
             the arm: on hidden-truth draws the fits that left 1.7-88 um called a wrong value identified
-            in 5 of 13, those that settled in none of 16 (docs/identify.md section 6). A larger bound
+            in 5 of 13, those that settled in none of 16 (docs/identify.md section 7). A larger bound
             (the twin's accuracy target, 0.3 mm) is the weaker claim of a lab that trusts its model.
         jacobian: the rollouts' constraint Jacobian (:attr:`~hil.sim.config.SolverConfig.jacobian`), or
             None to keep the preset's (a fit of a synthetic recording made on ``auto`` resolves the

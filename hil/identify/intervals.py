@@ -48,7 +48,7 @@ def fd_floor(x: FloatArray, fd_step: float) -> FloatArray:
     The Jacobian is a secant over this step. Where the objective is not smooth on a smaller scale, the
     secant's slope is not the gradient, and the point where the solver stops can lie anywhere within about a
     step of the minimum. It is not smooth there: a command delay interpolated between 1 ms periods against
-    ticks that start late, dry friction's stick and slip. Measured (docs/identify.md section 6): one draw's
+    ticks that start late, dry friction's stick and slip. Measured (docs/identify.md section 7): one draw's
     cable-length error against its delay, every other value true, rises from 0.062 µm (the encoders'
     quantization) to 0.105 µm at 4 µs shorter and to 0.297 µm at 4 µs longer with the loop's lateness in
     the recording, symmetrically (0.105 and 0.107 µm) without it; the delay's step is 10 µs, and its fits

@@ -1,6 +1,6 @@
 """Where a fit starts again when its first optimum has not explained what the sensors can see.
 
-Levenberg-Marquardt finds the nearest minimum. In the hidden-truth draws (docs/identify.md section 6) four
+Levenberg-Marquardt finds the nearest minimum. In the hidden-truth draws (docs/identify.md section 7) four
 of nine fits stopped in one where the delay sat at 0 and joint friction, damping and capstan friction made
 up for it, leaving 0.02-0.6 mm of the cable lengths unexplained, where the fits that reached the truth
 left 6e-5 mm: the encoders' own quantization. A model that can follow the arm exactly (the draws) tells
@@ -147,9 +147,9 @@ KNOWN_TORQUE_HORIZONS_S = (3.0, 6.0, 10.0)
 def default_horizons(known: Collection[str]) -> tuple[float, ...]:
     """The command's horizons when none are asked for: :data:`KNOWN_TORQUE_HORIZONS_S` when ``torque_scale``
     is among the parameters the lab gives (``known``), else none. The twenty draws that showed continuation
-    helps gave the torque constant; with it fitted, the evidence is two plants, one each way (the timed fit
-    ended worse with it, 0.43 against 0.23 mm; a draw settled only with it: docs/identify.md section 6), so
-    there it stays off until more is run."""
+    helps gave the torque constant; with it fitted, twenty draws with continuation and one start settled in
+    3 of 17 and missed the held-out and coverage goals (docs/identify.md section 6), and the timed fit ended
+    worse with it (0.43 against 0.23 mm), so there it stays off."""
     return KNOWN_TORQUE_HORIZONS_S if "torque_scale" in known else ()
 
 
