@@ -239,6 +239,7 @@ def run_identify_command(args: argparse.Namespace) -> int:
             delay_fitted,
             args.explained_within_mm is None,
             bool(horizons),
+            "torque_scale" in fitted and all(d.tip_m is None for d in data),
         )
         if hint:
             Console().print(f"[yellow]{hint}", highlight=False)
@@ -392,6 +393,7 @@ def local_minimum_hint(
     delay_fitted: bool = True,
     bound_is_noise: bool = True,
     horizons: bool = False,
+    scale_tied: bool = False,
 ) -> str | None:
     """What to do when the best start left more than the encoders' noise (``settled``, m), or None.
 
@@ -399,7 +401,10 @@ def local_minimum_hint(
     draws every wrong fit left more than that, and no fit that left less was wrong (docs/identify.md section
     6); a real arm's fit always leaves more, so the hint says what it can and cannot mean. With
     ``bound_is_noise`` (no ``--explained-within-mm``) it also says why nothing is called identified; without
-    ``horizons`` (no ``--horizons``) it offers horizon continuation.
+    ``horizons`` (no ``--horizons``) it offers horizon continuation. With ``scale_tied`` (the torque constant
+    fitted from the motors alone, no tracked tip) it offers ``--known torque_scale`` instead: on twenty
+    hidden truths so fitted 3 of 17 fits settled at their first start, with the constant given 13 of 20
+    (docs/identify.md section 6).
     """
     if not starts or not math.isfinite(settled):
         return None
@@ -415,11 +420,17 @@ def local_minimum_hint(
         if bound_is_noise
         else ""
     )
-    span = (
-        ""
-        if horizons
-        else " --horizons 3,6,10 fits the first seconds first, where stick-slip leaves fewer such minima."
-    )
+    if scale_tied:
+        span = (
+            " The torque constant was fitted from the motors alone, where it trades with the arm's force"
+            " scale: --known torque_scale=VALUE (the datasheet's, or a weighing: docs/identify.md section 3)"
+            " lets the fit settle far more often."
+        )
+    elif horizons:
+        span = ""
+    else:
+        span = " --horizons 3,6,10 fits the first seconds first, where stick-slip leaves fewer such minima."
+
     if restarts == 0:
         cells = " and ".join(f"{1e3 * v:g}" for v in DELAY_CELLS_S)
         where = f"with the delay at {cells} ms" if delay_fitted else "from points around the first start"

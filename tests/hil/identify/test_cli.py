@@ -112,6 +112,10 @@ def test_a_fit_that_left_more_than_the_encoders_noise_says_what_to_do() -> None:
     assert "--horizons 3,6,10" in hint and "--horizons" in after
     with_horizons = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0, horizons=True)
     assert with_horizons is not None and "--horizons" not in with_horizons
+    # A fit of the torque constant from the motors alone is told to give it, not to continue over horizons.
+    tied = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0, scale_tied=True)
+    assert tied is not None and "--known torque_scale=" in tied and "--horizons" not in tied
+    assert "--known" not in hint
 
 
 def test_horizons_asked_for_win_over_the_default() -> None:
