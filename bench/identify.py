@@ -106,6 +106,11 @@ def _fit(
     return fit(data, apply(_base(args), known), opts, progress=_say)
 
 
+def _tip_noise_m(args: argparse.Namespace) -> float | None:
+    """``--tip-noise-mm`` in metres (None: no tracked tip)."""
+    return None if args.tip_noise_mm is None else args.tip_noise_mm * 1e-3
+
+
 def _horizons(text: str) -> tuple[float, ...]:
     """``--horizons``: :func:`~hil.identify.starts.parse_horizons` for argparse."""
     try:
@@ -122,7 +127,13 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
     limits = SensorLimits(can_late_rate=0.0, loop_jitter_us=0) if args.no_timing_noise else None
     for k, p in enumerate(paths):
         record_truth(
-            p, truth, seed=1000 * seed + k, profile_name=args.profile, limits=limits, preset=_base(args)
+            p,
+            truth,
+            seed=1000 * seed + k,
+            profile_name=args.profile,
+            limits=limits,
+            preset=_base(args),
+            tip_noise_m=_tip_noise_m(args),
         )
     record_s = time.monotonic() - t0
     # Both recordings go in; the fit's budget (``--fit-s``, at least ``min_span_s`` per recording) is spent
@@ -158,6 +169,7 @@ def hidden_truth_row(seed: int, args: argparse.Namespace, work: Path) -> dict[st
         "seed": seed,
         "known": known,
         "timing_noise": not args.no_timing_noise,
+        "tip_noise_m": _tip_noise_m(args),
         "jacobian": args.jacobian,
         "params": params,
         "held_out_rms_m": result.rms_m(True),
@@ -467,7 +479,15 @@ def line_to_truth(
     path = work / f"truth{seed}-0.mcap"
     limits = None if row.get("timing_noise", True) else SensorLimits(can_late_rate=0.0, loop_jitter_us=0)
     base = ModelConfig(solver=SolverConfig(jacobian=row.get("jacobian", args.jacobian)))
-    record_truth(path, truth, seed=1000 * seed, profile_name=args.profile, limits=limits, preset=base)
+    record_truth(
+        path,
+        truth,
+        seed=1000 * seed,
+        profile_name=args.profile,
+        limits=limits,
+        preset=base,
+        tip_noise_m=row.get("tip_noise_m"),
+    )
     known = dict(row.get("known") or {})
     fitted = {x["name"]: float(x["value"]) for x in row["params"]}
     move = set(args.line_params.split(",")) if args.line_params else set(fitted)
@@ -539,6 +559,14 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="give the fit each draw's true torque constant (as a datasheet would) and fit the rest",
     )
+    ap.add_argument(
+        "--tip-noise-mm",
+        type=float,
+        default=None,
+        metavar="MM",
+        help="the hidden-truth recordings also carry a tracked tip with this noise per axis (a motion-"
+        "capture tracker at 100 Hz; docs/identify.md section 3)",
+    )
     ap.add_argument("--out", type=Path, default=Path("runs/bench-identify.jsonl"))
     ap.add_argument("--resume", action="store_true", help="keep the rows already in --out")
     ap.add_argument(
@@ -583,6 +611,8 @@ def main(argv: list[str] | None = None) -> int:
             _seeds(args.seeds)
         except ValueError:
             ap.error(f"--seeds {args.seeds!r}: whole numbers A,B,...")
+    if args.tip_noise_mm is not None and not (math.isfinite(args.tip_noise_mm) and args.tip_noise_mm >= 0):
+        ap.error(f"--tip-noise-mm {args.tip_noise_mm}: a finite noise >= 0")
     if args.quick:
         args.draws, args.profile, args.fit_s = 3, "quick", 12.0
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -115,8 +115,10 @@ def record_truth(
     preset: ModelConfig | None = None,
     design: SpiralDesign | None = None,
     mismatch: str | None = None,
+    tip_noise_m: float | None = None,
 ) -> ScenarioResult:
-    """Record the excitation on a virtual board whose plant has ``truth``'s parameters.
+    """Record the excitation on a virtual board whose plant has ``truth``'s parameters (with
+    ``tip_noise_m``, and a tracked tip with that noise per axis: :mod:`hil.identify.tracker`).
 
     Raises:
         ValueError: a truth the model refuses, or an unknown mismatch.
@@ -137,7 +139,7 @@ def record_truth(
         model=model,
         faults=lim.faults(),
         record=path,
-        options={"profile_name": profile_name},
+        options={"profile_name": profile_name, "tip_noise_m": tip_noise_m, "tip_seed": seed},
     )
     if not result.passed:
         failed = [c.name for c in result.checks if not c.passed]

@@ -126,7 +126,7 @@ def run_scenario(
     record: str | Path | None = None,
     progress: Callable[[int, int], None] | None = None,
     report_dir: str | Path | None = None,
-    options: Mapping[str, str] | None = None,
+    options: Mapping[str, object] | None = None,
 ) -> ScenarioResult:
     """Run one scenario in lockstep and measure its checks.
 
@@ -141,7 +141,7 @@ def run_scenario(
         report_dir: write the run's report there: a PNG of its signals (``NAME.png``), pictures of its
             moments rendered from the run's own states and, where the arm moves, a GIF
             (:mod:`hil.render`), listed in ``NAME.md``.
-        options: the scenario's own options (``excitation``: ``profile_name``).
+        options: the scenario's own options (``excitation``: ``profile_name``, ``tip_noise_m``, ``tip_seed``).
 
     Raises:
         KeyError: unknown scenario name.

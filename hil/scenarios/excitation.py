@@ -4,7 +4,8 @@ What ``spirob-host --excite`` does against a real board, played by the scripted 
 board: the radio arms (right lever DOWN, then MIDDLE: the pilot's enable), the host asks for DIRECT, then
 sends the profile's per-cable tensions (:mod:`hil.identify.excitation`) 50 times a second. The recording
 (``spirob-hil run excitation --record excite.mcap``) names the profile and when it began, so
-``spirob-hil identify`` finds its segments.
+``spirob-hil identify`` finds its segments. With ``tip_noise_m`` a motion-capture tracker
+(:class:`hil.identify.tracker.TipTracker`) also records the tip, as a lab's tracker would.
 """
 
 from __future__ import annotations
@@ -15,8 +16,10 @@ from typing import Final
 
 import numpy as np
 
+from hil.environment import Environment
 from hil.identify.excitation import Profile, profile
 from hil.identify.motor_data import EXCITATION_KEY
+from hil.identify.tracker import TipTracker
 from hil.run_record import Check, RunRecord
 from hil.scenarios.base import MS, SAFE, Plan, Scenario, rc
 from protocol.dbus import Lever
@@ -34,16 +37,29 @@ FLOAT32_N: Final = 1e-4
 
 
 class Excitation(Scenario):
-    """The ``standard`` profile (or another, ``spirob-hil run excitation --excite NAME``) in DIRECT mode."""
+    """The ``standard`` profile (or another, ``spirob-hil run excitation --excite NAME``) in DIRECT mode.
+
+    Args:
+        profile_name: the excitation profile.
+        tip_noise_m: with a value, a tracker records the tip with this noise per axis (None: no tracker).
+        tip_seed: the tracker noise's seed.
+    """
 
     name = "excitation"
     summary = "an identification excitation in DIRECT mode within every limit, for spirob-hil identify"
     duration_us = PROFILE_AT_US + round(profile("standard").duration_s * 1e6) + TAIL_US
     needs_plant = False
 
-    def __init__(self, profile_name: str = "standard") -> None:
+    def __init__(
+        self, profile_name: str = "standard", tip_noise_m: float | None = None, tip_seed: int = 0
+    ) -> None:
         self.profile: Profile = profile(profile_name)
         self.duration_us = PROFILE_AT_US + round(self.profile.duration_s * 1e6) + TAIL_US
+        self.tracker = None if tip_noise_m is None else TipTracker(noise_m=tip_noise_m, seed=tip_seed)
+
+    def after_tick(self, env: Environment) -> None:
+        if self.tracker is not None:
+            self.tracker.after_tick(env)
 
     def plan(self) -> Plan:
         p = self.profile

@@ -121,3 +121,9 @@ def test_the_line_from_a_fit_to_its_truth_ends_at_the_sensors_noise(tmp_path: Pa
     assert "moving damping_ratio, the others at the truth's" in probe.stdout, probe.stdout
     bad = _bench("--line", "--out", str(rows), "--line-params", "no_such_param")
     assert bad.returncode == 2 and "no_such_param not fitted" in bad.stderr, bad.stderr
+
+
+def test_a_negative_tracker_noise_is_one_line(tmp_path: Path) -> None:
+    run = _bench("--tip-noise-mm", "-0.1", "--draws", "1", "--out", str(tmp_path / "rows.jsonl"))
+    assert run.returncode == 2 and "--tip-noise-mm -0.1: a finite noise >= 0" in run.stderr, run.stderr
+    assert "Traceback" not in run.stderr and not (tmp_path / "rows.jsonl").exists()
