@@ -401,7 +401,27 @@ def _configure_run(p: argparse.ArgumentParser) -> None:
         metavar="PROFILE",
         help=f"the excitation scenario's profile ({', '.join(PROFILES)}; default standard)",
     )
+    p.add_argument(
+        "--tracked-tip",
+        type=float,
+        metavar="MM",
+        help="the excitation's recording also carries the tip as a motion-capture tracker would see it, with "
+        "this noise per axis in mm (foxglove.PoseInFrame on /mocap/tip; spirob-hil identify uses it)",
+    )
     add_design_arguments(p)
+
+
+def _check_tracked_tip(args: argparse.Namespace, names: list[str]) -> None:
+    """``--tracked-tip``: a simulated tracker, into the excitation's recording, with a sensible noise."""
+    where = f"{PROG} run"
+    if "excitation" not in names:
+        raise UsageError("--tracked-tip is the excitation scenario's option: run excitation", where)
+    if args.port:
+        raise UsageError("--tracked-tip simulates a tracker: a real arm's comes from its own bridge", where)
+    if not args.record:
+        raise UsageError("--tracked-tip writes into the recording: give --record FILE.mcap", where)
+    if not (math.isfinite(args.tracked_tip) and 0.0 <= args.tracked_tip <= 100.0):
+        raise UsageError(f"--tracked-tip {args.tracked_tip}: a noise in mm from 0 to 100", where)
 
 
 def _run_run(args: argparse.Namespace) -> int:
@@ -417,7 +437,7 @@ def _run_run(args: argparse.Namespace) -> int:
     if unknown:
         raise UsageError(f"unknown scenario {unknown[0]!r} (known: {', '.join(SCENARIOS)})", f"{PROG} run")
     faults = [Fault.parse(spec) for spec in args.fault]
-    options: dict[str, dict[str, str]] = {}
+    options: dict[str, dict[str, object]] = {}
     if args.excite is not None:
         if "excitation" not in names:
             raise UsageError("--excite is the excitation scenario's option: run excitation", f"{PROG} run")
@@ -427,6 +447,9 @@ def _run_run(args: argparse.Namespace) -> int:
                 f"{PROG} run",
             )
         options["excitation"] = {"profile_name": args.excite}
+    if args.tracked_tip is not None:
+        _check_tracked_tip(args, names)
+        options.setdefault("excitation", {})["tip_noise_m"] = args.tracked_tip * 1e-3
     design = design_from_args(args)
     if args.report and not args.port:  # checked before the first run, not after it
         writable_dir(Path(args.report), "write plots into", f"{PROG} run")

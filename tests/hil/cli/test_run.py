@@ -8,9 +8,11 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from hil.cli.main import main
+from hil.identify.motor_data import load_motor_data
 from hil.scenarios import SCENARIOS
 from tests.support.realtime_guard import scaled_s, timed_out
 from tests.support.terminal import children, ctrl_c, start_in_own_group
@@ -54,6 +56,17 @@ def test_run_json_record_report_and_replay(tmp_path: Path, capsys: pytest.Captur
     assert json.loads(capsys.readouterr().out)["matched"] is True
 
 
+def test_an_excitation_with_a_tracked_tip_is_read_with_its_tip(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "excite.mcap"
+    argv = ["run", "excitation", "--excite", "tiny", "--tracked-tip", "0.3", "--record", str(path)]
+    assert main(argv) == 0, capsys.readouterr()
+    data = load_motor_data(path)
+    assert data.tip_m is not None and np.isfinite(data.tip_m).all()
+    assert -0.25 < data.tip_m[0, 2] < -0.2  # the prototype's tip hangs about 22 cm below the drone
+
+
 def test_run_fails_with_nonzero_status_when_a_check_fails(capsys: pytest.CaptureFixture[str]) -> None:
     # The radio dies at 0 s for good: the gate never opens, so "current once armed" fails.
     assert main(["run", "startup-gate", "--fault", "rc-silence@0"]) == 1
@@ -83,6 +96,14 @@ def test_run_fails_with_nonzero_status_when_a_check_fails(capsys: pytest.Capture
         (["board", "--duration", "nan"], "--duration: must be a finite number > 0"),
         (["board", "--duration", "1e300"], "--duration: must be at most"),
         (["experiment", "packing", "--seed", "x"], "--seed: must be a whole number >= 0"),
+        (["run", "rc-loss", "--tracked-tip", "0.3"], "--tracked-tip is the excitation scenario's option"),
+        (["run", "excitation", "--tracked-tip", "0.3"], "give --record FILE.mcap"),
+        (["run", "excitation", "--tracked-tip", "-1", "--record", "x.mcap"], "a noise in mm from 0 to 100"),
+        (["run", "excitation", "--tracked-tip", "nan", "--record", "x.mcap"], "a noise in mm from 0 to 100"),
+        (
+            ["run", "excitation", "--tracked-tip", "0.3", "--port", "/dev/ttyACM9", "--record", "x.mcap"],
+            "a real arm's comes from its own bridge",
+        ),
     ],
 )
 def test_user_mistakes_are_one_line_and_status_2(
