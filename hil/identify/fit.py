@@ -43,6 +43,7 @@ from mujoco import sysid
 from numpy.typing import NDArray
 
 from hil.errors import HilError
+from hil.identify import scale_tie
 from hil.identify.excitation import OPENING_S
 from hil.identify.intervals import (
     ParamEstimate,
@@ -83,12 +84,10 @@ spool) and the tracked tip."""
 
 
 _SOLVER_TUNING: dict[str, Any] = {"mu_factor": 10.0, "x_scale": "jac"}
-"""How MuJoCo's Levenberg-Marquardt (``mujoco.minimize.least_squares``) moves its regularizer. Its
-defaults raise it by 10^0.1 after a failed step, from 1e-6, against a Hessian in the residual's own units:
-near the optimum, where the sensors' noise fails most steps, one iteration tried dozens of candidates, each
-a serial rollout. Scaled by the Jacobian's columns (the Hessian's diagonal then near 1) and raised tenfold,
-a fit of four parameters on a ``tiny`` recording ran 62 rollouts instead of 146 for the same 11 iterations,
-the same values and objective."""
+"""How MuJoCo's Levenberg-Marquardt (``mujoco.minimize.least_squares``) moves its regularizer. Its defaults
+raise it by 10^0.1 after a failed step, from 1e-6, against a Hessian in the residual's own units: near the
+optimum one iteration tried dozens of candidates. Scaled by the Jacobian's columns and raised tenfold, a fit
+of four parameters on a ``tiny`` recording ran 62 rollouts instead of 146 for the same 11 iterations."""
 
 
 START_OFF_BOUND: Final = {"delay": 0.002}
@@ -147,6 +146,7 @@ class FitOptions:
             slips to flip, and on hidden-truth draw 26 the objective falls smoothly from the stuck fit to the
             truth over 3 or 6 s but not over 10 or 14.5 s (docs/identify.md section 6). Empty: off.
         horizon_iters: Levenberg-Marquardt iterations at most in each horizon's stage.
+        scale_coordinates: the solver walks the force scale as a coordinate (:mod:`.scale_tie`).
     """
 
     params: tuple[str, ...] = tuple(p.name for p in ID_PARAMS)
@@ -166,6 +166,7 @@ class FitOptions:
     restarts: int = 0
     horizons_s: tuple[float, ...] = ()
     horizon_iters: int = 12
+    scale_coordinates: bool = True
 
 
 @dataclass(frozen=True)
@@ -436,7 +437,7 @@ def _solve(
         say(f"{label}iteration {len(trace)} of at most {opts.max_iters}", 0.9 * (k + done) / slots)
 
     say(f"{label}first evaluation", 0.9 * (k + part[0]) / slots)
-    params, result = sysid.optimize(
+    params, result = (scale_tie.optimize if opts.scale_coordinates else sysid.optimize)(
         start,
         residual_fn,
         optimizer="mujoco",
