@@ -239,7 +239,7 @@ def run_identify_command(args: argparse.Namespace) -> int:
             delay_fitted,
             args.explained_within_mm is None,
             bool(horizons),
-            "torque_scale" in fitted and all(d.tip_m is None for d in data),
+            "torque_scale" in fitted,
         )
         if hint:
             Console().print(f"[yellow]{hint}", highlight=False)
@@ -402,9 +402,9 @@ def local_minimum_hint(
     6); a real arm's fit always leaves more, so the hint says what it can and cannot mean. With
     ``bound_is_noise`` (no ``--explained-within-mm``) it also says why nothing is called identified; without
     ``horizons`` (no ``--horizons``) it offers horizon continuation. With ``scale_tied`` (the torque constant
-    fitted from the motors alone, no tracked tip) it offers ``--known torque_scale`` instead: on twenty
-    hidden truths so fitted 3 of 17 fits settled at their first start, with the constant given 13 of 20
-    (docs/identify.md section 6).
+    fitted) it offers ``--known torque_scale`` too: on twenty hidden truths with continuation, 13 of 20 first
+    starts settled with the constant given, SCALE_FIRST_STARTS with it fitted (docs/identify.md section 6;
+    a tracked tip of 0.3 mm adds little to the motors' data, section 3).
     """
     if not starts or not math.isfinite(settled):
         return None
@@ -422,9 +422,10 @@ def local_minimum_hint(
     )
     if scale_tied:
         span = (
-            " The torque constant was fitted from the motors alone, where it trades with the arm's force"
-            " scale: --known torque_scale=VALUE (the datasheet's, or a weighing: docs/identify.md section 3)"
-            " lets the fit settle far more often."
+            " The torque constant was fitted: it moves with the arm's force scale, the hardest direction for"
+            " the search; --known torque_scale=VALUE (the datasheet's, or a weighing: docs/identify.md"
+            " section 3) takes it out of the search"
+            + ("." if horizons else ", and --horizons 3,6,10 fits the first seconds first.")
         )
     elif horizons:
         span = ""

@@ -112,9 +112,11 @@ def test_a_fit_that_left_more_than_the_encoders_noise_says_what_to_do() -> None:
     assert "--horizons 3,6,10" in hint and "--horizons" in after
     with_horizons = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0, horizons=True)
     assert with_horizons is not None and "--horizons" not in with_horizons
-    # A fit of the torque constant from the motors alone is told to give it, not to continue over horizons.
+    # A fit of the torque constant is told it can give it, and to continue over horizons if it did not.
     tied = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0, scale_tied=True)
-    assert tied is not None and "--known torque_scale=" in tied and "--horizons" not in tied
+    assert tied is not None and "--known torque_scale=" in tied and "--horizons 3,6,10" in tied
+    tied_h = local_minimum_hint([(14424.0, 0.19e-3)], settled, 0, horizons=True, scale_tied=True)
+    assert tied_h is not None and "--known torque_scale=" in tied_h and "--horizons" not in tied_h
     assert "--known" not in hint
 
 
