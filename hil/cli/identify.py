@@ -403,7 +403,7 @@ def local_minimum_hint(
     ``bound_is_noise`` (no ``--explained-within-mm``) it also says why nothing is called identified; without
     ``horizons`` (no ``--horizons``) it offers horizon continuation. With ``scale_tied`` (the torque constant
     fitted) it offers ``--known torque_scale`` too: on twenty hidden truths with continuation, 13 of 20 first
-    starts settled with the constant given, SCALE_FIRST_STARTS with it fitted (docs/identify.md section 6;
+    starts settled with the constant given, 9 of 17 with it fitted (docs/identify.md section 6;
     a tracked tip of 0.3 mm adds little to the motors' data, section 3).
     """
     if not starts or not math.isfinite(settled):

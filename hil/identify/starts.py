@@ -147,9 +147,10 @@ KNOWN_TORQUE_HORIZONS_S = (3.0, 6.0, 10.0)
 def default_horizons(known: Collection[str]) -> tuple[float, ...]:
     """The command's horizons when none are asked for: :data:`KNOWN_TORQUE_HORIZONS_S` when ``torque_scale``
     is among the parameters the lab gives (``known``), else none. The twenty draws that showed continuation
-    helps gave the torque constant; with it fitted, twenty draws with continuation and one start settled in
-    3 of 17 and missed the held-out and coverage goals (docs/identify.md section 6), and the timed fit ended
-    worse with it (0.43 against 0.23 mm), so there it stays off."""
+    helps gave the torque constant; with it fitted, the same draws with continuation and one start settled
+    9 of 17 with the force scale as one coordinate (3 of 17 without) and missed the coverage goal
+    (docs/identify.md section 6), no such run without continuation was made, and the timed fit (before the
+    coordinate) ended worse with it (0.43 against 0.23 mm), so there it stays off."""
     return KNOWN_TORQUE_HORIZONS_S if "torque_scale" in known else ()
 
 
