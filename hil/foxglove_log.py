@@ -224,7 +224,7 @@ def _quat_mul(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> npt.NDA
     )
 
 
-def _in_parent(
+def in_parent(
     parent_p: npt.NDArray[np.float64],
     parent_q: npt.NDArray[np.float64],
     p: npt.NDArray[np.float64],
@@ -258,9 +258,9 @@ def tree_poses(
     out = [(WORLD_FRAME, DRONE_FRAME, pos[0], quat[0])]
     if len(pos) == 1:
         return out
-    base_p, base_q = _in_parent(pos[0], quat[0], pos[1:2], quat[1:2])
+    base_p, base_q = in_parent(pos[0], quat[0], pos[1:2], quat[1:2])
     out.append((DRONE_FRAME, ARM_BASE_FRAME, base_p[0], base_q[0]))
-    unit_p, unit_q = _in_parent(pos[1], quat[1], pos[1:], quat[1:])
+    unit_p, unit_q = in_parent(pos[1], quat[1], pos[1:], quat[1:])
     out.extend(
         (ARM_BASE_FRAME, unit_frame(i), p, q) for i, (p, q) in enumerate(zip(unit_p, unit_q, strict=True))
     )

@@ -14,8 +14,9 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Final
 
-import mujoco
 import numpy as np
+
+from hil.foxglove_log import DRONE_FRAME, in_parent
 
 if TYPE_CHECKING:
     from hil.environment import Environment
@@ -103,15 +104,12 @@ class TipTracker:
         self._next_us = (now // self._period_us + 1) * self._period_us
         plant = env.board.plant
         drone, tip = plant.drone_pose(), plant.tip_pose()
-        inv = np.empty(4)
-        mujoco.mju_negQuat(inv, drone.quat_wxyz)
-        rel = np.empty(3)
-        mujoco.mju_rotVecQuat(rel, tip.pos_m - drone.pos_m, inv)
-        quat = np.empty(4)
-        mujoco.mju_mulQuat(quat, inv, tip.quat_wxyz)
-        if self.noise_m > 0.0:
-            rel = rel + self._rng.normal(0.0, self.noise_m, 3)
+        rel, quat = in_parent(drone.pos_m, drone.quat_wxyz, tip.pos_m[None], tip.quat_wxyz[None])
+        pos = rel[0] + (self._rng.normal(0.0, self.noise_m, 3) if self.noise_m > 0.0 else 0.0)
         rec.write_json(
-            TIP_TOPIC, now, pose_in_frame(rec.unix_ns(now), "drone", rel, quat), schema=POSE_IN_FRAME_SCHEMA
+            TIP_TOPIC,
+            now,
+            pose_in_frame(rec.unix_ns(now), DRONE_FRAME, pos, quat[0]),
+            schema=POSE_IN_FRAME_SCHEMA,
         )
         self.samples += 1
