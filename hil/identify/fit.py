@@ -67,18 +67,7 @@ __all__ = ["FitError", "FitOptions", "FitResult", "fit", "objective_at"]
 
 FloatArray = NDArray[np.float64]
 
-SENSORS: Final = (
-    "tension_0",
-    "tension_1",
-    "tension_2",
-    "len_0",
-    "len_1",
-    "len_2",
-    "vel_0",
-    "vel_1",
-    "vel_2",
-    "tip",
-)
+SENSORS: Final = (*(f"{kind}_{i}" for kind in ("tension", "len", "vel") for i in range(3)), "tip")
 """The model's sensors: the cable tensions (not measured), the motors' view (wound cable and its speed per
 spool) and the tracked tip."""
 
@@ -429,12 +418,18 @@ def _solve(
     ) + stage
     slots = opts.restarts + 2
 
-    def on_iter(trace: list[Any]) -> None:
+    def on_iter(trace: list[Any]) -> None:  # a log per iteration, then one at the end point (no step)
+        n, last = len(trace), trace[-1].step is None
         objective.append(float(trace[-1].objective))
-        if trace[-1].step is not None:
+        if not last:
             steps.append(np.abs(np.asarray(trace[-1].step, dtype=np.float64).ravel()))
-        done = part[0] + (part[1] - part[0]) * len(trace) / (opts.max_iters + 2)
-        say(f"{label}iteration {len(trace)} of at most {opts.max_iters}", 0.9 * (k + done) / slots)
+        done = part[0] + (part[1] - part[0]) * n / (opts.max_iters + 2)
+        what = (
+            f"the end point, after {n - 1} iterations"
+            if last
+            else f"iteration {n} of at most {opts.max_iters}"
+        )
+        say(label + what, 0.9 * (k + done) / slots)
 
     say(f"{label}first evaluation", 0.9 * (k + part[0]) / slots)
     params, result = (scale_tie.optimize if opts.scale_coordinates else sysid.optimize)(

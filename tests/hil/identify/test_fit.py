@@ -147,6 +147,10 @@ def test_a_fit_that_leaves_more_than_the_sensors_noise_starts_again_and_keeps_th
     assert all(rms > settled_m([data]) for _, rms in result.starts)
     assert result.objective[-1] == min(obj for obj, _ in result.starts)
     assert any(stage.startswith("start 2 of at most 2: iteration") for stage in progress), progress
+    # No iteration past the cap: the solver's last log is its end point, said as such, once per start.
+    counts = [int(s.split("iteration ")[1].split()[0]) for s in progress if " of at most 3" in s]
+    assert counts and max(counts) <= 3, progress
+    assert sum("the end point, after" in s for s in progress) == 2, progress
     # The starts differ: the second began elsewhere in the box.
     assert result.starts[0] != result.starts[1]
 
