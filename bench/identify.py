@@ -11,7 +11,8 @@ exact, and how long does it take (issue 23's proof without hardware).
 2. Model mismatch (``--mismatch``): truths the fit cannot represent (capsule units, a stretchier cable,
    joint-to-joint stiffness scatter): the fitted model's held-out error against the preset's (goal: halved).
 3. Fit time (``--fit-time``): five 60 s recordings of one plant, the default fit (with ``--horizons``'
-   stages when given), on the cores there are (goal: at most 10 minutes).
+   stages when given), on the cores there are (goal: at most 10 minutes); ``--fit-time-baseline`` also fits
+   them without the force scale's coordinate first and prints the ratio.
 
 Every row is written to ``--out`` (JSON lines) as it finishes; ``--resume`` skips the rows already there.
 Prints the figures and their intervals (Wilson for rates, bootstrap for medians) with the sample sizes.
@@ -219,19 +220,27 @@ def mismatch_row(name: str, args: argparse.Namespace, work: Path) -> dict[str, A
 
 
 def fit_time_row(args: argparse.Namespace, work: Path) -> dict[str, Any]:
-    """Five 60 s recordings of one plant, the default fit (with ``--horizons``' stages if given)."""
+    """Five 60 s recordings of one plant, the default fit (with ``--horizons``' stages if given); with
+    ``--fit-time-baseline`` the same recordings fitted first in the parameters' own coordinates (the fit
+    before the force scale's coordinate, ``FitOptions.scale_coordinates``), the baseline of the same run."""
     truth = draw_truth(np.random.default_rng(2026))
     paths = [work / f"five-{k}.mcap" for k in range(5)]
     for k, p in enumerate(paths):
         record_truth(p, truth, seed=700 + k, profile_name="standard", preset=_base(args))
+    row: dict[str, Any] = {"kind": "fit-time", "horizons_s": list(args.horizons), "recordings": len(paths)}
+    if args.fit_time_baseline:
+        row["baseline"] = _timed_fit(paths, args, scale_coordinates=False)
+    row.update(_timed_fit(paths, args, scale_coordinates=True))
+    return row
+
+
+def _timed_fit(paths: list[Path], args: argparse.Namespace, *, scale_coordinates: bool) -> dict[str, Any]:
     t0 = time.monotonic()
     data = [load_motor_data(p) for p in paths]
-    options = FitOptions(jobs=args.jobs, horizons_s=args.horizons)
+    options = FitOptions(jobs=args.jobs, horizons_s=args.horizons, scale_coordinates=scale_coordinates)
     result = fit(data, _base(args), options, progress=_say)
     return {
-        "kind": "fit-time",
-        "horizons_s": list(args.horizons),
-        "recordings": len(paths),
+        "scale_coordinates": scale_coordinates,
         "seconds_each": data[0].duration_s,
         "wall_s": time.monotonic() - t0,
         "iterations": result.iterations,
@@ -459,14 +468,19 @@ def summarise(rows: list[dict[str, Any]]) -> None:
                 )
         elif r["kind"] == "fit-time":
             stages = r.get("horizons_s") or []
-            print(
-                f"fit time{' (horizons ' + ','.join(f'{h:g}' for h in stages) + ' s)' if stages else ''}: "
-                f"{r['recordings']} recordings of {r['seconds_each']:.0f} s: {r['wall_s']:.0f} s "
-                f"wall ({r['iterations']} iterations, {r['rollouts']} rollouts, {r['simulated_s']:.0f} s "
-                "simulated; "
-                f"goal <= 600 s); held out {r['held_out_rms_m'] * 1e3:.3f} mm "
-                f"(preset {r['held_out_rms_nominal_m'] * 1e3:.3f} mm)"
-            )
+            for label, f in (("the parameters' own coordinates (baseline)", r.get("baseline")), ("", r)):
+                if f is None:
+                    continue
+                print(
+                    f"fit time{' (horizons ' + ','.join(f'{h:g}' for h in stages) + ' s)' if stages else ''}"
+                    f"{', ' + label if label else ''}: {r['recordings']} recordings of "
+                    f"{f['seconds_each']:.0f} s: {f['wall_s']:.0f} s wall ({f['iterations']} iterations, "
+                    f"{f['rollouts']} rollouts, {f['simulated_s']:.0f} s simulated, "
+                    f"{f['simulated_s'] / f['wall_s']:.1f} simulated s per s; goal <= 600 s); held out "
+                    f"{f['held_out_rms_m'] * 1e3:.3f} mm (preset {f['held_out_rms_nominal_m'] * 1e3:.3f} mm)"
+                )
+            if r.get("baseline"):
+                print(f"  wall time against the baseline: {r['wall_s'] / r['baseline']['wall_s']:.2f}x")
 
 
 def line_to_truth(
@@ -548,6 +562,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=None)
     ap.add_argument("--mismatch", action="store_true", help="also the model-mismatch plants")
     ap.add_argument("--fit-time", action="store_true", help="also five 60 s recordings, timed")
+    ap.add_argument(
+        "--fit-time-baseline",
+        action="store_true",
+        help="with --fit-time: fit the same recordings first without the force scale's coordinate "
+        "(the baseline, in the same run)",
+    )
     ap.add_argument("--quick", action="store_true", help="3 draws of the quick profile (a smoke run)")
     ap.add_argument(
         "--no-timing-noise",
