@@ -169,12 +169,12 @@ class FitResult:
         traces: every recording, simulated whole: its fitted and held-out samples.
         condition_number: of the scaled Jacobian at the optimum (large: parameters trade against each other).
         correlation: the parameters' correlation matrix (order of ``estimates``).
-        iterations: solver iterations.
+        iterations: the kept start's solver iterations (in the whole span, after any horizon stages).
         rollouts: simulations run.
         simulated_s: seconds simulated in all.
         wall_s: the fit's wall time.
         recordings: (name, sha256, duration) of each recording used.
-        objective: the kept start's objective after each of its iterations.
+        objective: the kept start's objective after each of its iterations, then at its end point.
         converged: the kept start had converged.
         starts: per start run, its final objective and its fitted cable lengths' RMS error [m] (the first
             start first; the kept one has the lowest objective).
@@ -652,7 +652,7 @@ def fit(
             traces=traces,
             condition_number=cond,
             correlation=corr,
-            iterations=len(objective),
+            iterations=max(0, len(objective) - 1),  # the solver's last log is its end point
             rollouts=pool.rollouts,
             simulated_s=pool.simulated_s,
             wall_s=time.monotonic() - t_start,
