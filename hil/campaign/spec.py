@@ -32,6 +32,7 @@ from hil.sim.config import PHYSICS_STEPS_S, ModelConfig
 from hil.sim.presets import resolve
 from hil.sim.spiral import SpiralDesign, b_from_taper, taper_from_b
 from hil.sim.variants import Variant
+from hil.trial.arm_45cm import scaled_model
 from hil.trial.grasp import grasp_firmware
 
 __all__ = [
@@ -76,6 +77,7 @@ _DESIGN_KEYS = {
     "stiffness_exponent": _FLOAT,
     "cable_mu": _FLOAT,
     "arm_friction": _FLOAT,
+    "scale_model": _BOOL,
 }
 _OBJECT_KEYS = {
     "diameter_m": _FLOAT,
@@ -565,7 +567,10 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
     ``design.preset`` (default ``prototype``) gives the plant model and, unless physical inputs
     (``length_m``, ``tip_width_m``, ``taper_deg`` or ``b``, ``dtheta_deg``) are given, the design;
     ``cables``, ``base_stiffness_nm_per_rad``, ``stiffness_exponent``, ``cable_mu`` and ``arm_friction``
-    change either;
+    change either; ``scale_model`` (default false) then scales the model, which describes the preset's arm,
+    to the run's arm in the same material (mass with the volume, the base joint's stiffness with the cube
+    of its width: :func:`hil.trial.arm_45cm.scaled_model`), so a given ``base_stiffness_nm_per_rad`` is the
+    preset-sized arm's;
     ``design.physics`` (default ``physics``: ``fine`` for grasp trials, as the experiments run them,
     ``board`` for scenarios) names the physics step and constraint stiffness
     (:data:`~hil.sim.config.PHYSICS_STEPS_S`).
@@ -600,6 +605,8 @@ def build_design(inputs: Mapping[str, Any], physics: str = "board") -> tuple[Spi
         }
         arm = replace(chosen.model.arm, **{k: v for k, v in arm_changes.items() if v is not None})
         model = replace(chosen.model, arm=arm).with_physics(PHYSICS_STEPS_S[physics])
+        if d.get("scale_model", False):
+            model = scaled_model(model, design, chosen.spiral())
         if "variant" in d:
             try:
                 variant = Variant.parse(d["variant"])

@@ -28,6 +28,8 @@ from hil.campaign.spec import Campaign, CampaignError, Run, build_design, load_c
 from hil.campaign.summary import design_rates, success_maps
 from hil.cli.main import main
 from hil.render import NO_GL
+from hil.sim.config import ModelConfig
+from hil.sim.spiral import SpiralDesign
 
 ROOT = Path(__file__).resolve().parents[3]
 PYTHON = sys.executable
@@ -542,6 +544,43 @@ def test_the_size_law_is_an_axis_and_out_of_its_range_is_one_line() -> None:
     assert base.arm.stiffness_exponent == 3
     with pytest.raises(CampaignError, match=r"design stiffness_exponent=5.0: .*stiffness_exponent"):
         build_design({"design.stiffness_exponent": 5.0})
+
+
+def test_scale_model_scales_the_preset_to_the_run_s_arm_in_the_same_material() -> None:
+    long_arm = {"design.length_m": 0.45, "design.tip_width_m": 0.010, "design.taper_deg": 10.0}
+    design, as_given = build_design({**long_arm, "design.base_stiffness_nm_per_rad": 0.125})
+    _, scaled = build_design(
+        {**long_arm, "design.base_stiffness_nm_per_rad": 0.125, "design.scale_model": True}
+    )
+    assert (as_given.arm.total_mass_kg, as_given.arm.base_stiffness_nm_per_rad) == (
+        ModelConfig().arm.total_mass_kg,
+        0.125,
+    )
+    prototype = SpiralDesign.paper_prototype()
+    width = design.unit_widths_m()[0][1] / prototype.unit_widths_m()[0][1]
+    assert scaled.arm.base_stiffness_nm_per_rad == pytest.approx(0.125 * width**3)
+    assert scaled.arm.total_mass_kg > 10 * as_given.arm.total_mass_kg  # 2.1x longer: the volume's cube
+    assert scaled.solver == as_given.solver  # the physics is the run's
+    # On the preset's own arm the scale is one.
+    _, same = build_design({"design.scale_model": True})
+    assert same == build_design({})[1]
+    with pytest.raises(CampaignError, match="scale_model"):
+        parse_campaign(
+            {
+                "kind": "grasp",
+                "design": {"scale_model": "yes"},
+                "object": {"diameter_m": 0.02, "x_m": 0.04, "z_m": -0.1},
+            }
+        )
+
+
+def test_the_claims_strategy_long_example_expands_to_its_stated_runs() -> None:
+    path = Path(__file__).resolve().parents[3] / "examples" / "campaign_claims_strategy_long.toml"
+    runs = load_campaign(path, []).runs()
+    assert len(runs) == 192  # 2 materials x 2 stiffnesses x 2 cable counts x 12 placements x 2 arms
+    for r in runs[:: len(runs) // 8]:
+        design, _ = build_design(r.inputs, physics="fine")
+        assert design.units == 24 and design.cables == r.inputs["design.cables"]
 
 
 def test_the_claims_strategy_example_expands_to_its_stated_runs() -> None:
