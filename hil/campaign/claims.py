@@ -24,6 +24,7 @@ from typing import Any, Final
 
 from hil.campaign.summary import CHOICE_PREFIXES
 from hil.experiments.stats import mcnemar_exact
+from hil.trial.scene import beyond_goal
 
 __all__ = ["ALPHA", "PairedCell", "claim_map", "paired_cells", "verdict"]
 
@@ -45,6 +46,9 @@ class PairedCell:
         only_b: pairs only the other won.
         p: exact McNemar p of the discordant pairs.
         penetration_m: the deepest penetration of the cell's runs (NaN if none says).
+        placed_inside: the cell's paired runs whose object was put in place overlapping the arm beyond the
+            penetration goal (:attr:`hil.trial.grasp.GraspOutcome.placed_inside`): not grasps, though
+            counted as run.
     """
 
     inputs: dict[str, Any]
@@ -55,6 +59,7 @@ class PairedCell:
     only_b: int
     p: float
     penetration_m: float
+    placed_inside: int = 0
 
     @property
     def holds(self) -> bool:
@@ -122,6 +127,7 @@ def paired_cells(rows: Sequence[Mapping[str, Any]], arm_key: str) -> list[Paired
             for run in pair
             if isinstance(run.get("measured"), Mapping) and "extremes" in run["measured"]
         ]
+        inside = sum(_placed_inside(run) for pair in both for run in pair)
         first = both[0][0]["inputs"]
         out.append(
             PairedCell(
@@ -133,9 +139,21 @@ def paired_cells(rows: Sequence[Mapping[str, Any]], arm_key: str) -> list[Paired
                 only_b,
                 mcnemar_exact(only_a, only_b),
                 max(depths) if depths else math.nan,
+                inside,
             )
         )
     return out
+
+
+def _placed_inside(run: Mapping[str, Any]) -> bool:
+    measured = run.get("measured")
+    if not isinstance(measured, Mapping):
+        return False
+    depth = measured.get("placed_overlap_m")
+    diameter = run["inputs"].get("object.diameter_m")
+    if not isinstance(depth, int | float) or not isinstance(diameter, int | float):
+        return False  # rows written before the field existed, or no object
+    return beyond_goal(float(depth), float(diameter) / 2)
 
 
 def verdict(cells: Sequence[PairedCell], arm_key: str, a: Any) -> str:
@@ -147,13 +165,22 @@ def verdict(cells: Sequence[PairedCell], arm_key: str, a: Any) -> str:
     pooled = f"pooled {wins_a} / {wins_b} discordant pairs, p = {mcnemar_exact(wins_a, wins_b):.2g}"
     if not holding:
         worse = sum(c.only_b > c.only_a and c.p < ALPHA for c in cells)
-        return (
+        said = (
             f"{name} wins in none of {len(cells)} cells ({pooled}; it loses significantly in {worse}): "
             "the claim holds nowhere in this range"
         )
-    return f"{name} wins in {len(holding)} of {len(cells)} cells ({pooled}): holds when " + "; or ".join(
-        c.label for c in holding
-    )
+    else:
+        said = f"{name} wins in {len(holding)} of {len(cells)} cells ({pooled}): holds when " + "; or ".join(
+            c.label for c in holding
+        )
+    inside = [c for c in cells if c.placed_inside]
+    if inside:
+        said += (
+            f"; but {sum(c.placed_inside for c in inside)} runs in {len(inside)} cells put the object inside "
+            "the arm (overlapping it beyond the penetration goal when placed), which is not a grasp: "
+            + "; ".join(f"{c.label} ({c.placed_inside})" for c in inside)
+        )
+    return said
 
 
 def claim_map(cells: Sequence[PairedCell], path: Path, title: str) -> Path | None:

@@ -343,6 +343,7 @@ def _paired(args: argparse.Namespace, rows: list[dict[str, Any]]) -> dict[str, A
                 "p": c.p,
                 "holds": c.holds,
                 "penetration_m": None if math.isnan(c.penetration_m) else c.penetration_m,
+                "placed_inside": c.placed_inside,
             }
             for c in cells
         ],
@@ -364,6 +365,8 @@ def _print_paired(console: Console, paired: dict[str, Any]) -> None:
         "only a / only b",
         "McNemar p",
         "holds",
+        "deepest",
+        "placed inside",
     ):
         table.add_column(name)
     for c in paired["cells"]:
@@ -376,6 +379,8 @@ def _print_paired(console: Console, paired: dict[str, Any]) -> None:
             f"{c['only_a']} / {c['only_b']}",
             f"{c['p']:.2g}",
             "yes" if c["holds"] else "no",
+            "n/a" if c["penetration_m"] is None else f"{c['penetration_m'] * 1000:.2f} mm",
+            str(c["placed_inside"]),
         )
     console.print(table)
     console.print(f"verdict: {paired['verdict']}", highlight=False, soft_wrap=True)

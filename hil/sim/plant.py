@@ -577,7 +577,8 @@ class Plant:
             mujoco.mj_contactForce(m, d, i, force)
             name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, other) or "world"
             pos = (float(con.pos[0]), float(con.pos[1]), float(con.pos[2]))
-            out.append(Contact(self._body_name_of[unit], name, pos, max(float(force[0]), 0.0)))
+            depth = max(0.0, -float(con.dist))
+            out.append(Contact(self._body_name_of[unit], name, pos, max(float(force[0]), 0.0), depth))
         return out
 
     # ------------------------------------------------------------------ drone and objects

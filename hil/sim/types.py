@@ -129,12 +129,14 @@ class Contact:
         other: the other body's name (an object's name, or ``world`` for the floor).
         pos_m: contact point, world frame.
         normal_force_n: force along the contact normal (>= 0).
+        depth_m: how far the two overlap (0 when they only touch or are within the contact margin).
     """
 
     unit: str
     other: str
     pos_m: tuple[float, float, float]
     normal_force_n: float
+    depth_m: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from hil.trial.scene import (
     OBJ,
     SUCCESS_WRAP_DEG,
     S,
+    beyond_goal,
     target_object,
     world_m,
 )
@@ -103,6 +104,10 @@ class GraspOutcome:
         load_n: with a load ramp, the force at which the object came out (moved more than
             :data:`HELD_DROP_MM` along the force from where the ramp started, or no contact); the cap if
             it never did; NaN without a ramp or if it was not held.
+        placed_overlap_m: how deep the arm and the object overlap on the tick after the object was put in
+            its place (NaN if it never was). Beyond the penetration goal (:attr:`placed_inside`) the arm
+            was already where the object was put (a start that did not keep the shape its placements were
+            cleared against), and the trial is not a grasp.
     """
 
     setup: GraspSetup
@@ -119,6 +124,12 @@ class GraspOutcome:
     max_current_raw: int
     extremes: PhysicsExtremes
     load_n: float = math.nan
+    placed_overlap_m: float = math.nan
+
+    @property
+    def placed_inside(self) -> bool:
+        """The object was put in place overlapping the arm beyond the penetration goal."""
+        return beyond_goal(self.placed_overlap_m, self.setup.diameter_m / 2)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (the setup without its firmware and model configurations)."""
@@ -184,6 +195,7 @@ def grasp_trial(
     timeout_us = 12 * S
     end_us = timeout_us
     load_n = math.nan
+    placed_overlap = math.nan
     while rig.now_us < end_us:
         rig.step()
         if on_tick is not None:
@@ -195,6 +207,8 @@ def grasp_trial(
         if t_start < 0 and state in (GraspState.REACH, GraspState.WRAP):
             t_start = now
             plant.hold_object(OBJ, target)
+        elif t_start >= 0 and math.isnan(placed_overlap):  # the first tick with the object in place
+            placed_overlap = max((c.depth_m for c in plant.contacts() if c.other == OBJ), default=0.0)
         if t_contact < 0 and state == GraspState.WRAP and setup.strategy_on:
             t_contact = now
         if t_hold < 0 and state == GraspState.HOLD:
@@ -233,6 +247,7 @@ def grasp_trial(
         max_current,
         plant.extremes(),
         load_n,
+        placed_overlap,
     )
     rig.close()
     return out

@@ -29,6 +29,18 @@ SUCCESS_WRAP_DEG = 180.0
 (fixed before the strategy experiment was run; eq. 15's "half way around")."""
 
 
+PENETRATION_GOAL_M = 0.001
+PENETRATION_GOAL_RATIO = 0.1
+"""The experiments' physics goal for arm-object contacts: a penetration under 1 mm or under 10 % of the
+object's radius (docs/experiments.md)."""
+
+
+def beyond_goal(depth_m: float, radius_m: float) -> bool:
+    """An arm-object overlap of ``depth_m`` on an object of ``radius_m`` misses the penetration goal (NaN:
+    no)."""
+    return depth_m > PENETRATION_GOAL_M and depth_m > PENETRATION_GOAL_RATIO * radius_m
+
+
 def world_m(x_m: float, z_m: float) -> tuple[float, float, float]:
     """World position of a point given relative to the arm's base in the x-z plane."""
     return (x_m, 0.0, BASE_Z_M + z_m)

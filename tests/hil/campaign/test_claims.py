@@ -57,6 +57,28 @@ def test_runs_pair_by_placement_per_cell_and_the_rule_is_mcnemar() -> None:
     assert "wins in none of 1 cells" in lost and "the claim holds nowhere in this range" in lost
 
 
+def test_runs_whose_object_was_put_into_the_arm_are_counted_and_named_in_the_verdict() -> None:
+    rows = _rows()
+    for r in rows:
+        r["inputs"]["object.diameter_m"] = 0.02
+        r["measured"]["placed_overlap_m"] = 0.0
+    soft_on = [r for r in rows if r["inputs"]["design.base_stiffness_nm_per_rad"] == 0.25][:4:2]
+    soft_on[0]["measured"]["placed_overlap_m"] = 0.004  # beyond 1 mm and 10 % of the 10 mm radius
+    soft_on[1]["measured"]["placed_overlap_m"] = 0.0009  # within the goal
+    cells = {
+        c.inputs["design.base_stiffness_nm_per_rad"]: c for c in paired_cells(rows, "controller.strategy_on")
+    }
+    assert (cells[0.25].placed_inside, cells[0.5].placed_inside) == (1, 0)
+    text = verdict(list(cells.values()), "controller.strategy_on", True)
+    assert "holds when base_stiffness_nm_per_rad=0.25" in text
+    assert text.endswith(
+        "; but 1 runs in 1 cells put the object inside the arm (overlapping it beyond the penetration goal "
+        "when placed), which is not a grasp: base_stiffness_nm_per_rad=0.25, stiffness_exponent=2 (1)"
+    )
+    # Rows written before the trial measured it count as placed clear.
+    assert all(c.placed_inside == 0 for c in paired_cells(_rows(), "controller.strategy_on"))
+
+
 def test_the_map_colours_a_winning_cell_blue_and_a_losing_one_red(tmp_path: Path) -> None:
     cells = paired_cells(_rows(), "controller.strategy_on")
     path = claim_map(cells, tmp_path / "map.png", "strategy on minus off")

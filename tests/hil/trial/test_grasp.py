@@ -55,3 +55,13 @@ def test_a_ramp_that_curls_in_the_air_is_held_without_the_ceiling_and_failed_wit
     assert paid_again == paid  # the same physics up to the verdict
     assert refused.state == "FAILED" and math.isnan(refused.t_hold_s)
     assert f"grasp FAILED: empty curl: {paid * 1e3:.1f} mm paid in > {ceiling * 1e3:.1f}" in events
+
+
+def test_an_object_put_into_the_arm_is_flagged_and_one_beside_it_is_not() -> None:
+    """The trial measures how deep the object overlaps the arm on the tick after it is put in place: the
+    straight arm (the ramp's start) is about 16 mm wide 100 mm below its base, so a 20 mm cylinder 14 mm
+    off its axis is put a few millimetres into it; the reference placement, 40 mm out, clears it."""
+    inside = grasp_trial(GraspSetup(0.014, -0.10, 0.02, strategy_on=False))
+    assert inside.placed_overlap_m > 0.001 and inside.placed_inside
+    beside = grasp_trial(GraspSetup(0.04, -0.11, 0.02, strategy_on=False))
+    assert beside.placed_overlap_m == 0.0 and not beside.placed_inside
