@@ -154,6 +154,7 @@ class GraspRangeResult(GraspOutcomes):
                 )
             )
         rows.extend(extremes_rows(self.extremes))
+        rows.extend(self.placement_rows())
         return rows
 
     def describe_samples(self) -> str:

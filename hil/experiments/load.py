@@ -144,6 +144,7 @@ class LoadResult(GraspOutcomes):
                     )
                 )
         rows.extend(extremes_rows(self.extremes))
+        rows.extend(self.placement_rows())
         return rows
 
     def describe_samples(self) -> str:

@@ -6,7 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from hil.experiments.base import Conditions
-from hil.experiments.common import worst_extremes
+from hil.experiments.common import Row, worst_extremes
 from hil.experiments.parallel import parallel_map
 from hil.sim.types import PhysicsExtremes
 from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_trial_job
@@ -28,10 +28,27 @@ class GraspOutcomes:
         """The worst physics over every grasp."""
         return worst_extremes(o.extremes for o in self.outcomes)
 
+    @property
+    def placed_inside_n(self) -> int:
+        """Grasps whose object was put in place inside the arm (:attr:`GraspOutcome.placed_inside`): not
+        grasps, so a figure that counts them says so."""
+        return sum(o.placed_inside for o in self.outcomes)
+
+    def placement_rows(self) -> list[Row]:
+        """The table row that says how many objects were put inside the arm when placed."""
+        return [
+            (
+                "objects put inside the arm when placed (not grasps)",
+                f"{self.placed_inside_n} of {len(self.outcomes)}",
+                "goal 0 (overlap beyond the penetration goal on the tick after placing)",
+            )
+        ]
+
     def outcomes_dict(self) -> dict[str, Any]:
         """The grasps, JSON-ready: the worst physics, how many, and each outcome (the tail of ``as_dict``)."""
         return {
             "extremes": self.extremes.as_dict(),
             "trials": len(self.outcomes),
+            "placed_inside": self.placed_inside_n,
             "outcomes": [o.as_dict() for o in self.outcomes],
         }

@@ -195,6 +195,7 @@ class StrategyResult(GraspOutcomes):
                 )
             )
         rows.extend(extremes_rows(self.extremes))
+        rows.extend(self.placement_rows())
         return rows
 
     def describe_samples(self) -> str:

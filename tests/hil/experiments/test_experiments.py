@@ -107,6 +107,9 @@ def test_required_json_keys_through_the_cli(capsys: pytest.CaptureFixture[str], 
             assert all(len(a["ci95"]) == 2 and a["n"] == 1 for a in out["arms"].values())
             assert [c["arm"] for c in out["mcnemar"]] == ["on", "oracle"]
             assert all(0.0 <= c["p_value"] <= 1.0 for c in out["mcnemar"])
+            # The reference placement clears the arm: no trial starts with the object inside it.
+            assert out["placed_inside"] == 0
+            assert all(o["placed_overlap_m"] <= 0.001 for o in out["outcomes"])
     assert main(["experiment", "packing", "--size", "tiny", "--jobs", "1"]) == 0
     table = capsys.readouterr().out
     assert "paper" in table and "b_fit" not in table and "fitted spiral b" in table
