@@ -89,6 +89,7 @@ def grasp_setup(i: Mapping[str, Any]) -> tuple[GraspSetup, SpiralDesign]:
         "mass_kg": i.get("object.mass_kg"),
         "length_m": i.get("object.length_m"),
         "object_friction": i.get("object.friction"),
+        "release_at_touch": i.get("object.release_at_touch"),
         "strategy_on": i.get("controller.strategy_on"),
         "contact_oracle": i.get("controller.contact_oracle"),
     }

@@ -86,6 +86,7 @@ _OBJECT_KEYS = {
     "mass_kg": _FLOAT,
     "length_m": _FLOAT,
     "friction": _FLOAT,
+    "release_at_touch": _BOOL,
 }
 _ARRAY_KEYS = {
     "arms": _INT,

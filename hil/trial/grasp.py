@@ -47,6 +47,8 @@ class GraspSetup:
             object's and the arm's).
         hold_s: how long the object must stay after its support is removed.
         release: remove the support at HOLD (False: the object stays fixed, a pole or a branch).
+        release_at_touch: the support gives way at the arm's first touch instead (the simulator's true
+            contact): a free object that a touch dislodges, which the wrap must catch, not knock away.
         load_rate_n_per_s: if > 0, once the released object has been held for ``hold_s``, a force on it
             along ``load_dir`` grows at this rate until it comes out (the load and grasp-range
             experiments).
@@ -69,6 +71,7 @@ class GraspSetup:
     object_friction: float = 0.8
     hold_s: float = 0.6
     release: bool = True
+    release_at_touch: bool = False
     load_rate_n_per_s: float = 0.0
     load_cap_n: float = 20.0
     load_dir: tuple[float, float, float] = (0.0, 0.0, -1.0)
@@ -104,6 +107,8 @@ class GraspOutcome:
         load_n: with a load ramp, the force at which the object came out (moved more than
             :data:`HELD_DROP_MM` along the force from where the ramp started, or no contact); the cap if
             it never did; NaN without a ramp or if it was not held.
+        moved_mm: how far the object ends from where it was put in place (NaN if it never was): a free
+            object knocked away ends far off.
         placed_overlap_m: how deep the arm and the object overlap on the tick after the object was put in
             its place (NaN if it never was). Beyond the penetration goal (:attr:`placed_inside`) the arm
             was already where the object was put (a start that did not keep the shape its placements were
@@ -125,6 +130,7 @@ class GraspOutcome:
     extremes: PhysicsExtremes
     load_n: float = math.nan
     placed_overlap_m: float = math.nan
+    moved_mm: float = math.nan
 
     @property
     def placed_inside(self) -> bool:
@@ -209,6 +215,8 @@ def grasp_trial(
             plant.hold_object(OBJ, target)
         elif t_start >= 0 and math.isnan(placed_overlap):  # the first tick with the object in place
             placed_overlap = max((c.depth_m for c in plant.contacts() if c.other == OBJ), default=0.0)
+        if setup.release_at_touch and t_start >= 0 and plant.object_held(OBJ) and contact_units(plant, OBJ):
+            plant.release_object(OBJ)
         if t_contact < 0 and state == GraspState.WRAP and setup.strategy_on:
             t_contact = now
         if t_hold < 0 and state == GraspState.HOLD:
@@ -248,6 +256,7 @@ def grasp_trial(
         plant.extremes(),
         load_n,
         placed_overlap,
+        float(np.linalg.norm(final - np.asarray(target))) * 1000 if t_start >= 0 else math.nan,
     )
     rig.close()
     return out
