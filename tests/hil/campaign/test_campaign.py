@@ -23,7 +23,7 @@ from typing import Any
 
 import pytest
 
-from hil.campaign.runner import ResultsFile, execute_local, run_one, stable_row
+from hil.campaign.runner import ResultsFile, execute_local, grasp_setup, run_one, stable_row
 from hil.campaign.spec import Campaign, CampaignError, Run, build_design, load_campaign, parse_campaign
 from hil.campaign.summary import design_rates, success_maps
 from hil.cli.main import main
@@ -581,6 +581,16 @@ def test_the_claims_strategy_long_example_expands_to_its_stated_runs() -> None:
     for r in runs[:: len(runs) // 8]:
         design, _ = build_design(r.inputs, physics="fine")
         assert design.units == 24 and design.cables == r.inputs["design.cables"]
+
+
+def test_the_free_object_example_lets_its_objects_go_at_the_first_touch() -> None:
+    path = Path(__file__).resolve().parents[3] / "examples" / "campaign_free_object.toml"
+    runs = load_campaign(path, []).runs()
+    assert len(runs) == 96  # 24 placements x 2 reach rates x 2 arms
+    setups = [grasp_setup(r.inputs)[0] for r in runs]
+    assert all(s.release_at_touch for s in setups)
+    assert {s.firmware.grasp.reach_rate_n_per_s for s in setups if s.firmware is not None} == {10.0, 2.5}
+    assert not grasp_setup({**runs[0].inputs, "object.release_at_touch": False})[0].release_at_touch
 
 
 def test_the_claims_strategy_example_expands_to_its_stated_runs() -> None:

@@ -5,8 +5,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from hil.sim.objects import contact_units
 from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_firmware, grasp_trial
 from hil.trial.rig import Rig
+from hil.trial.scene import OBJ
 from protocol.messages import GraspState
 
 
@@ -65,3 +67,23 @@ def test_an_object_put_into_the_arm_is_flagged_and_one_beside_it_is_not() -> Non
     assert inside.placed_overlap_m > 0.001 and inside.placed_inside
     beside = grasp_trial(GraspSetup(0.04, -0.11, 0.02, strategy_on=False))
     assert beside.placed_overlap_m == 0.0 and not beside.placed_inside
+
+
+def test_a_free_object_is_let_go_at_the_first_touch_and_the_trial_says_where_it_ends() -> None:
+    """With ``release_at_touch`` the support gives way the first tick the arm touches the object: the
+    trial's object is free from then on (before HOLD). At the reference placement the ramp's tip-first curl
+    still hooks it; ``moved_mm`` says how far from its placement it ends."""
+    held: list[bool] = []  # on the first tick the arm touches the object, and on the next
+
+    def look(rig: Rig) -> None:
+        plant = rig.plant
+        if len(held) == 1 or (
+            not held and rig.firmware.grasp_state != GraspState.IDLE and contact_units(plant, OBJ)
+        ):
+            held.append(plant.object_held(OBJ))  # on_tick looks before the trial lets it go
+
+    out = grasp_trial(GraspSetup(0.04, -0.11, 0.02, strategy_on=False, release_at_touch=True), on_tick=look)
+    assert held == [True, False]  # on its support until the first touch, free from the tick after
+    assert out.state == "HOLD" and out.held and 0.0 < out.moved_mm < 200.0
+    never = grasp_trial(GraspSetup(0.20, -0.05, 0.02, strategy_on=True, release_at_touch=True))
+    assert never.state == "FAILED" and never.moved_mm < 1.0  # out of reach: untouched, still on its support
