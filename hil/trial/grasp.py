@@ -147,11 +147,19 @@ class GraspOutcome:
 def grasp_firmware(**changes: Any) -> FirmwareConfig:
     """The firmware of the grasp experiments: defaults, except that IDLE winds the pack up at 60 N/s
     (the trial starts packed and only has to hold it) and a reach that has run its ramp down without
-    contact fails 0.6 s later instead of after 4 s."""
-    base = FirmwareConfig()
-    ramp_s = (base.grasp.pack_n - base.grasp.reach_n) / base.grasp.reach_rate_n_per_s
-    cfg = base.replaced(grasp_pack_rate_n_per_s=60.0, grasp_reach_timeout_us=int((ramp_s + 0.6) * S))
-    return cfg.replaced(**changes) if changes else cfg
+    contact fails 0.6 s later instead of after 4 s.
+
+    The reach's ramp is the one of ``changes`` (its pack and reach tensions and rate), unless they set
+    ``grasp_reach_timeout_us`` themselves: a slower reach gets the longer timeout its ramp needs.
+    """
+    cfg = FirmwareConfig().replaced(grasp_pack_rate_n_per_s=60.0)
+    if changes:
+        cfg = cfg.replaced(**changes)
+    if "grasp_reach_timeout_us" in changes:
+        return cfg
+    g = cfg.grasp
+    ramp_s = (g.pack_n - g.reach_n) / g.reach_rate_n_per_s
+    return cfg.replaced(grasp_reach_timeout_us=int((ramp_s + 0.6) * S))
 
 
 def grasp_rig(setup: GraspSetup, design: SpiralDesign) -> Rig:

@@ -87,3 +87,14 @@ def test_a_free_object_is_let_go_at_the_first_touch_and_the_trial_says_where_it_
     assert out.state == "HOLD" and out.held and 0.0 < out.moved_mm < 200.0
     never = grasp_trial(GraspSetup(0.20, -0.05, 0.02, strategy_on=True, release_at_touch=True))
     assert never.state == "FAILED" and never.moved_mm < 1.0  # out of reach: untouched, still on its support
+
+
+def test_the_reach_timeout_follows_the_reach_ramp_it_is_given() -> None:
+    """The experiments' firmware fails a reach 0.6 s after its ramp has run down: the default ramp
+    (18 N to 0 at 10 N/s) gives 2.4 s; a 4x slower reach the 7.8 s it needs (before, it kept 2.4 s and
+    timed out at 12 N, its arm hardly unrolled); a timeout given is kept."""
+    assert grasp_firmware().grasp.reach_timeout_us == 2_400_000
+    assert grasp_firmware(grasp_reach_rate_n_per_s=2.5).grasp.reach_timeout_us == 7_800_000
+    assert grasp_firmware(grasp_pack_n=12.0, grasp_reach_n=4.0).grasp.reach_timeout_us == 1_400_000
+    given = grasp_firmware(grasp_reach_rate_n_per_s=2.5, grasp_reach_timeout_us=3_000_000)
+    assert given.grasp.reach_timeout_us == 3_000_000
