@@ -384,6 +384,10 @@ class BandsResult:
                 "",
             )
         )
+        inside = sum(o.placed_inside for o in self.outcomes if o is not None)
+        rows.append(
+            ("objects put inside the arm when placed (not grasps)", f"{inside} of {len(self.outcomes)}", "0")
+        )
         rows.extend(extremes_rows(self.extremes))
         return rows
 
