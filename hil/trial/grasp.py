@@ -48,7 +48,8 @@ class GraspSetup:
         hold_s: how long the object must stay after its support is removed.
         release: remove the support at HOLD (False: the object stays fixed, a pole or a branch).
         release_at_touch: the support gives way at the arm's first touch instead (the simulator's true
-            contact): a free object that a touch dislodges, which the wrap must catch, not knock away.
+            contact): a free object that a touch dislodges, which the wrap must catch, not knock away
+            (``release`` then changes nothing: the object is already free at HOLD).
         load_rate_n_per_s: if > 0, once the released object has been held for ``hold_s``, a force on it
             along ``load_dir`` grows at this rate until it comes out (the load and grasp-range
             experiments).
