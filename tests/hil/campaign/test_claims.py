@@ -126,4 +126,6 @@ def test_the_cli_prints_the_cells_and_the_verdict_in_json(
     assert paired["arm"] == "controller.strategy_on" and paired["a"] is True and paired["b"] is False
     (cell,) = paired["cells"]
     assert cell["pairs"] == 1 and cell["p"] == 1.0 and not cell["holds"]
+    assert cell["placed_inside"] == 0 and 0.0 <= cell["penetration_m"] < 0.001  # real grasps, clean contacts
     assert paired["verdict"].startswith("strategy_on=true wins in none of 1 cells")
+    assert "inside the arm" not in paired["verdict"]
