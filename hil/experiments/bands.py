@@ -43,6 +43,7 @@ from hil.errors import PlantDivergedError
 from hil.experiments.base import Conditions, Experiment, Sizes
 from hil.experiments.common import Row, extremes_rows, pct, pyplot, save_figure, worst_extremes
 from hil.experiments.geometry import ArmFootprint, Envelope, joint_points_xz
+from hil.experiments.outcomes import placement_row
 from hil.experiments.parallel import parallel_map
 from hil.experiments.stats import mcnemar_exact, wilson_interval
 from hil.sim.config import ModelConfig
@@ -384,10 +385,7 @@ class BandsResult:
                 "",
             )
         )
-        inside = sum(o.placed_inside for o in self.outcomes if o is not None)
-        rows.append(
-            ("objects put inside the arm when placed (not grasps)", f"{inside} of {len(self.outcomes)}", "0")
-        )
+        rows.append(placement_row(self.outcomes))
         rows.extend(extremes_rows(self.extremes))
         return rows
 

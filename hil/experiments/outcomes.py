@@ -3,6 +3,7 @@ the part of their results that is the grasp outcomes."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from hil.experiments.base import Conditions
@@ -15,6 +16,17 @@ from hil.trial.grasp import GraspOutcome, GraspSetup, grasp_trial_job
 def grasp_trials(setups: list[GraspSetup], on: Conditions) -> tuple[GraspOutcome, ...]:
     """:func:`~hil.trial.grasp.grasp_trial` of every setup on ``on.design``, over ``on.jobs`` workers."""
     return tuple(parallel_map(grasp_trial_job, [(s, on.design) for s in setups], on.jobs, on.progress))
+
+
+def placement_row(outcomes: Sequence[GraspOutcome | None]) -> Row:
+    """How many of the grasps (None: a grasp left out) put their object inside the arm when placed
+    (:attr:`GraspOutcome.placed_inside`), as a table row."""
+    inside = sum(o.placed_inside for o in outcomes if o is not None)
+    return (
+        "objects put inside the arm when placed (not grasps)",
+        f"{inside} of {len(outcomes)}",
+        "goal 0 (overlap beyond the penetration goal on the tick after placing)",
+    )
 
 
 class GraspOutcomes:
@@ -36,13 +48,7 @@ class GraspOutcomes:
 
     def placement_rows(self) -> list[Row]:
         """The table row that says how many objects were put inside the arm when placed."""
-        return [
-            (
-                "objects put inside the arm when placed (not grasps)",
-                f"{self.placed_inside_n} of {len(self.outcomes)}",
-                "goal 0 (overlap beyond the penetration goal on the tick after placing)",
-            )
-        ]
+        return [placement_row(self.outcomes)]
 
     def outcomes_dict(self) -> dict[str, Any]:
         """The grasps, JSON-ready: the worst physics, how many, and each outcome (the tail of ``as_dict``)."""
