@@ -20,7 +20,6 @@ from typing import Any, Final, Protocol
 
 from controller.config import FirmwareConfig
 from hil.trial.grasp import grasp_firmware
-from hil.trial.scene import S
 
 __all__ = [
     "DIMENSIONS",
@@ -112,10 +111,8 @@ def firmware_values(searched: Mapping[str, Any]) -> dict[str, Any]:
         ConfigError: values the firmware refuses (checked on top of the experiments' firmware).
     """
     values = dict(searched)
-    if values.get("grasp_strategy_on", True):
-        fw = grasp_firmware(**values)
-        ramp_s = (fw.grasp.pack_n - fw.grasp.reach_n) / fw.grasp.reach_rate_n_per_s
-        values["grasp_reach_timeout_us"] = int((ramp_s + 0.6) * S)
+    if values.get("grasp_strategy_on", True):  # written out, so the row's inputs say it
+        values["grasp_reach_timeout_us"] = grasp_firmware(**values).grasp.reach_timeout_us
     grasp_firmware(**values)  # the whole point, checked as the trial will build it
     return values
 
