@@ -28,6 +28,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from hil.campaign.provenance import row_stamp
 from hil.campaign.spec import CampaignError, Run, build_design, build_firmware
 from hil.sim.spiral import SpiralDesign
 from hil.trial.array_grasp import ArrayGraspSetup, array_grasp_trial
@@ -76,6 +77,7 @@ def run_one(run: Run) -> dict[str, Any]:
         "outcome": outcome,
         "measured": _clean(measured),
         "run_time_s": round(time.perf_counter() - t0, 3),
+        "made_by": row_stamp(run.inputs),
     }
     if error is not None:
         row["error"] = error
@@ -200,10 +202,14 @@ class ResultsFile:
 
     Opening it for a resume reads the rows already there: a torn last line (the writer was killed in the
     middle of it) is cut off, so the next row starts on a line of its own; other unreadable lines are
-    counted and left alone (never a crash on bad bytes).
+    counted and left alone (never a crash on bad bytes). A row made by other code or from another model
+    file than this process would use (its ``made_by`` is not :func:`~hil.campaign.provenance.row_stamp`
+    of its inputs, or it has none) is stale: kept in the file, not done. A run's last row counts, so a
+    stale run run again is done.
 
     Attributes:
-        done: the rows already in the file, by run key.
+        done: the rows already in the file that this code would make, by run key.
+        stale: the rows made by other code or from another model file, by run key (none also in ``done``).
         unreadable_n: lines that were not a row (a torn last line included).
     """
 
@@ -215,6 +221,7 @@ class ResultsFile:
         """
         self.path = path
         self.done: dict[str, dict[str, Any]] = {}
+        self.stale: dict[str, dict[str, Any]] = {}
         self.unreadable_n = 0
         try:
             exists = path.is_file() and path.stat().st_size > 0
@@ -257,10 +264,17 @@ class ResultsFile:
             except (json.JSONDecodeError, UnicodeDecodeError):
                 self.unreadable_n += 1
                 continue
-            if isinstance(row, dict) and isinstance(row.get("key"), str):
-                self.done[row["key"]] = row
-            else:
+            if not (isinstance(row, dict) and isinstance(row.get("key"), str)):
                 self.unreadable_n += 1
+                continue
+            key = row["key"]
+            inputs = row.get("inputs")
+            if isinstance(inputs, dict) and row.get("made_by") == row_stamp(inputs):
+                self.done[key] = row
+                self.stale.pop(key, None)
+            else:
+                self.stale[key] = row
+                self.done.pop(key, None)
 
     def append(self, row: Mapping[str, Any]) -> None:
         """Write one row as one line and push it to the disk (a kill now loses no finished run)."""
@@ -268,6 +282,7 @@ class ResultsFile:
         self._out.flush()
         os.fsync(self._out.fileno())
         self.done[row["key"]] = dict(row)
+        self.stale.pop(row["key"], None)
 
     def close(self) -> None:
         """Close the file."""
@@ -374,6 +389,7 @@ def _lost_row(run: Run, attempts: int) -> dict[str, Any]:
         "outcome": "error",
         "measured": {},
         "run_time_s": 0.0,
+        "made_by": row_stamp(run.inputs),
         "error": f"worker lost {attempts} times",
     }
 

@@ -34,7 +34,7 @@ from hil.campaign.runner import (
     execute_local,
     execute_ray,
 )
-from hil.campaign.spec import Campaign, Run, load_campaign
+from hil.campaign.spec import Campaign, CampaignError, Run, load_campaign
 
 __all__ = ["CAMPAIGN_HELP", "configure_campaign", "run_campaign_command"]
 
@@ -81,6 +81,12 @@ def configure_campaign(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--resume", action="store_true", help="go on with --out: skip the runs already in it")
     p.add_argument(
+        "--rerun-stale",
+        action="store_true",
+        help="with --resume: run again the runs whose rows were made by other code or another model file "
+        "(without it such a file is refused)",
+    )
+    p.add_argument(
         "--jobs", type=int, default=2, metavar="N", help="local worker processes, or --ray's CPUs (default 2)"
     )
     where = p.add_mutually_exclusive_group()
@@ -120,6 +126,8 @@ def _check_args(args: argparse.Namespace) -> None:
         raise UsageError(f"--max-retries must be 0..{MAX_RETRIES_LIMIT}, got {args.max_retries}", PROG)
     if args.top < 1:
         raise UsageError(f"--top must be >= 1, got {args.top}", PROG)
+    if args.rerun_stale and not args.resume:
+        raise UsageError("--rerun-stale goes with --resume", PROG)
     if args.file is None and not args.set:
         raise UsageError("give a campaign FILE, or describe one with --set KEY=VALUE", PROG)
     if args.file is None and args.out is None:
@@ -163,9 +171,18 @@ def run_campaign_command(args: argparse.Namespace) -> int:
         else f"{args.jobs} local process(es)"
     )
     with ResultsFile(out, resume=args.resume) as results:
+        stale_n = sum(r.key in results.stale for r in runs)
+        if stale_n and not args.rerun_stale:
+            raise CampaignError(
+                f"{out}: {stale_n} of this campaign's rows were made by other code or from another model "
+                "file than this run would use (the plant, firmware or MuJoCo changed since), so their "
+                "outcomes may not be this code's: --rerun-stale runs them again, or write to a new --out"
+            )
         todo = [r for r in runs if r.key not in results.done]
         skipped_n = len(runs) - len(todo)
         note = f", {results.unreadable_n} unreadable line(s) skipped" if results.unreadable_n else ""
+        if stale_n:
+            note += f", {stale_n} made by other code to run again"
         err.print(
             f"campaign: {len(runs)} runs, {skipped_n} already in {out}{note}; "
             f"{len(todo)} to run on {executor}",

@@ -252,6 +252,11 @@ def run_tune_command(args: argparse.Namespace) -> int:
     budget_s = None if args.budget_min is None else args.budget_min * 60
     progress = _Progress(err, args.trials * len(train) + 3 * len(test), budget_s, 3 * len(test))
     with stop_on_signals() as stop, ResultsFile(rows_path, resume=True) as cache:
+        if cache.stale:
+            progress.say(
+                f"{len(cache.stale)} stored grasp(s) in {rows_path} were made by other code or from another "
+                "model file: they are run again when needed (the study's finished trials keep their scores)"
+            )
         if on_ray:
             from hil.tune.ray_search import search_ray  # Ray is imported only here
 

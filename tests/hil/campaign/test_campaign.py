@@ -23,6 +23,7 @@ from typing import Any
 
 import pytest
 
+from hil.campaign.provenance import code_id, row_stamp, source_digest
 from hil.campaign.runner import ResultsFile, execute_local, grasp_setup, run_one, stable_row
 from hil.campaign.spec import Campaign, CampaignError, Run, build_design, load_campaign, parse_campaign
 from hil.campaign.summary import design_rates, success_maps
@@ -216,11 +217,12 @@ def test_an_unwritable_output_fails_before_the_first_run(
 
 def test_the_write_probe_leaves_the_results_file_as_it_was(tmp_path: Path) -> None:
     path = tmp_path / "r.jsonl"
+    row = {"key": "a", "inputs": {}, "made_by": row_stamp({})}
     with ResultsFile(path, resume=False) as f:
-        f.append({"key": "a"})
+        f.append(row)
     with ResultsFile(path, resume=True) as f:
         assert list(f.done) == ["a"] and f.unreadable_n == 0
-    assert path.read_text() == '{"key":"a"}\n'
+    assert json.loads(path.read_text()) == row and path.read_text().count("\n") == 1
 
 
 @pytest.mark.parametrize(
@@ -280,6 +282,7 @@ def test_without_ray_a_ray_campaign_is_one_line_and_a_local_one_never_imports_it
 def test_a_torn_last_line_is_cut_and_bad_lines_are_counted(tmp_path: Path) -> None:
     path = tmp_path / "r.jsonl"
     good = {"key": "a" * 16, "inputs": {}, "outcome": "success", "measured": {}, "run_time_s": 1.0}
+    good["made_by"] = row_stamp({})
     path.write_bytes(json.dumps(good).encode() + b"\n\x00garbage\n" + b'{"key": "bbbb", "inp')
     with pytest.raises(CampaignError, match="--resume"):
         ResultsFile(path, resume=False)
@@ -289,6 +292,60 @@ def test_a_torn_last_line_is_cut_and_bad_lines_are_counted(tmp_path: Path) -> No
         f.append({**good, "key": "c" * 16})
     keys = [json.loads(line)["key"] for line in path.read_bytes().splitlines() if line.startswith(b"{")]
     assert keys == ["a" * 16, "c" * 16]
+
+
+def test_a_rows_stamp_ignores_comments_docstrings_and_layout_but_not_code() -> None:
+    base = source_digest('"""Module."""\n\ndef f(x):\n    """Doc."""\n    return x + 1\n')
+    assert source_digest("# a comment\ndef f( x ):\n    return x+1  # more\n") == base
+    assert source_digest("def f(x):\n    return x + 2\n") != base
+    assert len(code_id()) == 16 and code_id() == code_id()
+    assert row_stamp({}, code="a") != row_stamp({}, code="b")
+
+
+def test_rows_made_by_other_code_or_another_model_file_are_stale(tmp_path: Path) -> None:
+    model = tmp_path / "arm.toml"
+    model.write_text("one")
+    inputs = {"design.preset": str(model), "seed": 0}
+    row = {"key": "k" * 16, "inputs": inputs, "outcome": "success", "made_by": row_stamp(inputs)}
+    old = {**row, "key": "o" * 16, "made_by": row_stamp(inputs, code="0" * 16)}
+    unstamped = {k: v for k, v in row.items() if k != "made_by"} | {"key": "u" * 16}
+    path = tmp_path / "r.jsonl"
+    path.write_text("".join(json.dumps(r) + "\n" for r in (row, old, unstamped)))
+    with ResultsFile(path, resume=True) as f:
+        assert list(f.done) == ["k" * 16] and sorted(f.stale) == ["o" * 16, "u" * 16]
+        f.append({**old, "made_by": row_stamp(inputs)})  # run again: its last row counts
+        assert sorted(f.done) == ["k" * 16, "o" * 16] and list(f.stale) == ["u" * 16]
+    with ResultsFile(path, resume=True) as f:
+        assert sorted(f.done) == ["k" * 16, "o" * 16] and list(f.stale) == ["u" * 16]
+    model.write_text("two")  # the same name, another fitted model
+    with ResultsFile(path, resume=True) as f:
+        assert not f.done and len(f.stale) == 3
+
+
+def test_resume_refuses_rows_of_other_code_until_told_to_run_them_again(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    argv = ["campaign", "--set", "kind=scenario", "--set", "scenario.name=startup-gate", "--set", "seeds=2"]
+    argv += ["-o", "s.jsonl", "--jobs", "1", "--json"]
+    assert main(argv) == 0
+    first = rows_of(tmp_path / "s.jsonl")
+    assert len(first) == 2 and all(r["made_by"] == row_stamp(r["inputs"]) for r in first)
+    first[1]["made_by"] = "0" * 16  # as if made before the plant changed
+    (tmp_path / "s.jsonl").write_text("".join(json.dumps(r) + "\n" for r in first))
+    capsys.readouterr()
+    assert main([*argv, "--resume"]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "1 of this campaign's rows were made by other code" in lines[0], lines
+    assert "--rerun-stale" in lines[0]
+    assert main([*argv, "--resume", "--rerun-stale"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["skipped_n"] == 1 and summary["ran_n"] == 1
+    rows = rows_of(tmp_path / "s.jsonl")
+    assert len(rows) == 3 and rows[2]["key"] == first[1]["key"]
+    assert stable_row(rows[2]) | {"made_by": ""} == stable_row(first[1]) | {"made_by": ""}
+    assert main([*argv, "--rerun-stale"]) == 2
+    assert "--rerun-stale goes with --resume" in capsys.readouterr().err
 
 
 def _wait_for_rows(path: Path, n: int, proc: subprocess.Popen[str], timeout_s: float) -> None:
