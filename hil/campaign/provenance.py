@@ -24,7 +24,10 @@ import numpy as np
 
 from hil.sim.presets import is_model_file
 
-__all__ = ["OUTCOME_SOURCES", "code_id", "row_stamp", "source_digest"]
+__all__ = ["OUTCOME_SOURCES", "UNKNOWN", "code_id", "row_stamp", "source_digest"]
+
+UNKNOWN: Final = "unknown"
+"""The stamp of a process that cannot read its outcome code: no row is ever taken as made by it."""
 
 OUTCOME_SOURCES: Final = (
     ("protocol", True),
@@ -69,19 +72,26 @@ def _package_files(name: str, recursive: bool) -> list[tuple[str, Path]]:
 @functools.cache
 def code_id() -> str:
     """This process's outcome code: :data:`OUTCOME_SOURCES`' syntax trees and the physics libraries'
-    versions, hashed (16 hex digits; computed once per process, about a third of a second)."""
+    versions, hashed (16 hex digits; computed once per process, about a third of a second).
+    :data:`UNKNOWN` when the sources cannot be read."""
     h = hashlib.sha256(f"mujoco {mujoco.__version__}; numpy {np.__version__}\n".encode())
-    for name, recursive in OUTCOME_SOURCES:
-        for rel, path in _package_files(name, recursive):
-            h.update(f"{rel} {source_digest(path.read_text(encoding='utf-8'))}\n".encode())
+    try:
+        for name, recursive in OUTCOME_SOURCES:
+            for rel, path in _package_files(name, recursive):
+                h.update(f"{rel} {source_digest(path.read_text(encoding='utf-8'))}\n".encode())
+    except (OSError, RuntimeError, SyntaxError, UnicodeDecodeError, ValueError):
+        return UNKNOWN  # e.g. an install without sources
     return h.hexdigest()[:16]
 
 
 def row_stamp(inputs: Mapping[str, Any], code: str | None = None) -> str:
     """The stamp of a row with these inputs made by ``code`` (default: this process's :func:`code_id`):
     the code, and the bytes of the fitted model file ``design.preset`` names, if it names one (an
-    unreadable file stamps as missing: the run itself reports the error)."""
-    h = hashlib.sha256((code or code_id()).encode())
+    unreadable file stamps as missing: the run itself reports the error); :data:`UNKNOWN` if the code is."""
+    code = code or code_id()
+    if code == UNKNOWN:
+        return UNKNOWN
+    h = hashlib.sha256(code.encode())
     preset = inputs.get("design.preset")
     if isinstance(preset, str) and is_model_file(preset):
         try:

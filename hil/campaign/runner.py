@@ -28,7 +28,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from hil.campaign.provenance import row_stamp
+from hil.campaign.provenance import UNKNOWN, row_stamp
 from hil.campaign.spec import CampaignError, Run, build_design, build_firmware
 from hil.sim.spiral import SpiralDesign
 from hil.trial.array_grasp import ArrayGraspSetup, array_grasp_trial
@@ -269,7 +269,8 @@ class ResultsFile:
                 continue
             key = row["key"]
             inputs = row.get("inputs")
-            if isinstance(inputs, dict) and row.get("made_by") == row_stamp(inputs):
+            stamp = row_stamp(inputs) if isinstance(inputs, dict) else UNKNOWN
+            if stamp != UNKNOWN and row.get("made_by") == stamp:
                 self.done[key] = row
                 self.stale.pop(key, None)
             else:

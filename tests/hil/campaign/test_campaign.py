@@ -23,7 +23,8 @@ from typing import Any
 
 import pytest
 
-from hil.campaign.provenance import code_id, row_stamp, source_digest
+from hil.campaign import runner
+from hil.campaign.provenance import UNKNOWN, code_id, row_stamp, source_digest
 from hil.campaign.runner import ResultsFile, execute_local, grasp_setup, run_one, stable_row
 from hil.campaign.spec import Campaign, CampaignError, Run, build_design, load_campaign, parse_campaign
 from hil.campaign.summary import design_rates, success_maps
@@ -300,9 +301,12 @@ def test_a_rows_stamp_ignores_comments_docstrings_and_layout_but_not_code() -> N
     assert source_digest("def f(x):\n    return x + 2\n") != base
     assert len(code_id()) == 16 and code_id() == code_id()
     assert row_stamp({}, code="a") != row_stamp({}, code="b")
+    assert row_stamp({}, code=UNKNOWN) == UNKNOWN  # code it cannot read stamps rows no resume takes
 
 
-def test_rows_made_by_other_code_or_another_model_file_are_stale(tmp_path: Path) -> None:
+def test_rows_made_by_other_code_or_another_model_file_are_stale(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     model = tmp_path / "arm.toml"
     model.write_text("one")
     inputs = {"design.preset": str(model), "seed": 0}
@@ -320,6 +324,10 @@ def test_rows_made_by_other_code_or_another_model_file_are_stale(tmp_path: Path)
     model.write_text("two")  # the same name, another fitted model
     with ResultsFile(path, resume=True) as f:
         assert not f.done and len(f.stale) == 3
+    monkeypatch.setattr(runner, "row_stamp", lambda _inputs: UNKNOWN)
+    (tmp_path / "r2.jsonl").write_text(json.dumps({**row, "made_by": UNKNOWN}) + "\n")
+    with ResultsFile(tmp_path / "r2.jsonl", resume=True) as f:
+        assert not f.done and len(f.stale) == 1
 
 
 def test_resume_refuses_rows_of_other_code_until_told_to_run_them_again(
