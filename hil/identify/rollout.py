@@ -59,7 +59,7 @@ def simulate(job: RolloutJob) -> FloatArray:
     A plant that diverges (a candidate far from the truth can) yields NaN from there on: the fit sees a
     huge residual, never an exception.
     """
-    plant = Plant(job.design, PlantConfig(model=job.model))
+    plant = Plant(job.design, PlantConfig(model=job.model, track_extremes=False))
     n = len(job.currents_a)
     out = np.full((n, CHANNELS), np.nan)
     raw = np.rint(np.asarray(job.currents_a, dtype=np.float64) * RAW_PER_AMP).astype(np.int64)

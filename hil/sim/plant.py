@@ -61,9 +61,8 @@ class Plant:
     arms on a ring under the drone (``PlantConfig.ring``), each with its own cables and drives.
 
     In an array, every per-motor or per-unit value runs arm after arm: motor ``m`` (1-based) drives cable
-    ``(m-1) % C`` of arm ``(m-1) // C``; units, joint angles, tensions and lengths are concatenated the
-    same way, and names carry the arm's prefix (``a2_unit_05``, :func:`hil.sim.array.arm_prefix`). The
-    drone, the objects and a single arm's names are as without a ring.
+    ``(m-1) % C`` of arm ``(m-1) // C``; units, joint angles, tensions and lengths are concatenated the same
+    way, and names carry the arm's prefix (``a2_unit_05``, :func:`hil.sim.array.arm_prefix`).
 
     Args:
         design: the spiral design; ``None`` = the paper's 3-cable prototype. ``design.cables`` sets the
@@ -261,6 +260,7 @@ class Plant:
         self._monitor = ExtremesMonitor(
             m, self._unit_bodies.tolist(), radii, self._tension_adr_list, self._design.dtheta_rad
         )
+        self._track_extremes = self._config.track_extremes
         self._drone_accel = np.zeros(3)
         self._gravity = m.opt.gravity.copy()  # the mounting's (hil.sim.mjcf)
         self._accel_gain = 1.0 if cfg.mounting == "hanging" else 0.0
@@ -378,8 +378,9 @@ class Plant:
         for _ in range(self._substeps):
             mujoco.mj_step(m, d)
         self._time_us += self._config.control_period_us
-        self._joint_angles_into(self._angles_buf)
-        self._monitor.update(d, self._angles_buf)
+        if self._track_extremes:
+            self._joint_angles_into(self._angles_buf)
+            self._monitor.update(d, self._angles_buf)
         # One cheap test per period; the detailed diagnosis only when it fails.
         qvel = d.qvel
         arm_speed = np.abs(qvel[self._arm_slice]).max()

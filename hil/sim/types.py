@@ -66,6 +66,8 @@ class PlantConfig:
         ring: ``None``: one arm (the classic plant). Else an array of ``ring.arms`` arms of the design on a
             ring under the drone (:mod:`hil.sim.array`), motor ``m`` driving cable ``(m-1) % C`` of arm
             ``(m-1) // C`` (the firmware's layout, ``controller.config``).
+        track_extremes: measure :meth:`Plant.extremes` every period (an identification rollout, which
+            never reads them, turns it off; the physics is the same either way).
     """
 
     model: ModelConfig = field(default_factory=ModelConfig)
@@ -73,6 +75,7 @@ class PlantConfig:
     max_joint_speed_rad_s: float = 5.0e3
     max_spool_speed_m_s: float = 50.0
     ring: RingConfig | None = None
+    track_extremes: bool = True
 
     def validate(self) -> None:
         """Raise ``ValueError`` if a value is out of range."""

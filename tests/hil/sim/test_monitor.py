@@ -57,6 +57,17 @@ def test_tension_and_overshoot_are_maxima_kept_until_reset() -> None:
     assert plant.extremes().tension_n == 0.0
 
 
+def test_a_plant_that_does_not_track_extremes_moves_the_same() -> None:
+    """Identification's rollouts skip the monitor; the arm they simulate must be the same to the bit."""
+    plants = [Plant(TWO_CABLE, PlantConfig(track_extremes=track)) for track in (True, False)]
+    for p in plants:
+        p.apply_currents([3000, 500])
+        p.run(200_000)
+    assert (plants[0].unit_poses()[0] == plants[1].unit_poses()[0]).all()
+    assert plants[0].extremes().tension_n > 10.0
+    assert plants[1].extremes().tension_n == 0.0  # not measured
+
+
 def test_extremes_serialise_in_si_units() -> None:
     plant = Plant(TWO_CABLE, PlantConfig(model=ModelConfig()))
     plant.step()
