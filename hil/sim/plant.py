@@ -62,7 +62,8 @@ class Plant:
 
     In an array, every per-motor or per-unit value runs arm after arm: motor ``m`` (1-based) drives cable
     ``(m-1) % C`` of arm ``(m-1) // C``; units, joint angles, tensions and lengths are concatenated the same
-    way, and names carry the arm's prefix (``a2_unit_05``, :func:`hil.sim.array.arm_prefix`).
+    way, and names carry the arm's prefix (``a2_unit_05``, :func:`hil.sim.array.arm_prefix`). The drone, the
+    objects and a single arm's names are as without a ring.
 
     Args:
         design: the spiral design; ``None`` = the paper's 3-cable prototype. ``design.cables`` sets the
@@ -260,7 +261,6 @@ class Plant:
         self._monitor = ExtremesMonitor(
             m, self._unit_bodies.tolist(), radii, self._tension_adr_list, self._design.dtheta_rad
         )
-        self._track_extremes = self._config.track_extremes
         self._drone_accel = np.zeros(3)
         self._gravity = m.opt.gravity.copy()  # the mounting's (hil.sim.mjcf)
         self._accel_gain = 1.0 if cfg.mounting == "hanging" else 0.0
@@ -378,7 +378,7 @@ class Plant:
         for _ in range(self._substeps):
             mujoco.mj_step(m, d)
         self._time_us += self._config.control_period_us
-        if self._track_extremes:
+        if self._config.track_extremes:
             self._joint_angles_into(self._angles_buf)
             self._monitor.update(d, self._angles_buf)
         # One cheap test per period; the detailed diagnosis only when it fails.
